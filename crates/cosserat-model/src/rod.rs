@@ -1,0 +1,304 @@
+//! Rod state and per-element parameters as flat arrays.
+//!
+//! [`RodState`] is what changes every step (positions, velocities, frames, angular velocities);
+//! [`RodParams`] is what a scene fixes (rest lengths, rest Darboux vectors, masses, inertias,
+//! stiffnesses). Both are structure-of-arrays with one entry per point, element or interior
+//! node, so that they map one-to-one onto GPU storage buffers and so that a step is a handful
+//! of linear sweeps.
+
+use crate::quat::{frame_from_tangent, rotation_between};
+use crate::{Material, Quat, Real, Vec3, darboux};
+
+/// The dynamic state of one rod of `n` elements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RodState<T: Real> {
+    /// Centreline points `r_0..r_n` [m].
+    pub positions: Vec<Vec3<T>>,
+    /// Point velocities [m/s].
+    pub velocities: Vec<Vec3<T>>,
+    /// Material frames `q_0..q_{n-1}` (body → world).
+    pub frames: Vec<Quat<T>>,
+    /// Frame angular velocities in body coordinates [rad/s].
+    pub angular_velocities: Vec<Vec3<T>>,
+}
+
+impl<T: Real> RodState<T> {
+    /// Number of elements `n`.
+    pub fn elements(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Converts the state to another precision.
+    pub fn cast<U: Real>(&self) -> RodState<U> {
+        let v = |x: &Vec3<T>| Vec3::new(U::lit(x.x.to_f64()), U::lit(x.y.to_f64()), U::lit(x.z.to_f64()));
+        RodState {
+            positions: self.positions.iter().map(v).collect(),
+            velocities: self.velocities.iter().map(v).collect(),
+            frames: self
+                .frames
+                .iter()
+                .map(|q| Quat::new(U::lit(q.w.to_f64()), U::lit(q.i.to_f64()), U::lit(q.j.to_f64()), U::lit(q.k.to_f64())))
+                .collect(),
+            angular_velocities: self.angular_velocities.iter().map(v).collect(),
+        }
+    }
+}
+
+/// The fixed parameters of one rod of `n` elements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RodParams<T: Real> {
+    /// Rest length `l0_j` of each element [m].
+    pub rest_lengths: Vec<T>,
+    /// Rest Darboux vector `û` at each interior node (body frame of the lower element) [1/m].
+    pub rest_darboux: Vec<Vec3<T>>,
+    /// Lumped point masses [kg] (half of each adjacent element).
+    pub masses: Vec<T>,
+    /// Inverse point masses [1/kg]; zero for points moved kinematically.
+    pub inv_masses: Vec<T>,
+    /// Principal rotational inertia of each element about its body axes [kg m²].
+    pub inertias: Vec<Vec3<T>>,
+    /// Bending/twisting stiffness `(EI₁, EI₂, GJ)` at each interior node [N m²].
+    pub bend_twist_stiffness: Vec<Vec3<T>>,
+    /// Stretching stiffness `EA` of each element [N] (extensible mode).
+    pub stretch_stiffness: Vec<T>,
+    /// Parallel-constraint penalty `K_p` of each element [N].
+    pub parallel_stiffness: Vec<T>,
+    /// Rotational internal damping at each interior node [N m² s]: resists the rate of change of
+    /// the Darboux vector (relative angular velocity of neighbouring frames).
+    pub bend_damping: Vec<T>,
+    /// Translational internal damping of each element [N s]: resists the rate of stretching.
+    pub stretch_damping: Vec<T>,
+    /// Viscous drag rate of the surrounding medium [1/s]: each point feels `−drag · m · v`.
+    pub drag: T,
+    /// Cross-section radius [m], for collisions and output.
+    pub radius: T,
+}
+
+impl<T: Real> RodParams<T> {
+    /// Number of elements `n`.
+    pub fn elements(&self) -> usize {
+        self.rest_lengths.len()
+    }
+
+    /// Distance between frames `j` and `j + 1`: the mean of their rest lengths.
+    #[inline(always)]
+    pub fn node_length(&self, j: usize) -> T {
+        (self.rest_lengths[j] + self.rest_lengths[j + 1]) * T::lit(0.5)
+    }
+}
+
+/// Why a rod could not be built from the given geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RodBuildError {
+    /// Fewer than two points (at least one element is needed).
+    TooFewPoints(usize),
+    /// A point is not finite.
+    NonFinitePoint(usize),
+    /// Two consecutive points coincide.
+    ZeroLengthElement(usize),
+    /// The polyline turns back on itself at this interior point (a 180° fold has no unique
+    /// frame transport).
+    FoldedBack(usize),
+    /// The material is invalid.
+    Material(crate::MaterialError),
+    /// A per-rod coefficient is negative or not finite.
+    InvalidCoefficient(&'static str, f64),
+}
+
+impl std::fmt::Display for RodBuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::TooFewPoints(n) => write!(f, "a rod needs at least 2 points, got {n}"),
+            Self::NonFinitePoint(i) => write!(f, "point {i} is not finite"),
+            Self::ZeroLengthElement(j) => write!(f, "element {j} has zero length (points {j} and {} coincide)", j + 1),
+            Self::FoldedBack(i) => write!(f, "the polyline folds back on itself at point {i}"),
+            Self::Material(e) => write!(f, "{e}"),
+            Self::InvalidCoefficient(name, v) => write!(f, "`{name}` = {v} is invalid: expected a finite number >= 0"),
+        }
+    }
+}
+
+impl std::error::Error for RodBuildError {}
+
+/// The rest shape of a rod: where its rest Darboux vectors come from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RestShape {
+    /// Taken from the initial geometry, so the rod starts at rest (its intrinsic shape is the
+    /// shape it is built in).
+    Initial,
+    /// A uniform intrinsic curvature/twist `(κ₁, κ₂, τ)` [1/m] in the body frame; `[0, 0, 0]` is a
+    /// straight, untwisted rod.
+    Uniform([f64; 3]),
+}
+
+/// Everything needed to build a rod besides its geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RodSpec {
+    /// Material of the whole rod.
+    pub material: Material,
+    /// Source of the rest Darboux vectors.
+    pub rest_shape: RestShape,
+    /// `K_p` override [N]; `None` uses the shear stiffness `G A`.
+    pub parallel_stiffness: Option<f64>,
+    /// Rotational internal damping coefficient [N m² s].
+    pub bend_damping: f64,
+    /// Translational internal damping coefficient [N s].
+    pub stretch_damping: f64,
+    /// Viscous drag rate of the surrounding medium [1/s].
+    pub drag: f64,
+    /// Direction `d1` of the first frame should point to (projected off the tangent).
+    pub first_director_hint: [f64; 3],
+}
+
+impl RodSpec {
+    /// A spec with the given material, a rest shape taken from the geometry, no damping and the
+    /// default penalty.
+    pub fn new(material: Material) -> Self {
+        Self {
+            material,
+            rest_shape: RestShape::Initial,
+            parallel_stiffness: None,
+            bend_damping: 0.0,
+            stretch_damping: 0.0,
+            drag: 0.0,
+            first_director_hint: [0.0, 0.0, 1.0],
+        }
+    }
+}
+
+/// Builds the state and parameters of a rod through the given polyline.
+///
+/// Frames are adapted to the segments (`d3` along each) and carried from one segment to the
+/// next by parallel transport (the rotation of least angle), so a polyline built without twist
+/// gets frames without twist.
+pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodState<T>, RodParams<T>), RodBuildError> {
+    spec.material.validate().map_err(RodBuildError::Material)?;
+    for (name, v) in [
+        ("bend_damping", spec.bend_damping),
+        ("stretch_damping", spec.stretch_damping),
+        ("drag", spec.drag),
+        ("parallel_stiffness", spec.parallel_stiffness.unwrap_or(0.0)),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(RodBuildError::InvalidCoefficient(name, v));
+        }
+    }
+    if points.len() < 2 {
+        return Err(RodBuildError::TooFewPoints(points.len()));
+    }
+    let p: Vec<Vec3<f64>> = points.iter().map(|a| Vec3::new(a[0], a[1], a[2])).collect();
+    if let Some(i) = p.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
+        return Err(RodBuildError::NonFinitePoint(i));
+    }
+    let n = p.len() - 1;
+    let mut lengths = Vec::with_capacity(n);
+    let mut tangents = Vec::with_capacity(n);
+    for j in 0..n {
+        let e = p[j + 1] - p[j];
+        let l = e.norm();
+        if !(l > 0.0) {
+            return Err(RodBuildError::ZeroLengthElement(j));
+        }
+        lengths.push(l);
+        tangents.push(e / l);
+    }
+    let hint = Vec3::from(spec.first_director_hint);
+    let mut frames: Vec<Quat<f64>> = Vec::with_capacity(n);
+    frames.push(frame_from_tangent(&tangents[0], &hint));
+    for j in 1..n {
+        let transport = rotation_between(&tangents[j - 1], &tangents[j]).ok_or(RodBuildError::FoldedBack(j))?;
+        let q = transport * frames[j - 1];
+        frames.push(q / q.norm());
+    }
+    let m = &spec.material;
+    let rest_darboux: Vec<Vec3<f64>> = match spec.rest_shape {
+        RestShape::Initial => (0..n.saturating_sub(1))
+            .map(|j| darboux(&frames[j], &frames[j + 1], 0.5 * (lengths[j] + lengths[j + 1])))
+            .collect(),
+        RestShape::Uniform(u) => vec![Vec3::from(u); n.saturating_sub(1)],
+    };
+    let mu = m.linear_density();
+    let mut masses = vec![0.0; n + 1];
+    for j in 0..n {
+        masses[j] += 0.5 * mu * lengths[j];
+        masses[j + 1] += 0.5 * mu * lengths[j];
+    }
+    let ipl = m.inertia_per_length();
+    let k = m.bend_twist_stiffness();
+    let kp = spec.parallel_stiffness.unwrap_or_else(|| m.shear_stiffness());
+    let t = T::lit;
+    let v3 = |v: Vec3<f64>| Vec3::new(t(v.x), t(v.y), t(v.z));
+    let state = RodState {
+        positions: p.iter().map(|x| v3(*x)).collect(),
+        velocities: vec![Vec3::zeros(); n + 1],
+        frames: frames.iter().map(|q| Quat::new(t(q.w), t(q.i), t(q.j), t(q.k))).collect(),
+        angular_velocities: vec![Vec3::zeros(); n],
+    };
+    let params = RodParams {
+        rest_lengths: lengths.iter().map(|&l| t(l)).collect(),
+        rest_darboux: rest_darboux.into_iter().map(v3).collect(),
+        masses: masses.iter().map(|&x| t(x)).collect(),
+        inv_masses: masses.iter().map(|&x| t(1.0 / x)).collect(),
+        inertias: lengths.iter().map(|&l| Vec3::new(t(ipl[0] * l), t(ipl[1] * l), t(ipl[2] * l))).collect(),
+        bend_twist_stiffness: vec![Vec3::new(t(k[0]), t(k[1]), t(k[2])); n.saturating_sub(1)],
+        stretch_stiffness: vec![t(m.stretch_stiffness()); n],
+        parallel_stiffness: vec![t(kp); n],
+        bend_damping: vec![t(spec.bend_damping); n.saturating_sub(1)],
+        stretch_damping: vec![t(spec.stretch_damping); n],
+        drag: t(spec.drag),
+        radius: t(m.radius),
+    };
+    Ok((state, params))
+}
+
+/// Points of a straight rod from `start` along the unit `direction`, `n` equal elements of total
+/// `length`.
+pub fn straight_polyline(start: [f64; 3], direction: [f64; 3], length: f64, n: usize) -> Vec<[f64; 3]> {
+    let d = Vec3::from(direction).normalize();
+    (0..=n)
+        .map(|i| {
+            let s = length * i as f64 / n as f64;
+            [start[0] + d.x * s, start[1] + d.y * s, start[2] + d.z * s]
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mat() -> Material {
+        Material::new(1e6, 1e6 / 3.0, 1000.0, 1e-3)
+    }
+
+    #[test]
+    fn straight_rod_is_at_rest_and_conserves_mass() {
+        let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 2.0, 10);
+        let (s, p) = build_rod::<f64>(&pts, &RodSpec::new(mat())).unwrap();
+        assert_eq!(s.elements(), 10);
+        let total: f64 = p.masses.iter().sum();
+        assert!((total - mat().linear_density() * 2.0).abs() < 1e-15);
+        assert!(p.rest_darboux.iter().all(|u| u.norm() < 1e-12));
+        for (j, q) in s.frames.iter().enumerate() {
+            assert!((crate::quat::d3(q) - Vec3::x()).norm() < 1e-12, "frame {j}");
+        }
+    }
+
+    #[test]
+    fn bad_geometry_is_rejected() {
+        let spec = RodSpec::new(mat());
+        assert_eq!(build_rod::<f64>(&[[0.0; 3]], &spec).unwrap_err(), RodBuildError::TooFewPoints(1));
+        assert_eq!(
+            build_rod::<f64>(&[[0.0; 3], [0.0; 3]], &spec).unwrap_err(),
+            RodBuildError::ZeroLengthElement(0)
+        );
+        assert_eq!(
+            build_rod::<f64>(&[[0.0; 3], [1.0, 0.0, 0.0], [0.0; 3]], &spec).unwrap_err(),
+            RodBuildError::FoldedBack(1)
+        );
+        assert_eq!(
+            build_rod::<f64>(&[[0.0; 3], [f64::NAN, 0.0, 0.0]], &spec).unwrap_err(),
+            RodBuildError::NonFinitePoint(1)
+        );
+    }
+}
