@@ -1,0 +1,19 @@
+//! CPU time stepping of Cosserat rods.
+//!
+//! One step is the paper's Fig. 5 loop without collisions: forces and torques from the model →
+//! integrate velocities (semi-implicit Euler) → apply end conditions → distance-constraint
+//! iterations → integrate positions and frames. [`step_rod`] advances one rod and is the
+//! reference the other backends are compared with; [`step_rods`] advances many rods, serially
+//! or on rayon's pool according to a [`Par`] value, with identical results either way because
+//! rods do not interact.
+//!
+//! The stepper owns no scene logic: it takes rods whose parameters and end conditions were set
+//! up by the caller, and reports divergence as a value naming the rod, element, step and
+//! quantity instead of letting NaNs spread.
+
+pub mod ends;
+pub mod stepper;
+
+pub use constraints::Ordering;
+pub use ends::{EndCondition, EndKind, PrescribedMotion};
+pub use stepper::{CpuRod, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod, step_rods};

@@ -1,0 +1,15 @@
+//! Iterative impulse-based constraints for Cosserat rods (paper section 2.1, "Constraints").
+//!
+//! The paper replaces the stiff stretching energy of the original CoRdE by hard distance
+//! constraints between neighbouring points and solves them locally, one impulse at a time,
+//! inside the time step (its Fig. 5): after the velocities have been integrated from the forces
+//! and before the positions are. Local impulses keep every constraint independent of all but
+//! its neighbours, which is what lets the same solver run serially, over a red–black colouring
+//! on many threads, or on the GPU.
+//!
+//! This crate knows rods only as arrays of points, velocities, inverse masses and rest lengths;
+//! it has no notion of frames, forces, threads or devices.
+
+pub mod distance;
+
+pub use distance::{Ordering, solve_distance_iteration, strain_extremes};
