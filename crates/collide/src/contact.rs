@@ -1,0 +1,436 @@
+//! Sphere–triangle narrow phase against a mesh, and the per-point contact response.
+//!
+//! A rod mass point is a sphere of radius `r`. For each point, the AABB tree yields the leaves
+//! within `r`, and every triangle there is tested exactly (closest point on the triangle, Ericson's
+//! Voronoi-region method, in `f64`). A triangle is *in contact* when its closest point is closer
+//! than `r`.
+//!
+//! # Orientation and depth
+//!
+//! The mesh normals point into the lumen (see [`TriMesh::orient_into_lumen`]). For a contact we
+//! use the triangle's **face normal** `n` (by winding) as the response direction, as the paper
+//! does, and the signed distance `s = ±|p − c|`, positive when the centre `p` is on the lumen side
+//! of the face (`(p − c)·n ≥ 0`). The penetration depth is `r − s`: between 0 and `r` while the
+//! centre is still inside, above `r` once the centre has crossed the wall.
+//!
+//! # Point response
+//!
+//! As in the paper, a point's response is the penetration-weighted average of the normals of the
+//! triangles it touches: `dir = normalize(Σ dᵢ nᵢ)`, and we report the depth as the same weighted
+//! mean of the depths, `Σ dᵢ² / Σ dᵢ` (equal to the common depth when all touched triangles are
+//! coplanar, never above the largest one, which is reported too).
+//!
+//! # Escaped points
+//!
+//! A point whose centre has crossed the wall is *escaped*. Testing the sign against every touched
+//! face is unreliable near non-convex parts (junctions), so the sign is taken at the **nearest**
+//! triangle only, against the *angle-weighted pseudo-normal* of the feature (face, edge or vertex)
+//! holding the closest point (Bærentzen & Aanæs 2005). For a closed manifold surface this sign is
+//! exact; for open ends it falls back to the face normal at boundary edges. `detect` only sees
+//! triangles within `r`, so a point that has moved further than `r` beyond the wall has no
+//! contacts; use [`MeshCollider::nearest`] with a larger search distance (e.g. the largest
+//! per-step displacement) to classify such points.
+
+use std::collections::HashMap;
+
+use nalgebra::Vector3;
+
+use crate::bvh::{Bvh, STACK_SIZE};
+use crate::mesh::TriMesh;
+
+/// One sphere–triangle contact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    /// Index of the query point in the batch.
+    pub point: u32,
+    /// Triangle index in the mesh.
+    pub triangle: u32,
+    /// Closest point on the triangle.
+    pub closest: [f64; 3],
+    /// Unsigned distance from the sphere centre to the triangle (`< r`).
+    pub distance: f64,
+    /// `±distance`, positive on the lumen side of the face.
+    pub signed_distance: f64,
+    /// Penetration depth `r − signed_distance` (> 0).
+    pub depth: f64,
+    /// Unit face normal (into the lumen): the direction to push the point.
+    pub normal: [f64; 3],
+}
+
+/// The aggregated response of one point (all its contacts).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointResponse {
+    /// Unit response direction, the depth-weighted mean of the contact normals; zero if no contact
+    /// (or if the normals cancel exactly).
+    pub direction: [f64; 3],
+    /// Depth-weighted mean depth `Σ dᵢ² / Σ dᵢ`; 0 if no contact.
+    pub depth: f64,
+    /// Largest single-contact depth; 0 if no contact.
+    pub max_depth: f64,
+    /// Index of the first contact of this point in [`ContactBuffer::contacts`].
+    pub first: u32,
+    /// Number of contacts of this point.
+    pub count: u32,
+    /// `true` if the centre is behind the nearest triangle (see the module docs).
+    pub escaped: bool,
+}
+
+/// Reusable output of [`MeshCollider::detect`]: all contacts, grouped by point, and one response
+/// per point. Clearing keeps the capacity, so after warm-up a detection allocates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct ContactBuffer {
+    contacts: Vec<Contact>,
+    responses: Vec<PointResponse>,
+}
+
+impl ContactBuffer {
+    /// An empty buffer.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Empties the buffer, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.contacts.clear();
+        self.responses.clear();
+    }
+
+    /// All contacts, grouped by point in point order.
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts
+    }
+
+    /// One response per query point, in point order.
+    pub fn responses(&self) -> &[PointResponse] {
+        &self.responses
+    }
+
+    /// The contacts of point `i`.
+    pub fn contacts_of(&self, i: usize) -> &[Contact] {
+        let r = &self.responses[i];
+        &self.contacts[r.first as usize..(r.first + r.count) as usize]
+    }
+
+    /// Number of points with at least one contact.
+    pub fn points_in_contact(&self) -> usize {
+        self.responses.iter().filter(|r| r.count > 0).count()
+    }
+}
+
+/// Which feature of a triangle holds the closest point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    /// The interior of the face.
+    Face,
+    /// Edge `k` from corner `k` to corner `(k + 1) % 3`.
+    Edge(u8),
+    /// Corner `k`.
+    Vertex(u8),
+}
+
+/// Closest point on triangle `abc` to `p`, and the feature holding it (Ericson, *Real-Time
+/// Collision Detection*, 5.1.5).
+#[inline]
+pub fn closest_point_triangle(
+    p: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> (Vector3<f64>, Feature) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(&ap);
+    let d2 = ac.dot(&ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (*a, Feature::Vertex(0));
+    }
+    let bp = p - b;
+    let d3 = ab.dot(&bp);
+    let d4 = ac.dot(&bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (*b, Feature::Vertex(1));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + ab * v, Feature::Edge(0));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(&cp);
+    let d6 = ac.dot(&cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (*c, Feature::Vertex(2));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + ac * w, Feature::Edge(2));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + (c - b) * w, Feature::Edge(1));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let v = vb * denom;
+    let w = vc * denom;
+    (a + ab * v + ac * w, Feature::Face)
+}
+
+/// Per-triangle data in leaf order, so a leaf's triangles are contiguous in memory.
+#[derive(Clone, Copy, Debug)]
+struct TriData {
+    a: Vector3<f64>,
+    b: Vector3<f64>,
+    c: Vector3<f64>,
+    n: Vector3<f64>,
+}
+
+/// The result of a nearest-triangle query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Nearest {
+    /// Triangle index in the mesh.
+    pub triangle: u32,
+    /// Closest point on the mesh.
+    pub closest: [f64; 3],
+    /// Unsigned distance.
+    pub distance: f64,
+    /// Distance signed by the pseudo-normal of the closest feature: positive in the lumen.
+    pub signed_distance: f64,
+}
+
+/// A mesh with its AABB tree and the data for fast sphere queries. Immutable after build, so one
+/// collider can be shared by threads.
+#[derive(Clone, Debug)]
+pub struct MeshCollider {
+    mesh: TriMesh,
+    bvh: Bvh,
+    tris: Vec<TriData>,
+    /// Angle-weighted vertex pseudo-normals (by mesh vertex).
+    vertex_normals: Vec<Vector3<f64>>,
+    /// Edge pseudo-normals, 3 per triangle in leaf order (edge k = corner k → k+1).
+    edge_normals: Vec<[Vector3<f64>; 3]>,
+}
+
+impl MeshCollider {
+    /// Builds the tree (default leaf size) and the query data for `mesh`.
+    pub fn new(mesh: TriMesh) -> Self {
+        let bvh = Bvh::build(&mesh);
+        Self::with_bvh(mesh, bvh)
+    }
+
+    /// Uses an already built tree (e.g. with another leaf size). The tree must belong to `mesh`.
+    pub fn with_bvh(mesh: TriMesh, bvh: Bvh) -> Self {
+        let nt = mesh.triangles().len();
+        let face: Vec<Vector3<f64>> = (0..nt).map(|t| mesh.face_normal(t)).collect();
+        let mut vertex_normals = vec![Vector3::zeros(); mesh.vertices().len()];
+        let mut edge_map: HashMap<(u32, u32), Vector3<f64>> = HashMap::with_capacity(nt * 2);
+        for (t, tri) in mesh.triangles().iter().enumerate() {
+            let p = mesh.triangle(t);
+            for k in 0..3 {
+                let e1 = p[(k + 1) % 3] - p[k];
+                let e2 = p[(k + 2) % 3] - p[k];
+                let angle = e1.angle(&e2);
+                vertex_normals[tri[k] as usize] += face[t] * angle;
+                let (u, v) = (tri[k], tri[(k + 1) % 3]);
+                *edge_map
+                    .entry((u.min(v), u.max(v)))
+                    .or_insert_with(Vector3::zeros) += face[t];
+            }
+        }
+        for n in &mut vertex_normals {
+            *n = n.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
+        }
+        let mut tris = Vec::with_capacity(nt);
+        let mut edge_normals = Vec::with_capacity(nt);
+        for &t in bvh.tri_indices() {
+            let t = t as usize;
+            let [a, b, c] = mesh.triangle(t);
+            tris.push(TriData { a, b, c, n: face[t] });
+            let tri = mesh.triangles()[t];
+            let mut en = [Vector3::zeros(); 3];
+            for (k, slot) in en.iter_mut().enumerate() {
+                let (u, v) = (tri[k], tri[(k + 1) % 3]);
+                let s = edge_map[&(u.min(v), u.max(v))];
+                *slot = s.try_normalize(0.0).unwrap_or(face[t]);
+            }
+            edge_normals.push(en);
+        }
+        Self {
+            mesh,
+            bvh,
+            tris,
+            vertex_normals,
+            edge_normals,
+        }
+    }
+
+    /// The mesh.
+    pub fn mesh(&self) -> &TriMesh {
+        &self.mesh
+    }
+
+    /// The tree.
+    pub fn bvh(&self) -> &Bvh {
+        &self.bvh
+    }
+
+    /// The pseudo-normal of `feature` of the triangle in leaf-order slot `slot`.
+    fn pseudo_normal(&self, slot: usize, feature: Feature) -> Vector3<f64> {
+        match feature {
+            Feature::Face => self.tris[slot].n,
+            Feature::Edge(k) => self.edge_normals[slot][k as usize],
+            Feature::Vertex(k) => {
+                let t = self.bvh.tri_indices()[slot] as usize;
+                self.vertex_normals[self.mesh.triangles()[t][k as usize] as usize]
+            }
+        }
+    }
+
+    /// Contacts of one sphere (centre `p`, radius `r`), appended to `out` tagged with `point`;
+    /// returns the point's response. Triangles are reported in leaf order.
+    pub fn query_sphere(
+        &self,
+        p: &[f64; 3],
+        r: f64,
+        point: u32,
+        out: &mut Vec<Contact>,
+    ) -> PointResponse {
+        let first = out.len();
+        let pv = Vector3::from(*p);
+        let r2 = r * r;
+        let mut best = (f64::INFINITY, 0usize, Feature::Face, Vector3::zeros());
+        let mut sum_n = Vector3::zeros();
+        let (mut sum_w, mut sum_w2, mut max_d) = (0.0, 0.0, 0.0f64);
+        self.bvh.for_each_near(p, r, |slot| {
+            let t = &self.tris[slot];
+            let (c, feature) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
+            let diff = pv - c;
+            let d2 = diff.norm_squared();
+            if d2 < r2 {
+                let d = d2.sqrt();
+                let sd = if diff.dot(&t.n) >= 0.0 { d } else { -d };
+                let depth = r - sd;
+                if d2 < best.0 {
+                    best = (d2, slot, feature, diff);
+                }
+                sum_n += t.n * depth;
+                sum_w += depth;
+                sum_w2 += depth * depth;
+                max_d = max_d.max(depth);
+                out.push(Contact {
+                    point,
+                    triangle: self.bvh.tri_indices()[slot],
+                    closest: c.into(),
+                    distance: d,
+                    signed_distance: sd,
+                    depth,
+                    normal: t.n.into(),
+                });
+            }
+        });
+        let count = out.len() - first;
+        if count == 0 {
+            return PointResponse {
+                first: first as u32,
+                ..PointResponse::default()
+            };
+        }
+        let escaped = best.3.dot(&self.pseudo_normal(best.1, best.2)) < 0.0;
+        let direction = sum_n.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
+        PointResponse {
+            direction: direction.into(),
+            depth: sum_w2 / sum_w,
+            max_depth: max_d,
+            first: first as u32,
+            count: count as u32,
+            escaped,
+        }
+    }
+
+    /// Batch detection for rod points of one radius: clears `out`, then fills one
+    /// [`PointResponse`] per point and all contacts. Allocation-free once `out` has grown.
+    pub fn detect(&self, points: &[[f64; 3]], radius: f64, out: &mut ContactBuffer) {
+        out.clear();
+        out.responses.reserve(points.len());
+        for (i, p) in points.iter().enumerate() {
+            let resp = self.query_sphere(p, radius, i as u32, &mut out.contacts);
+            out.responses.push(resp);
+        }
+    }
+
+    /// Like [`detect`](Self::detect) with one radius per point (`radii.len()` must equal
+    /// `points.len()`; extra entries of the longer slice are ignored).
+    pub fn detect_with_radii(&self, points: &[[f64; 3]], radii: &[f64], out: &mut ContactBuffer) {
+        out.clear();
+        out.responses.reserve(points.len());
+        for (i, (p, &r)) in points.iter().zip(radii).enumerate() {
+            let resp = self.query_sphere(p, r, i as u32, &mut out.contacts);
+            out.responses.push(resp);
+        }
+    }
+
+    /// The nearest triangle to `p` within `max_distance` (use `f64::INFINITY` for no limit), with
+    /// the distance signed by the closest feature's pseudo-normal (positive in the lumen, negative
+    /// for an escaped point). `None` if no triangle is that close.
+    pub fn nearest(&self, p: &[f64; 3], max_distance: f64) -> Option<Nearest> {
+        let pv = Vector3::from(*p);
+        let nodes = self.bvh.nodes();
+        let mut best_d2 = max_distance * max_distance;
+        let mut best: Option<(usize, Vector3<f64>, Feature)> = None;
+        let mut stack = [(0u32, 0.0f64); STACK_SIZE];
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let (ni, d2) = stack[sp];
+            if d2 > best_d2 {
+                continue;
+            }
+            let n = &nodes[ni as usize];
+            if n.is_leaf() {
+                for slot in n.first as usize..(n.first + n.count) as usize {
+                    let t = &self.tris[slot];
+                    let (c, f) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
+                    let d2 = (pv - c).norm_squared();
+                    if d2 <= best_d2 {
+                        best_d2 = d2;
+                        best = Some((slot, c, f));
+                    }
+                }
+            } else {
+                let (l, r) = (n.first, n.first + 1);
+                let dl = nodes[l as usize].distance_squared(p);
+                let dr = nodes[r as usize].distance_squared(p);
+                // Push the farther child first so the nearer one is explored first.
+                let (near, far) = if dl <= dr {
+                    ((l, dl), (r, dr))
+                } else {
+                    ((r, dr), (l, dl))
+                };
+                if far.1 <= best_d2 {
+                    stack[sp] = far;
+                    sp += 1;
+                }
+                if near.1 <= best_d2 {
+                    stack[sp] = near;
+                    sp += 1;
+                }
+            }
+        }
+        let (slot, c, f) = best?;
+        let diff = pv - c;
+        let d = diff.norm();
+        let sign = if diff.dot(&self.pseudo_normal(slot, f)) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        Some(Nearest {
+            triangle: self.bvh.tri_indices()[slot],
+            closest: c.into(),
+            distance: d,
+            signed_distance: sign * d,
+        })
+    }
+}
