@@ -1,0 +1,29 @@
+//! `cosserat`: fast, accurate Cosserat rods for guidewires, catheters, sutures, cables and hair.
+//!
+//! This facade ties the workspace together: [`Simulation`] owns rods built with
+//! [`RodBuilder`]s through typed [`RodHandle`]s, [`scene`] loads TOML scene files, and
+//! [`output`] writes trajectories for NumPy and ParaView. The physics lives in
+//! [`cosserat_model`] (energies), [`constraints`] (impulse solver) and [`backend_cpu`]
+//! (stepping); they are re-exported for users who want the explicit pipeline.
+//!
+//! ```
+//! use cosserat::{Material, RodBuilder, SimulationBuilder};
+//! // A 0.5 m rubber-like rod clamped at one end, drooping under gravity.
+//! let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], 0.5, 50, Material::new(1e7, 3.3e6, 1100.0, 2e-3))
+//!     .clamp_start()
+//!     .damping(1e-5, 0.0, 1.0);
+//! let mut sim = SimulationBuilder::new().dt(2e-5).with_rod(rod).build()?;
+//! sim.run(100)?;
+//! let tip = *sim.positions(cosserat::RodHandle(0)).last().unwrap();
+//! assert!(tip[2] < 0.0, "the free end falls");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod output;
+pub mod scene;
+pub mod sim;
+
+pub use backend_cpu::{self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion};
+pub use constraints;
+pub use cosserat_model::{self, Material};
+pub use sim::{Backend, BuildError, RodBuilder, RodHandle, Simulation, SimulationBuilder};

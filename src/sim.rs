@@ -1,0 +1,474 @@
+//! The convenient world: a [`Simulation`] that owns its rods, built with typed handles.
+//!
+//! Lower crates take their state as arguments (the model computes forces, the backend steps
+//! arrays); this module owns that state for users who want to describe rods, press *step* and
+//! read results. It picks the precision (`f32` or `f64`) and the backend at run time, so a
+//! scene file or a command-line flag can choose them.
+
+use backend_cpu::{CpuRod, Divergence, EndCondition, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings, StepStats};
+use cosserat_model::energy::{Energies, ForceModel, energies};
+use cosserat_model::quat::directors;
+use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
+use cosserat_model::{Material, Real, RodBuildError, Vec3};
+
+/// Which backend steps the rods.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Backend {
+    /// Serial CPU stepper (the reference).
+    #[default]
+    Cpu,
+    /// CPU, rods stepped in parallel on rayon's pool.
+    CpuRayon,
+}
+
+impl Backend {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::CpuRayon => "cpu-rayon",
+        }
+    }
+}
+
+/// A handle to a rod of a [`Simulation`], returned when it is added.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct RodHandle(pub usize);
+
+/// Describes one rod before the simulation is built.
+#[derive(Clone, Debug)]
+#[must_use]
+pub struct RodBuilder {
+    points: Vec<[f64; 3]>,
+    spec: RodSpec,
+    ends: [EndCondition<f64>; 2],
+    loads: Vec<(usize, [f64; 3])>,
+    name: Option<String>,
+}
+
+impl RodBuilder {
+    /// A straight rod of `elements` equal elements from `start` along `direction`.
+    pub fn straight(start: [f64; 3], direction: [f64; 3], length: f64, elements: usize, material: Material) -> Self {
+        Self::polyline(straight_polyline(start, direction, length, elements.max(1)), material)
+    }
+
+    /// A rod through the given points, one element per segment.
+    pub fn polyline(points: Vec<[f64; 3]>, material: Material) -> Self {
+        Self { points, spec: RodSpec::new(material), ends: [EndCondition::free(); 2], loads: Vec::new(), name: None }
+    }
+
+    /// Resamples the polyline by arc length into `n` equal elements. Fails with the index of a
+    /// point that coincides with its predecessor.
+    pub fn resampled(mut self, n: usize) -> Result<Self, usize> {
+        let p: Vec<Vec3<f64>> = self.points.iter().map(|a| Vec3::from(*a)).collect();
+        let mut cum = vec![0.0];
+        for k in 1..p.len() {
+            let l = (p[k] - p[k - 1]).norm();
+            if !(l > 0.0) {
+                return Err(k);
+            }
+            cum.push(cum[k - 1] + l);
+        }
+        let total = *cum.last().unwrap_or(&0.0);
+        let mut seg = 0;
+        self.points = (0..=n)
+            .map(|i| {
+                let s = total * i as f64 / n as f64;
+                while seg + 2 < cum.len() && cum[seg + 1] < s {
+                    seg += 1;
+                }
+                let t = ((s - cum[seg]) / (cum[seg + 1] - cum[seg])).clamp(0.0, 1.0);
+                (p[seg] + (p[seg + 1] - p[seg]) * t).into()
+            })
+            .collect();
+        Ok(self)
+    }
+
+    /// Number of elements.
+    pub fn element_count(&self) -> usize {
+        self.points.len().saturating_sub(1)
+    }
+
+    /// Names the rod.
+    pub fn name(mut self, name: impl Into<String>) -> Self {
+        self.name = Some(name.into());
+        self
+    }
+
+    /// Sets where the rest curvature and twist come from.
+    pub fn rest_shape(mut self, shape: RestShape) -> Self {
+        self.spec.rest_shape = shape;
+        self
+    }
+
+    /// Overrides the parallel-constraint penalty `K_p` [N].
+    pub fn parallel_stiffness(mut self, kp: f64) -> Self {
+        self.spec.parallel_stiffness = Some(kp);
+        self
+    }
+
+    /// Sets rotational [N m² s] and stretching [N s] internal damping and the drag rate [1/s].
+    pub fn damping(mut self, bend: f64, stretch: f64, drag: f64) -> Self {
+        self.spec.bend_damping = bend;
+        self.spec.stretch_damping = stretch;
+        self.spec.drag = drag;
+        self
+    }
+
+    /// Direction the first frame's `d1` should point to.
+    pub fn first_director(mut self, d: [f64; 3]) -> Self {
+        self.spec.first_director_hint = d;
+        self
+    }
+
+    /// Condition at the first point.
+    pub fn start(mut self, c: EndCondition<f64>) -> Self {
+        self.ends[0] = c;
+        self
+    }
+
+    /// Condition at the last point.
+    pub fn end(mut self, c: EndCondition<f64>) -> Self {
+        self.ends[1] = c;
+        self
+    }
+
+    /// Clamps the first point and frame in place.
+    pub fn clamp_start(self) -> Self {
+        self.start(EndCondition::clamped())
+    }
+
+    /// Pins the first point in place.
+    pub fn pin_start(self) -> Self {
+        self.start(EndCondition::pinned())
+    }
+
+    /// Adds a constant force [N] on point `point`.
+    pub fn load(mut self, point: usize, force: [f64; 3]) -> Self {
+        self.loads.push((point, force));
+        self
+    }
+
+    fn build<T: Real>(&self) -> Result<CpuRod<T>, RodBuildError> {
+        let (state, params) = build_rod::<T>(&self.points, &self.spec)?;
+        let ends = self.ends.map(cast_end);
+        let loads = self.loads.iter().map(|&(point, f)| PointLoad { point, force: v3(f) }).collect();
+        Ok(CpuRod::new(state, params, ends, loads))
+    }
+}
+
+fn v3<T: Real>(a: [f64; 3]) -> Vec3<T> {
+    Vec3::new(T::lit(a[0]), T::lit(a[1]), T::lit(a[2]))
+}
+
+fn cast_end<T: Real>(e: EndCondition<f64>) -> EndCondition<T> {
+    EndCondition {
+        kind: e.kind,
+        motion: e.motion.map(|m| PrescribedMotion {
+            velocity: v3(m.velocity.into()),
+            angular_velocity: v3(m.angular_velocity.into()),
+            start_time: m.start_time,
+            end_time: m.end_time,
+        }),
+    }
+}
+
+/// A simulation that could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// A rod's geometry or material is invalid.
+    #[error("rod {rod}: {source}")]
+    Rod {
+        /// Index of the rod.
+        rod: usize,
+        /// What is wrong with it.
+        source: RodBuildError,
+    },
+    /// A setting is invalid.
+    #[error("{0}")]
+    Setting(String),
+    /// A point load names a point the rod does not have.
+    #[error("rod {rod}: load on point {point}, but the rod has points 0..={last}")]
+    LoadPoint {
+        /// Index of the rod.
+        rod: usize,
+        /// Requested point.
+        point: usize,
+        /// Last valid point.
+        last: usize,
+    },
+}
+
+/// Describes a simulation before it is built.
+#[derive(Clone, Debug)]
+#[must_use]
+pub struct SimulationBuilder {
+    rods: Vec<RodBuilder>,
+    settings: SolverSettings<f64>,
+    double_precision: bool,
+    backend: Backend,
+}
+
+impl Default for SimulationBuilder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SimulationBuilder {
+    /// Defaults: `dt = 1e-4` s, 10 Gauss–Seidel sweeps, inextensible, gravity `−9.81 ẑ`, `f32`.
+    pub fn new() -> Self {
+        Self {
+            rods: Vec::new(),
+            settings: SolverSettings {
+                dt: 1e-4,
+                iterations: 10,
+                ordering: Ordering::GaussSeidel,
+                extensible: false,
+                gravity: Vec3::new(0.0, 0.0, -9.81),
+                divergence_strain: 0.5,
+            },
+            double_precision: false,
+            backend: Backend::Cpu,
+        }
+    }
+
+    /// Time step [s].
+    pub fn dt(mut self, dt: f64) -> Self {
+        self.settings.dt = dt;
+        self
+    }
+    /// Distance-constraint sweeps per step.
+    pub fn iterations(mut self, n: usize) -> Self {
+        self.settings.iterations = n;
+        self
+    }
+    /// Extensible (stretch energy) instead of inextensible (distance constraints).
+    pub fn extensible(mut self, yes: bool) -> Self {
+        self.settings.extensible = yes;
+        self
+    }
+    /// Order of each constraint sweep.
+    pub fn ordering(mut self, o: Ordering) -> Self {
+        self.settings.ordering = o;
+        self
+    }
+    /// Gravity [m/s²].
+    pub fn gravity(mut self, g: [f64; 3]) -> Self {
+        self.settings.gravity = g.into();
+        self
+    }
+    /// Runs in `f64` instead of `f32`.
+    pub fn double_precision(mut self, yes: bool) -> Self {
+        self.double_precision = yes;
+        self
+    }
+    /// Strain at which a run is declared diverged.
+    pub fn divergence_strain(mut self, s: f64) -> Self {
+        self.settings.divergence_strain = s;
+        self
+    }
+    /// The backend that steps the rods.
+    pub fn backend(mut self, b: Backend) -> Self {
+        self.backend = b;
+        self
+    }
+    /// Adds a rod and returns its handle.
+    pub fn add_rod(&mut self, rod: RodBuilder) -> RodHandle {
+        self.rods.push(rod);
+        RodHandle(self.rods.len() - 1)
+    }
+    /// Adds a rod, builder style.
+    pub fn with_rod(mut self, rod: RodBuilder) -> Self {
+        self.add_rod(rod);
+        self
+    }
+    /// Time step of the simulation to be built.
+    pub fn time_step(&self) -> f64 {
+        self.settings.dt
+    }
+
+    /// Checks everything and builds the simulation.
+    pub fn build(self) -> Result<Simulation, BuildError> {
+        let s = &self.settings;
+        if !(s.dt.is_finite() && s.dt > 0.0) {
+            return Err(BuildError::Setting(format!("dt = {} is invalid: expected a finite number > 0", s.dt)));
+        }
+        if self.rods.is_empty() {
+            return Err(BuildError::Setting("a simulation needs at least one rod".into()));
+        }
+        for (i, r) in self.rods.iter().enumerate() {
+            for &(point, _) in &r.loads {
+                if point > r.element_count() {
+                    return Err(BuildError::LoadPoint { rod: i, point, last: r.element_count() });
+                }
+            }
+        }
+        let world = if self.double_precision { World::F64(Rods::build(&self.rods, s)?) } else { World::F32(Rods::build(&self.rods, &cast_settings(s))?) };
+        Ok(Simulation {
+            world,
+            names: self.rods.iter().enumerate().map(|(i, r)| r.name.clone().unwrap_or_else(|| format!("rod{i}"))).collect(),
+            radii: self.rods.iter().map(|r| r.spec.material.radius).collect(),
+            backend: self.backend,
+            dt: s.dt,
+            time: 0.0,
+            steps: 0,
+            max_strain: 0.0,
+            extensible: s.extensible,
+        })
+    }
+}
+
+fn cast_settings<T: Real>(s: &SolverSettings<f64>) -> SolverSettings<T> {
+    SolverSettings {
+        dt: T::lit(s.dt),
+        iterations: s.iterations,
+        ordering: s.ordering,
+        extensible: s.extensible,
+        gravity: v3(s.gravity.into()),
+        divergence_strain: T::lit(s.divergence_strain),
+    }
+}
+
+struct Rods<T: Real> {
+    rods: Vec<CpuRod<T>>,
+    settings: SolverSettings<T>,
+    stats: Vec<StepStats>,
+}
+
+impl<T: Real> Rods<T> {
+    fn build(rods: &[RodBuilder], settings: &SolverSettings<T>) -> Result<Self, BuildError> {
+        let rods = rods.iter().enumerate().map(|(i, r)| r.build::<T>().map_err(|source| BuildError::Rod { rod: i, source })).collect::<Result<_, _>>()?;
+        Ok(Self { rods, settings: *settings, stats: Vec::new() })
+    }
+}
+
+enum World {
+    F32(Rods<f32>),
+    F64(Rods<f64>),
+}
+
+/// Dispatches a generic expression over the precision of the world.
+macro_rules! with_rods {
+    ($world:expr, $r:ident => $body:expr) => {
+        match $world {
+            World::F32($r) => $body,
+            World::F64($r) => $body,
+        }
+    };
+}
+
+/// A running simulation: rods, their state and the clock.
+pub struct Simulation {
+    world: World,
+    names: Vec<String>,
+    radii: Vec<f64>,
+    backend: Backend,
+    dt: f64,
+    time: f64,
+    steps: u64,
+    max_strain: f64,
+    extensible: bool,
+}
+
+impl Simulation {
+    /// Advances every rod by one time step.
+    pub fn step(&mut self) -> Result<(), Divergence> {
+        let par = match self.backend {
+            Backend::Cpu => Par::Serial,
+            Backend::CpuRayon => Par::Rayon,
+        };
+        let (time, step) = (self.time, self.steps);
+        let worst = with_rods!(&mut self.world, w => {
+            backend_cpu::step_rods(&mut w.rods, &w.settings, time, step, par, &mut w.stats)?;
+            w.stats.iter().map(StepStats::max_strain).fold(0.0, f64::max)
+        });
+        self.max_strain = self.max_strain.max(worst);
+        self.steps += 1;
+        self.time = self.steps as f64 * self.dt;
+        Ok(())
+    }
+
+    /// Advances `n` steps, stopping at the first divergence.
+    pub fn run(&mut self, n: u64) -> Result<(), Divergence> {
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    /// Simulated time [s].
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+    /// Time step [s].
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+    /// The backend stepping the rods.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+    /// Whether the rods are extensible.
+    pub fn is_extensible(&self) -> bool {
+        self.extensible
+    }
+    /// Whether the simulation runs in `f64`.
+    pub fn is_double_precision(&self) -> bool {
+        matches!(self.world, World::F64(_))
+    }
+    /// Handles of all rods.
+    pub fn rods(&self) -> impl Iterator<Item = RodHandle> {
+        (0..self.names.len()).map(RodHandle)
+    }
+    /// A rod's name.
+    pub fn rod_name(&self, h: RodHandle) -> &str {
+        &self.names[h.0]
+    }
+    /// A rod's radius [m].
+    pub fn rod_radius(&self, h: RodHandle) -> f64 {
+        self.radii[h.0]
+    }
+    /// Total number of elements of all rods.
+    pub fn element_count(&self) -> usize {
+        with_rods!(&self.world, w => w.rods.iter().map(|r| r.elements()).sum())
+    }
+    /// Largest `|l/l0 − 1|` of any segment at the end of any step so far.
+    pub fn max_strain(&self) -> f64 {
+        self.max_strain
+    }
+
+    /// Centreline points of a rod [m].
+    pub fn positions(&self, h: RodHandle) -> Vec<[f64; 3]> {
+        with_rods!(&self.world, w => w.rods[h.0].state.positions.iter().map(|p| [p.x.to_f64(), p.y.to_f64(), p.z.to_f64()]).collect())
+    }
+
+    /// Point velocities of a rod [m/s].
+    pub fn velocities(&self, h: RodHandle) -> Vec<[f64; 3]> {
+        with_rods!(&self.world, w => w.rods[h.0].state.velocities.iter().map(|p| [p.x.to_f64(), p.y.to_f64(), p.z.to_f64()]).collect())
+    }
+
+    /// The first director `d1` of each element of a rod.
+    pub fn first_directors(&self, h: RodHandle) -> Vec<[f64; 3]> {
+        with_rods!(&self.world, w => w.rods[h.0].state.frames.iter().map(|q| { let d = directors(q)[0]; [d.x.to_f64(), d.y.to_f64(), d.z.to_f64()] }).collect())
+    }
+
+    /// Energies summed over all rods.
+    pub fn energies(&self) -> Energies {
+        with_rods!(&self.world, w => {
+            let model = ForceModel { extensible: w.settings.extensible, gravity: w.settings.gravity };
+            w.rods.iter().map(|r| energies(&r.state, &r.params, &model)).fold(Energies::default(), |a, b| Energies {
+                bend_twist: a.bend_twist + b.bend_twist,
+                parallel: a.parallel + b.parallel,
+                stretch: a.stretch + b.stretch,
+                gravity: a.gravity + b.gravity,
+                kinetic_translation: a.kinetic_translation + b.kinetic_translation,
+                kinetic_rotation: a.kinetic_rotation + b.kinetic_rotation,
+            })
+        })
+    }
+}
