@@ -325,3 +325,107 @@ impl Bvh {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize) -> TriMesh {
+        let mut v = Vec::new();
+        let mut t = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                v.push([i as f64 * 0.1, j as f64 * 0.1, ((i * j) as f64 * 0.01).sin()]);
+            }
+        }
+        let id = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        for i in 0..n {
+            for j in 0..n {
+                t.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                t.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        TriMesh::new(v, t, "grid").expect("valid grid").0
+    }
+
+    #[test]
+    fn node_layout_is_gpu_ready() {
+        assert_eq!(std::mem::size_of::<BvhNode>(), 32);
+        assert_eq!(std::mem::align_of::<BvhNode>(), 4);
+        let m = grid(3);
+        let b = Bvh::build(&m);
+        let w = b.node_words();
+        assert_eq!(w.len(), 8 * b.nodes().len());
+        assert_eq!(f32::from_bits(w[0]), b.nodes()[0].min[0]);
+        assert_eq!(w[7], b.nodes()[0].count);
+    }
+
+    #[test]
+    fn balanced_depth_and_invariants_for_all_leaf_sizes() {
+        let m = grid(40); // 3200 triangles
+        for leaf in [1, 2, 4, 8] {
+            let b = Bvh::build_with_leaf_size(&m, leaf);
+            b.check_invariants(&m).unwrap();
+            let bound = (3200f64 / leaf as f64).log2().ceil() as usize + 2;
+            assert!(b.depth() <= bound, "leaf {leaf}: depth {} > {bound}", b.depth());
+            assert!(b.leaf_count() >= 3200 / leaf);
+        }
+        // A single triangle: the root is a leaf.
+        let one = TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]], "one")
+            .unwrap()
+            .0;
+        let b = Bvh::build(&one);
+        b.check_invariants(&one).unwrap();
+        assert_eq!((b.depth(), b.nodes().len()), (1, 1));
+    }
+
+    #[test]
+    fn invariant_checker_catches_corruption() {
+        let m = grid(6);
+        let good = Bvh::build(&m);
+        let mut b = good.clone();
+        b.nodes[1].max[0] = b.nodes[0].max[0] + 1.0;
+        assert!(b.check_invariants(&m).is_err());
+        let mut b = good.clone();
+        let last = b.tri_indices.len() - 1;
+        b.tri_indices[last] = b.tri_indices[0];
+        assert!(b.check_invariants(&m).is_err());
+        let mut b = good.clone();
+        let leaf = b.nodes.iter().position(|n| n.is_leaf()).unwrap();
+        b.nodes[leaf].min[2] = b.nodes[leaf].max[2] + 1.0;
+        assert!(b.check_invariants(&m).is_err());
+        let mut b = good.clone();
+        b.depth = 99;
+        assert!(b.check_invariants(&m).is_err());
+    }
+
+    #[test]
+    fn outward_rounding_is_conservative() {
+        for x in [0.1f64, -0.1, 1.0 / 3.0, -2.0 / 3.0, 1e-30, 0.0] {
+            assert!(f64::from(round_down(x)) <= x);
+            assert!(f64::from(round_up(x)) >= x);
+        }
+    }
+
+    #[test]
+    fn sphere_query_visits_exactly_the_brute_force_leaves() {
+        let m = grid(20);
+        let b = Bvh::build_with_leaf_size(&m, 2);
+        for (k, p) in [[0.5, 0.5, 0.3], [1.0, 2.0, 0.0], [-1.0, 0.0, 0.0], [1.9, 0.1, -0.2]].iter().enumerate() {
+            let r = 0.05 + 0.1 * k as f64;
+            let mut got = Vec::new();
+            b.for_each_near(p, r, |s| got.push(s));
+            got.sort_unstable();
+            let mut want: Vec<usize> = Vec::new();
+            for n in b.nodes().iter().filter(|n| n.is_leaf()) {
+                // A leaf is visited iff it and all its ancestors are within r; ancestors contain
+                // it, so iff the leaf itself is.
+                if n.distance_squared(p) <= r * r {
+                    want.extend(n.first as usize..(n.first + n.count) as usize);
+                }
+            }
+            want.sort_unstable();
+            assert_eq!(got, want);
+        }
+    }
+}

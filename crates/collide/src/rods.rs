@@ -27,8 +27,8 @@
 //!
 //! Neighbouring segments of one chain always touch (adjacent ones share a point). Segment pairs
 //! `i`, `j` of the same chain with `|i − j| ≤ skip` are therefore not tested. By default the skip is
-//! `max(1, ⌈2r / h⌉)` with `h` the chain's mean segment length: on a straight chain the first
-//! tested pair is then separated by at least `2r` of arc length, so a straight or gently bent chain
+//! `⌊2r / h⌋ + 1` with `h` the chain's mean segment length: on a straight chain the first tested
+//! pair is then separated by more than `2r` of arc length, so a straight or gently bent chain
 //! reports nothing, while a tight loop or a knot does.
 
 /// A polyline of points (at least one) with a radius. Pure data, borrowed.
@@ -58,7 +58,7 @@ pub struct RodCollisionConfig {
     /// Whether a chain is tested against itself. Default `true`.
     pub self_collisions: bool,
     /// Same-chain segment pairs with `|i − j| ≤ skip` are not tested; `None` (default) computes
-    /// `max(1, ⌈2r / h⌉)` per chain (see the module docs).
+    /// `⌊2r / h⌋ + 1` per chain (see the module docs).
     pub self_skip: Option<usize>,
     /// Broad-phase algorithm. Default [`BroadPhase::SweepAndPrune`].
     pub broad_phase: BroadPhase,
@@ -245,7 +245,7 @@ impl RodCollider {
         if !(h > 0.0) || !chain.radius.is_finite() {
             return n;
         }
-        ((2.0 * chain.radius / h).ceil() as usize).clamp(1, n)
+        ((2.0 * chain.radius / h).floor() as usize + 1).clamp(1, n)
     }
 
     /// Finds all segment contacts between the chains (and within each chain if enabled). Clears
