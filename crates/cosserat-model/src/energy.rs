@@ -167,7 +167,9 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
         let (_, mut fb, tq) = parallel_element(ra, rb, &s.frames[j], p.parallel_stiffness[j], l0);
         if model.extensible {
             fb += stretch_element(ra, rb, p.stretch_stiffness[j], l0).1;
-            fb += stretch_damping_element(ra, rb, &s.velocities[j], &s.velocities[j + 1], p.stretch_damping[j], l0);
+            if p.stretch_damping[j] > T::zero() {
+                fb += stretch_damping_element(ra, rb, &s.velocities[j], &s.velocities[j + 1], p.stretch_damping[j], l0);
+            }
         }
         forces[j] -= fb;
         forces[j + 1] += fb;
@@ -175,12 +177,18 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
         torques[j] += tq;
     }
     for j in 0..n.saturating_sub(1) {
-        let l = p.node_length(j);
-        let (qa, qb) = (&s.frames[j], &s.frames[j + 1]);
-        let (_, ta, tb) = bend_twist_node(qa, qb, &p.rest_darboux[j], &p.bend_twist_stiffness[j], l);
-        let (da, db) = bend_damping_node(qa, qb, &s.angular_velocities[j], &s.angular_velocities[j + 1], p.bend_damping[j], l);
-        torques[j] += ta + da;
-        torques[j + 1] += tb + db;
+        let (_, ta, tb) = bend_twist_node(&s.frames[j], &s.frames[j + 1], &p.rest_darboux[j], &p.bend_twist_stiffness[j], p.node_length(j));
+        torques[j] += ta;
+        torques[j + 1] += tb;
+    }
+    // A rod without rotational damping pays nothing for it.
+    if p.bend_damping.iter().any(|&c| c > T::zero()) {
+        for j in 0..n.saturating_sub(1) {
+            let (qa, qb) = (&s.frames[j], &s.frames[j + 1]);
+            let (da, db) = bend_damping_node(qa, qb, &s.angular_velocities[j], &s.angular_velocities[j + 1], p.bend_damping[j], p.node_length(j));
+            torques[j] += da;
+            torques[j + 1] += db;
+        }
     }
 }
 
