@@ -264,7 +264,7 @@ impl Bvh {
             }
             max_depth = max_depth.max(level);
             let nd = &self.nodes[i];
-            if (0..3).any(|k| !(nd.min[k] <= nd.max[k])) {
+            if (0..3).any(|k| nd.min[k].partial_cmp(&nd.max[k]).is_none_or(|o| o.is_gt())) {
                 return fail(format!("node {i} has an empty or NaN box"));
             }
             if nd.is_leaf() {
@@ -335,7 +335,11 @@ mod tests {
         let mut t = Vec::new();
         for i in 0..=n {
             for j in 0..=n {
-                v.push([i as f64 * 0.1, j as f64 * 0.1, ((i * j) as f64 * 0.01).sin()]);
+                v.push([
+                    i as f64 * 0.1,
+                    j as f64 * 0.1,
+                    ((i * j) as f64 * 0.01).sin(),
+                ]);
             }
         }
         let id = |i: usize, j: usize| (i * (n + 1) + j) as u32;
@@ -367,13 +371,21 @@ mod tests {
             let b = Bvh::build_with_leaf_size(&m, leaf);
             b.check_invariants(&m).unwrap();
             let bound = (3200f64 / leaf as f64).log2().ceil() as usize + 2;
-            assert!(b.depth() <= bound, "leaf {leaf}: depth {} > {bound}", b.depth());
+            assert!(
+                b.depth() <= bound,
+                "leaf {leaf}: depth {} > {bound}",
+                b.depth()
+            );
             assert!(b.leaf_count() >= 3200 / leaf);
         }
         // A single triangle: the root is a leaf.
-        let one = TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]], "one")
-            .unwrap()
-            .0;
+        let one = TriMesh::new(
+            vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![[0, 1, 2]],
+            "one",
+        )
+        .unwrap()
+        .0;
         let b = Bvh::build(&one);
         b.check_invariants(&one).unwrap();
         assert_eq!((b.depth(), b.nodes().len()), (1, 1));
@@ -411,7 +423,15 @@ mod tests {
     fn sphere_query_visits_exactly_the_brute_force_leaves() {
         let m = grid(20);
         let b = Bvh::build_with_leaf_size(&m, 2);
-        for (k, p) in [[0.5, 0.5, 0.3], [1.0, 2.0, 0.0], [-1.0, 0.0, 0.0], [1.9, 0.1, -0.2]].iter().enumerate() {
+        for (k, p) in [
+            [0.5, 0.5, 0.3],
+            [1.0, 2.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [1.9, 0.1, -0.2],
+        ]
+        .iter()
+        .enumerate()
+        {
             let r = 0.05 + 0.1 * k as f64;
             let mut got = Vec::new();
             b.for_each_near(p, r, |s| got.push(s));

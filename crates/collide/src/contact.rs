@@ -247,7 +247,12 @@ impl MeshCollider {
         for &t in bvh.tri_indices() {
             let t = t as usize;
             let [a, b, c] = mesh.triangle(t);
-            tris.push(TriData { a, b, c, n: face[t] });
+            tris.push(TriData {
+                a,
+                b,
+                c,
+                n: face[t],
+            });
             let tri = mesh.triangles()[t];
             let mut en = [Vector3::zeros(); 3];
             for (k, slot) in en.iter_mut().enumerate() {
@@ -432,5 +437,106 @@ impl MeshCollider {
             distance: d,
             signed_distance: sign * d,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A square floor at z = 0 of 2·n² triangles, normals +z (the "lumen" is above).
+    fn floor(n: usize) -> MeshCollider {
+        let mut v = Vec::new();
+        let mut t = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                v.push([i as f64 / n as f64, j as f64 / n as f64, 0.0]);
+            }
+        }
+        let id = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        for i in 0..n {
+            for j in 0..n {
+                t.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                t.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        MeshCollider::new(TriMesh::new(v, t, "floor").expect("valid").0)
+    }
+
+    #[test]
+    fn flat_wall_response_and_escape() {
+        let c = floor(10);
+        let mut buf = ContactBuffer::new();
+        let pts = [[0.53, 0.47, 0.02], [0.5, 0.5, -0.01], [0.31, 0.62, 0.2]];
+        c.detect(&pts, 0.05, &mut buf);
+        let r = buf.responses();
+        assert_eq!(r.len(), 3);
+        // Above the floor: pushed up by r - d.
+        assert!(r[0].count >= 2 && !r[0].escaped);
+        // The triangle under the point gives r - d; those beside it are farther (less deep).
+        assert!((r[0].max_depth - 0.03).abs() < 1e-12);
+        assert!(r[0].depth > 0.0 && r[0].depth <= r[0].max_depth);
+        assert!((r[0].direction[2] - 1.0).abs() < 1e-12);
+        // Below the floor (centre crossed the wall): escaped, depth r + d, still pushed up.
+        assert!(r[1].escaped && (r[1].max_depth - 0.06).abs() < 1e-12);
+        assert!((r[1].direction[2] - 1.0).abs() < 1e-12);
+        // Far above: nothing.
+        assert_eq!(r[2].count, 0);
+        assert_eq!(r[2].direction, [0.0; 3]);
+        // Grouping: contacts_of(i) are point i's, and cover all contacts in order.
+        let total: usize = (0..3).map(|i| buf.contacts_of(i).len()).sum();
+        assert_eq!(total, buf.contacts().len());
+        assert!(
+            buf.contacts_of(1)
+                .iter()
+                .all(|k| k.point == 1 && k.signed_distance < 0.0)
+        );
+        assert_eq!(buf.points_in_contact(), 2);
+        // Nearest: signed by the pseudo-normal; an unlimited search always finds one.
+        let n = c.nearest(&[0.5, 0.5, -0.3], f64::INFINITY).unwrap();
+        assert!((n.signed_distance + 0.3).abs() < 1e-12);
+        assert!(c.nearest(&[0.5, 0.5, -0.3], 0.1).is_none());
+        // Per-point radii.
+        c.detect_with_radii(&pts, &[0.01, 0.05, 0.5], &mut buf);
+        assert_eq!(buf.responses()[0].count, 0);
+        assert!(buf.responses()[2].count > 0);
+    }
+
+    #[test]
+    fn batch_detection_reuses_buffers() {
+        let c = floor(20);
+        let pts: Vec<[f64; 3]> = (0..500)
+            .map(|i| {
+                [
+                    (i % 25) as f64 / 25.0,
+                    (i / 25) as f64 / 20.0,
+                    0.01 * (i % 7) as f64 - 0.02,
+                ]
+            })
+            .collect();
+        let mut buf = ContactBuffer::new();
+        c.detect(&pts, 0.03, &mut buf);
+        let first: Vec<Contact> = buf.contacts().to_vec();
+        let caps = (buf.contacts.capacity(), buf.responses.capacity());
+        let ptrs = (buf.contacts.as_ptr(), buf.responses.as_ptr());
+        c.detect(&pts, 0.03, &mut buf);
+        assert_eq!(buf.contacts(), &first[..]);
+        assert_eq!((buf.contacts.capacity(), buf.responses.capacity()), caps);
+        assert_eq!((buf.contacts.as_ptr(), buf.responses.as_ptr()), ptrs);
+    }
+
+    #[test]
+    fn gpu_export_matches_the_tree() {
+        let c = floor(8);
+        let g = c.to_gpu();
+        assert_eq!(std::mem::size_of::<crate::GpuTriangle>(), 48);
+        assert_eq!(g.nodes, c.bvh().nodes());
+        assert_eq!(g.triangles.len(), c.mesh().triangles().len());
+        for (slot, gt) in g.triangles.iter().enumerate() {
+            assert_eq!(gt.index, c.bvh().tri_indices()[slot]);
+            let [a, _, _] = c.mesh().triangle(gt.index as usize);
+            assert_eq!(gt.a, [a.x as f32, a.y as f32, a.z as f32]);
+        }
+        assert_eq!(g.depth as usize, c.bvh().depth());
     }
 }

@@ -94,7 +94,12 @@ fn parse_obj_bytes(
 ) -> Result<(TriMesh, MeshReport), MeshError> {
     let text = std::str::from_utf8(bytes).map_err(|e| MeshError::Parse {
         path: name.to_string(),
-        line: Some(1 + bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count()),
+        line: Some(
+            1 + bytes[..e.valid_up_to()]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count(),
+        ),
         message: "not valid UTF-8 text (is this a binary file?)".to_string(),
     })?;
     parse_obj(text, name, scale)
@@ -195,7 +200,12 @@ pub fn parse_stl(bytes: &[u8], name: &str, scale: f64) -> Result<(TriMesh, MeshR
     if is_ascii {
         let text = std::str::from_utf8(bytes).map_err(|e| MeshError::Parse {
             path: name.to_string(),
-            line: Some(1 + bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count()),
+            line: Some(
+                1 + bytes[..e.valid_up_to()]
+                    .iter()
+                    .filter(|&&b| b == b'\n')
+                    .count(),
+            ),
             message: "ASCII STL is not valid UTF-8".to_string(),
         })?;
         return parse_stl_ascii(text, name, scale);

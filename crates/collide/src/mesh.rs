@@ -52,7 +52,9 @@ pub enum MeshError {
         scale: f64,
     },
     /// No usable triangles (none in the input, or all were degenerate or duplicates).
-    #[error("{path}: mesh has no usable triangles ({vertices} vertices, {dropped} triangles dropped as degenerate or duplicate)")]
+    #[error(
+        "{path}: mesh has no usable triangles ({vertices} vertices, {dropped} triangles dropped as degenerate or duplicate)"
+    )]
     Empty {
         /// The file.
         path: String,
@@ -88,7 +90,9 @@ pub enum MeshError {
         vertex_count: usize,
     },
     /// An edge is shared by more than two triangles.
-    #[error("{path}: non-manifold edge between vertices {a} and {b}: shared by {count} triangles (triangle {triangle} is one of them)")]
+    #[error(
+        "{path}: non-manifold edge between vertices {a} and {b}: shared by {count} triangles (triangle {triangle} is one of them)"
+    )]
     NonManifoldEdge {
         /// The file.
         path: String,

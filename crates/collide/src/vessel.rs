@@ -205,7 +205,8 @@ fn transport_frames(points: &[V], radii: &[f64], n0: V) -> Vec<Station> {
         let s = axis.norm();
         if s > 1e-12 {
             let ang = s.atan2(t_prev.dot(&t));
-            let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), ang);
+            let rot =
+                nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), ang);
             n = rot * n;
         }
         n = (n - t * n.dot(&t)).normalize();
@@ -337,7 +338,8 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
             .try_normalize(1e-9)
             .unwrap_or_else(|| any_perp(&d));
         let bb0 = d.cross(&bn0);
-        let nt_b = ((2.0 * PI * mean_r(bp.radius_start, bp.radius_end) / h).round() as usize).max(8);
+        let nt_b =
+            ((2.0 * PI * mean_r(bp.radius_start, bp.radius_end) / h).round() as usize).max(8);
         // First station whose ring is fully outside the trunk by a margin.
         let step = 0.25 * h;
         let mut s0 = None;
@@ -371,7 +373,12 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
         let bst: Vec<Station> = bpts
             .iter()
             .zip(&brad)
-            .map(|(&c, &r)| Station { c, n: bn0, b: bb0, r })
+            .map(|(&c, &r)| Station {
+                c,
+                n: bn0,
+                b: bb0,
+                r,
+            })
             .collect();
         let bbase = add_rings(&mut verts, &bst, nt_b);
         tris.extend(tube_triangles(bbase, nsb, nt_b));
@@ -403,13 +410,13 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
             }
         }
         let rim = rim.ok_or_else(|| {
-            invalid(format!("branch {bi}: could not cut a simple hole in the trunk"))
+            invalid(format!(
+                "branch {bi}: could not cut a simple hole in the trunk"
+            ))
         })?;
         for (ti, t) in tris[..trunk_tri_count].iter().enumerate() {
-            if t.iter().any(|&v| hole.contains(&(v as usize))) {
-                if !removed.insert(ti) {
-                    return Err(invalid(format!("branch {bi} overlaps another junction")));
-                }
+            if t.iter().any(|&v| hole.contains(&(v as usize))) && !removed.insert(ti) {
+                return Err(invalid(format!("branch {bi} overlaps another junction")));
             }
         }
         // Zip the rim (kept-side edges u→v, used reversed) to the first branch ring (j→j+1).
@@ -418,7 +425,8 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
             w.dot(&bb0).atan2(w.dot(&bn0))
         };
         let ring: Vec<u32> = (0..nt_b).map(|j| (bbase + j) as u32).collect();
-        zip_loops(&rim, &ring, &verts, &angle, &mut bands).map_err(|m| invalid(format!("branch {bi}: {m}")))?;
+        zip_loops(&rim, &ring, &verts, &angle, &mut bands)
+            .map_err(|m| invalid(format!("branch {bi}: {m}")))?;
 
         branch_lines.push(Centreline {
             points: std::iter::once(c0)
@@ -509,7 +517,11 @@ fn rim_loop(tris: &[[u32; 3]], hole: &HashSet<usize>) -> Result<Vec<u32>, Vec<us
     if rim.len() != next.len() {
         // Several loops: grow over the vertices of the loop(s) not containing `start`.
         let on: HashSet<u32> = rim.iter().copied().collect();
-        return Err(next.keys().filter(|k| !on.contains(k)).map(|&k| k as usize).collect());
+        return Err(next
+            .keys()
+            .filter(|k| !on.contains(k))
+            .map(|&k| k as usize)
+            .collect());
     }
     Ok(rim)
 }

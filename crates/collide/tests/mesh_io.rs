@@ -1,9 +1,12 @@
 //! Mesh loading and validation: every error case, the repairs, and the real meshes.
 
-use collide::{Bvh, MeshCollider, MeshError, TriMesh, load_mesh, load_obj, load_stl, parse_obj, parse_stl};
+use collide::{
+    Bvh, MeshCollider, MeshError, TriMesh, load_mesh, load_obj, load_stl, parse_obj, parse_stl,
+};
 use std::io::Write;
 
-const TETRA_OBJ: &str = "# tetrahedron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n";
+const TETRA_OBJ: &str =
+    "# tetrahedron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n";
 
 fn msg(e: &MeshError) -> String {
     e.to_string()
@@ -25,7 +28,8 @@ fn obj_tetrahedron_loads_scaled() {
 
 #[test]
 fn obj_faces_with_slashes_negative_indices_and_polygons() {
-    let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3//1 4\nf -4 -2 -1\n";
+    let text =
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3//1 4\nf -4 -2 -1\n";
     // The quad becomes 2 triangles; the last face duplicates the quad's second triangle.
     let (m, r) = parse_obj(text, "q.obj", 1.0).unwrap();
     assert_eq!(r.input_triangles, 3);
@@ -36,25 +40,66 @@ fn obj_faces_with_slashes_negative_indices_and_polygons() {
 #[test]
 fn obj_errors_name_file_line_and_value() {
     let e = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "bad.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::IndexOutOfRange { line: Some(4), index: 7, vertex_count: 3, .. }), "{e:?}");
-    assert!(msg(&e).contains("bad.obj:4") && msg(&e).contains('7'), "{e}");
+    assert!(
+        matches!(
+            e,
+            MeshError::IndexOutOfRange {
+                line: Some(4),
+                index: 7,
+                vertex_count: 3,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        msg(&e).contains("bad.obj:4") && msg(&e).contains('7'),
+        "{e}"
+    );
 
     let e = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "zero.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: 0, .. }), "{e:?}");
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: 0, .. }),
+        "{e:?}"
+    );
 
     let e = parse_obj("v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n", "nan.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::NonFiniteVertex { line: Some(2), vertex: 1, .. }), "{e:?}");
-    assert!(msg(&e).contains("nan.obj:2") && msg(&e).contains("NaN"), "{e}");
+    assert!(
+        matches!(
+            e,
+            MeshError::NonFiniteVertex {
+                line: Some(2),
+                vertex: 1,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        msg(&e).contains("nan.obj:2") && msg(&e).contains("NaN"),
+        "{e}"
+    );
 
     let e = parse_obj("v 0 0 inf\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "inf.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::NonFiniteVertex { value, .. } if value.is_infinite()), "{e:?}");
+    assert!(
+        matches!(e, MeshError::NonFiniteVertex { value, .. } if value.is_infinite()),
+        "{e:?}"
+    );
 
     // Overflow through the scale factor is caught too.
-    let e = parse_obj("v 1e308 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "big.obj", 1000.0).unwrap_err();
+    let e = parse_obj(
+        "v 1e308 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        "big.obj",
+        1000.0,
+    )
+    .unwrap_err();
     assert!(matches!(e, MeshError::NonFiniteVertex { .. }), "{e:?}");
 
     let e = parse_obj("v 0 0 zz\n", "tok.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::Parse { line: Some(1), .. }) && msg(&e).contains("zz"), "{e}");
+    assert!(
+        matches!(e, MeshError::Parse { line: Some(1), .. }) && msg(&e).contains("zz"),
+        "{e}"
+    );
 
     let e = parse_obj("v 0 0\n", "short.obj", 1.0).unwrap_err();
     assert!(msg(&e).contains("short.obj:1"), "{e}");
@@ -63,7 +108,10 @@ fn obj_errors_name_file_line_and_value() {
     assert!(matches!(e, MeshError::Parse { line: Some(3), .. }), "{e:?}");
 
     let e = parse_obj("# nothing\nv 0 0 0\n", "empty.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::Empty { .. }) && msg(&e).contains("empty.obj"), "{e}");
+    assert!(
+        matches!(e, MeshError::Empty { .. }) && msg(&e).contains("empty.obj"),
+        "{e}"
+    );
 
     let e = parse_obj(TETRA_OBJ, "t.obj", 0.0).unwrap_err();
     assert!(matches!(e, MeshError::InvalidScale { .. }), "{e:?}");
@@ -73,7 +121,13 @@ fn obj_errors_name_file_line_and_value() {
 
 #[test]
 fn degenerate_and_duplicate_triangles_are_dropped_and_counted() {
-    let verts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+    let verts = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+    ];
     let tris = vec![
         [0, 1, 2],
         [0, 0, 2], // repeated vertex
@@ -88,22 +142,52 @@ fn degenerate_and_duplicate_triangles_are_dropped_and_counted() {
     assert_eq!(m.triangles(), &[[0, 1, 2], [0, 1, 4]]);
 
     // Only degenerate triangles: an error naming the counts.
-    let e = TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], vec![[0, 1, 2]], "line").unwrap_err();
+    let e = TriMesh::new(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+        vec![[0, 1, 2]],
+        "line",
+    )
+    .unwrap_err();
     assert!(matches!(e, MeshError::Empty { dropped: 1, .. }), "{e:?}");
 }
 
 #[test]
 fn non_manifold_edge_is_an_error() {
-    let verts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]];
+    let verts = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+    ];
     let tris = vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]];
     let e = TriMesh::new(verts, tris, "fan").unwrap_err();
-    assert!(matches!(e, MeshError::NonManifoldEdge { a: 0, b: 1, count: 3, .. }), "{e:?}");
-    assert!(msg(&e).contains("fan") && msg(&e).contains("vertices 0 and 1"), "{e}");
+    assert!(
+        matches!(
+            e,
+            MeshError::NonManifoldEdge {
+                a: 0,
+                b: 1,
+                count: 3,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        msg(&e).contains("fan") && msg(&e).contains("vertices 0 and 1"),
+        "{e}"
+    );
 }
 
 #[test]
 fn misoriented_edges_are_reported() {
-    let verts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
+    let verts = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ];
     let (_, ok) = TriMesh::new(verts.clone(), vec![[0, 1, 2], [1, 3, 2]], "ok").unwrap();
     assert_eq!(ok.misoriented_edges, 0);
     assert_eq!(ok.boundary_edges, 4);
@@ -148,15 +232,24 @@ fn binary_stl_errors() {
     let mut b = binary_stl(&TETRA);
     b.truncate(b.len() - 7);
     let e = parse_stl(&b, "trunc.stl", 1.0).unwrap_err();
-    assert!(msg(&e).contains("trunc.stl") && msg(&e).contains("announces 4 triangles"), "{e}");
+    assert!(
+        msg(&e).contains("trunc.stl") && msg(&e).contains("announces 4 triangles"),
+        "{e}"
+    );
 
     let e = parse_stl(&[1, 2, 3], "tiny.stl", 1.0).unwrap_err();
-    assert!(msg(&e).contains("tiny.stl") && msg(&e).contains("3 bytes"), "{e}");
+    assert!(
+        msg(&e).contains("tiny.stl") && msg(&e).contains("3 bytes"),
+        "{e}"
+    );
 
     let mut t = TETRA;
     t[2][1][1] = f32::NAN;
     let e = parse_stl(&binary_stl(&t), "nan.stl", 1.0).unwrap_err();
-    assert!(msg(&e).contains("nan.stl") && msg(&e).contains("triangle 2"), "{e}");
+    assert!(
+        msg(&e).contains("nan.stl") && msg(&e).contains("triangle 2"),
+        "{e}"
+    );
 
     let e = parse_stl(&binary_stl(&[]), "none.stl", 1.0).unwrap_err();
     assert!(matches!(e, MeshError::Empty { .. }), "{e:?}");
@@ -183,11 +276,17 @@ fn ascii_stl_loads_and_reports_errors_with_lines() {
 
     let bad = ascii_stl(&TETRA).replacen("vertex 0 1 0", "vertex 0 x 0", 1);
     let e = parse_stl(bad.as_bytes(), "a.stl", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::Parse { line: Some(5), .. }) && msg(&e).contains("\"x\""), "{e}");
+    assert!(
+        matches!(e, MeshError::Parse { line: Some(5), .. }) && msg(&e).contains("\"x\""),
+        "{e}"
+    );
 
     let bad = ascii_stl(&TETRA).replacen("vertex 0 1 0", "vertex 0 inf 0", 1);
     let e = parse_stl(bad.as_bytes(), "a.stl", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::NonFiniteVertex { line: Some(5), .. }), "{e:?}");
+    assert!(
+        matches!(e, MeshError::NonFiniteVertex { line: Some(5), .. }),
+        "{e:?}"
+    );
 
     let bad = ascii_stl(&TETRA[..1]).replacen("      vertex 1 0 0\n", "", 1);
     let e = parse_stl(bad.as_bytes(), "a.stl", 1.0).unwrap_err();
@@ -200,7 +299,10 @@ fn files_by_extension_and_io_errors() {
     let obj = dir.path().join("t.OBJ");
     std::fs::write(&obj, TETRA_OBJ).unwrap();
     let stl = dir.path().join("t.stl");
-    std::fs::File::create(&stl).unwrap().write_all(&binary_stl(&TETRA)).unwrap();
+    std::fs::File::create(&stl)
+        .unwrap()
+        .write_all(&binary_stl(&TETRA))
+        .unwrap();
     let other = dir.path().join("t.mesh");
     std::fs::write(&other, TETRA_OBJ).unwrap();
     assert_eq!(load_mesh(&obj, 1.0).unwrap().0.triangles().len(), 4);
@@ -211,16 +313,28 @@ fn files_by_extension_and_io_errors() {
 
     let missing = dir.path().join("missing.obj");
     let e = load_mesh(&missing, 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::Io { .. }) && msg(&e).contains("missing.obj"), "{e}");
+    assert!(
+        matches!(e, MeshError::Io { .. }) && msg(&e).contains("missing.obj"),
+        "{e}"
+    );
 
     let bin = dir.path().join("bin.obj");
     std::fs::write(&bin, [0xffu8, 0xfe, 0x00, 0x10]).unwrap();
     let e = load_mesh(&bin, 1.0).unwrap_err();
-    assert!(msg(&e).contains("bin.obj:1") && msg(&e).contains("UTF-8"), "{e}");
+    assert!(
+        msg(&e).contains("bin.obj:1") && msg(&e).contains("UTF-8"),
+        "{e}"
+    );
 }
 
-const PHANTOM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/meshes/phantom.obj");
-const CAROTIDS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/meshes/carotids.stl");
+const PHANTOM: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../../shared/data/meshes/phantom.obj"
+);
+const CAROTIDS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../../shared/data/meshes/carotids.stl"
+);
 
 fn check_real(path: &str, triangles: usize) {
     if !std::path::Path::new(path).exists() {

@@ -28,7 +28,11 @@ fn config(cases: u32) -> ProptestConfig {
 }
 
 fn to_parry(mesh: &TriMesh, flags: TriMeshFlags) -> PMesh {
-    let v = mesh.vertices().iter().map(|p| PV::new(p.x, p.y, p.z)).collect();
+    let v = mesh
+        .vertices()
+        .iter()
+        .map(|p| PV::new(p.x, p.y, p.z))
+        .collect();
     PMesh::with_flags(v, mesh.triangles().to_vec(), flags).expect("parry accepts the mesh")
 }
 
@@ -55,8 +59,16 @@ fn close(a: f64, b: f64) -> bool {
 fn compare(c: &MeshCollider, pm: &PMesh, p: [f64; 3], r: f64) -> Result<(), TestCaseError> {
     let mut buf = ContactBuffer::new();
     c.detect(&[p], r, &mut buf);
-    let ours: BTreeMap<u32, f64> = buf.contacts().iter().map(|k| (k.triangle, k.distance)).collect();
-    prop_assert_eq!(ours.len(), buf.contacts().len(), "a triangle reported twice");
+    let ours: BTreeMap<u32, f64> = buf
+        .contacts()
+        .iter()
+        .map(|k| (k.triangle, k.distance))
+        .collect();
+    prop_assert_eq!(
+        ours.len(),
+        buf.contacts().len(),
+        "a triangle reported twice"
+    );
     let theirs = parry_within(pm, p, r);
     let edge = |d: f64| (d - r).abs() < 1e-9;
     for (t, d) in &theirs {
@@ -64,20 +76,40 @@ fn compare(c: &MeshCollider, pm: &PMesh, p: [f64; 3], r: f64) -> Result<(), Test
             continue;
         }
         let ours_d = ours.get(t).copied();
-        prop_assert!(ours_d.is_some(), "missed triangle {} at distance {} (r = {})", t, d, r);
+        prop_assert!(
+            ours_d.is_some(),
+            "missed triangle {} at distance {} (r = {})",
+            t,
+            d,
+            r
+        );
         let od = ours_d.unwrap_or(f64::NAN);
-        prop_assert!(close(od, *d), "triangle {}: distance {} vs parry {}", t, od, d);
+        prop_assert!(
+            close(od, *d),
+            "triangle {}: distance {} vs parry {}",
+            t,
+            od,
+            d
+        );
         prop_assert!(close(r - od, r - d), "penetration differs");
     }
     for (t, d) in &ours {
-        prop_assert!(theirs.contains_key(t) || edge(*d), "extra triangle {} at {}", t, d);
+        prop_assert!(
+            theirs.contains_key(t) || edge(*d),
+            "extra triangle {} at {}",
+            t,
+            d
+        );
     }
     for k in buf.contacts() {
         prop_assert!(close(k.depth, r - k.signed_distance));
         prop_assert!(k.signed_distance.abs() == k.distance);
         let n = nalgebra::Vector3::from(k.normal);
         prop_assert!((n.norm() - 1.0).abs() < 1e-12);
-        prop_assert!(close(n.dot(&c.mesh().face_normal(k.triangle as usize)), 1.0));
+        prop_assert!(close(
+            n.dot(&c.mesh().face_normal(k.triangle as usize)),
+            1.0
+        ));
     }
     // Nearest triangle: same distance as parry's projection on the whole mesh.
     let q = PV::new(p[0], p[1], p[2]);
@@ -85,7 +117,12 @@ fn compare(c: &MeshCollider, pm: &PMesh, p: [f64; 3], r: f64) -> Result<(), Test
     let near = c.nearest(&p, f64::INFINITY);
     prop_assert!(near.is_some());
     if let Some(near) = near {
-        prop_assert!(close(near.distance, proj.point.distance(q)), "nearest {} vs parry {}", near.distance, proj.point.distance(q));
+        prop_assert!(
+            close(near.distance, proj.point.distance(q)),
+            "nearest {} vs parry {}",
+            near.distance,
+            proj.point.distance(q)
+        );
     }
     Ok(())
 }
@@ -96,7 +133,11 @@ fn soup(seed: u64) -> TriMesh {
     let mut v = Vec::new();
     let mut t = Vec::new();
     for i in 0..n {
-        let c = [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)];
+        let c = [
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        ];
         let s: f64 = rng.random_range(0.05..0.8);
         for _ in 0..3 {
             v.push([

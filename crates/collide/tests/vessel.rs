@@ -136,7 +136,11 @@ fn points_past_the_wall_are_detected() {
     let (v, c) = default_vessel();
     let rod_r = 0.0005;
     let mut buf = ContactBuffer::new();
-    let junctions: Vec<f64> = VesselParams::default().branches.iter().map(|b| b.at).collect();
+    let junctions: Vec<f64> = VesselParams::default()
+        .branches
+        .iter()
+        .map(|b| b.at)
+        .collect();
     let mut tested = 0;
     for k in 1..20 {
         let u = k as f64 / 20.0;
@@ -160,7 +164,10 @@ fn points_past_the_wall_are_detected() {
             assert!(ri.count > 0 && !ri.escaped, "u={u} j={j}: {ri:?}");
             assert!(ri.depth > 0.0 && ri.depth < rod_r);
             let dir = nalgebra::Vector3::from(ri.direction);
-            assert!(dir.dot(&nalgebra::Vector3::from(n)) < -0.9, "response must point inward");
+            assert!(
+                dir.dot(&nalgebra::Vector3::from(n)) < -0.9,
+                "response must point inward"
+            );
             assert!(rt.count > 0 && rt.escaped, "u={u} j={j}: {rt:?}");
             assert!(rt.depth > rod_r);
             assert_eq!(rf.count, 0);
@@ -174,8 +181,10 @@ fn points_past_the_wall_are_detected() {
 
 #[test]
 fn bad_parameters_are_errors() {
-    let mut p = VesselParams::default();
-    p.trunk_length = f64::NAN;
+    let p = VesselParams {
+        trunk_length: f64::NAN,
+        ..VesselParams::default()
+    };
     assert!(generate(&p).is_err());
     let mut p = VesselParams::default();
     p.branches[0].radius_start = 0.05; // far wider than the trunk
