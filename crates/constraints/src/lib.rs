@@ -10,6 +10,7 @@
 //! This crate knows rods only as arrays of points, velocities, inverse masses and rest lengths;
 //! it has no notion of frames, forces, threads or devices.
 
+pub mod direct;
 pub mod distance;
 
 pub use distance::{Ordering, solve_distance_iteration, strain_extremes};

@@ -21,6 +21,7 @@ pub mod material;
 pub mod quat;
 pub mod real;
 pub mod rod;
+pub mod stability;
 
 pub use darboux::darboux;
 pub use material::{Material, MaterialError};
