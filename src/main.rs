@@ -15,7 +15,11 @@ use std::time::Instant;
 const DEMO_SCENE: &str = include_str!("../scenes/pendulum.toml");
 
 #[derive(Parser)]
-#[command(name = "cosserat", version, about = "Fast, accurate Cosserat rod simulation (CoRdE, inextensible CoRdE)")]
+#[command(
+    name = "cosserat",
+    version,
+    about = "Fast, accurate Cosserat rod simulation (CoRdE, inextensible CoRdE)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
@@ -76,8 +80,12 @@ fn parse_backend(name: &str) -> Result<Backend, String> {
     match name {
         "cpu" => Ok(Backend::Cpu),
         "cpu-rayon" => Ok(Backend::CpuRayon),
-        "gpu" => Err("the gpu backend is not built into this binary; use --backend cpu or cpu-rayon".into()),
-        other => Err(format!("unknown backend `{other}`: expected cpu or cpu-rayon")),
+        "gpu" => Err(
+            "the gpu backend is not built into this binary; use --backend cpu or cpu-rayon".into(),
+        ),
+        other => Err(format!(
+            "unknown backend `{other}`: expected cpu or cpu-rayon"
+        )),
     }
 }
 
@@ -88,10 +96,18 @@ struct RunOutcome {
     divergence: Option<String>,
 }
 
-fn step_for(sim: &mut Simulation, steps: u64, record: &mut Option<Recorder>, show_progress: bool) -> RunOutcome {
+fn step_for(
+    sim: &mut Simulation,
+    steps: u64,
+    record: &mut Option<Recorder>,
+    show_progress: bool,
+) -> RunOutcome {
     let bar = (show_progress && steps >= 20_000).then(|| {
         let b = indicatif::ProgressBar::new(steps);
-        b.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {eta} left").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {eta} left")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
         b
     });
     let mut wall = 0.0;
@@ -126,7 +142,11 @@ fn step_for(sim: &mut Simulation, steps: u64, record: &mut Option<Recorder>, sho
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    RunOutcome { steps: done, wall_s: wall, divergence }
+    RunOutcome {
+        steps: done,
+        wall_s: wall,
+        divergence,
+    }
 }
 
 /// Records frames of a run for `--out`.
@@ -140,14 +160,30 @@ impl Recorder {
         let mut trajectory = cosserat::output::Trajectory::new();
         for h in sim.rods() {
             let n = sim.positions(h).len() - 1;
-            trajectory.add_rod(sim.rod_name(h), sim.rod_radius(h), n).map_err(|e| e.to_string())?;
+            trajectory
+                .add_rod(sim.rod_name(h), sim.rod_radius(h), n)
+                .map_err(|e| e.to_string())?;
         }
-        Ok(Self { every: (steps / frames.max(1)).max(1), trajectory })
+        Ok(Self {
+            every: (steps / frames.max(1)).max(1),
+            trajectory,
+        })
     }
     fn capture(&mut self, sim: &Simulation) -> Result<(), String> {
-        let data: Vec<_> = sim.rods().map(|h| (sim.positions(h), sim.first_directors(h))).collect();
-        let frames: Vec<_> = data.iter().map(|(p, d)| cosserat::output::RodFrame { points: p, directors: d }).collect();
-        self.trajectory.push_frame(sim.time(), &frames).map_err(|e| e.to_string())
+        let data: Vec<_> = sim
+            .rods()
+            .map(|h| (sim.positions(h), sim.first_directors(h)))
+            .collect();
+        let frames: Vec<_> = data
+            .iter()
+            .map(|(p, d)| cosserat::output::RodFrame {
+                points: p,
+                directors: d,
+            })
+            .collect();
+        self.trajectory
+            .push_frame(sim.time(), &frames)
+            .map_err(|e| e.to_string())
     }
 }
 
@@ -155,7 +191,9 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
     let backend = parse_backend(&args.backend)?;
     let mut overrides = Vec::new();
     for kv in &args.overrides {
-        let (k, v) = kv.split_once('=').ok_or_else(|| format!("--set `{kv}`: expected KEY=VALUE"))?;
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| format!("--set `{kv}`: expected KEY=VALUE"))?;
         overrides.push((k.trim().to_string(), v.trim().to_string()));
     }
     if let Some(n) = args.elements {
@@ -169,36 +207,65 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
     let steps = match (args.steps, args.duration) {
         (Some(n), _) => n,
         (None, Some(d)) if d.is_finite() && d > 0.0 => (d / dt).round() as u64,
-        (None, Some(d)) => return Err(format!("--duration {d} is invalid: expected a positive number of seconds")),
+        (None, Some(d)) => {
+            return Err(format!(
+                "--duration {d} is invalid: expected a positive number of seconds"
+            ));
+        }
         (None, None) => length.steps,
     };
-    let mut sim = builder.backend(backend).build().map_err(|e| format!("{}: {e}", args.scene.display()))?;
-    let mut recorder = args.out.as_ref().map(|_| Recorder::new(&sim, steps, args.frames)).transpose()?;
+    let mut sim = builder
+        .backend(backend)
+        .build()
+        .map_err(|e| format!("{}: {e}", args.scene.display()))?;
+    let mut recorder = args
+        .out
+        .as_ref()
+        .map(|_| Recorder::new(&sim, steps, args.frames))
+        .transpose()?;
     let outcome = step_for(&mut sim, steps, &mut recorder, !args.json);
     if let (Some(dir), Some(rec)) = (&args.out, &recorder) {
         write_output(dir, rec)?;
     }
     report(&sim, &name, &outcome, args.json);
-    Ok(if outcome.divergence.is_some() { ExitCode::from(1) } else { ExitCode::SUCCESS })
+    Ok(if outcome.divergence.is_some() {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn count_rods(path: &Path) -> Result<usize, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read the scene: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the scene: {e}", path.display()))?;
     let doc: toml::Table = toml::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok(doc.get("rod").and_then(|r| r.as_array()).map_or(0, |a| a.len()))
+    Ok(doc
+        .get("rod")
+        .and_then(|r| r.as_array())
+        .map_or(0, |a| a.len()))
 }
 
 fn write_output(dir: &Path, rec: &Recorder) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create the output folder: {e}", dir.display()))?;
-    cosserat::output::write_npz(&dir.join("trajectory.npz"), &rec.trajectory).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("{}: cannot create the output folder: {e}", dir.display()))?;
+    cosserat::output::write_npz(&dir.join("trajectory.npz"), &rec.trajectory)
+        .map_err(|e| e.to_string())?;
     cosserat::output::write_vtp_series(dir, &rec.trajectory).map_err(|e| e.to_string())?;
     Ok(())
 }
 
 fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
     let e = sim.energies();
-    let tip = sim.positions(RodHandle(0)).last().copied().unwrap_or([f64::NAN; 3]);
-    let us_per_step = if o.steps > 0 { o.wall_s * 1e6 / o.steps as f64 } else { f64::NAN };
+    let tip = sim
+        .positions(RodHandle(0))
+        .last()
+        .copied()
+        .unwrap_or([f64::NAN; 3]);
+    let us_per_step = if o.steps > 0 {
+        o.wall_s * 1e6 / o.steps as f64
+    } else {
+        f64::NAN
+    };
     if json {
         let v = serde_json::json!({
             "scene": name,
@@ -220,10 +287,34 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         });
         println!("{v}");
     } else {
-        println!("scene      {name} ({} elements, {} backend, {})", sim.element_count(), sim.backend().name(), if sim.is_double_precision() { "f64" } else { "f32" });
-        println!("ran        {} steps of {:.3e} s = {:.4} s simulated in {:.3} s wall ({:.2} µs/step, {:.1}× real time)", o.steps, sim.dt(), sim.time(), o.wall_s, us_per_step, sim.time() / o.wall_s.max(1e-12));
-        println!("accuracy   max strain |l/l0 - 1| = {:.3e}", sim.max_strain());
-        println!("energy     kinetic {:.6e} J, potential {:.6e} J", e.kinetic(), e.potential());
+        println!(
+            "scene      {name} ({} elements, {} backend, {})",
+            sim.element_count(),
+            sim.backend().name(),
+            if sim.is_double_precision() {
+                "f64"
+            } else {
+                "f32"
+            }
+        );
+        println!(
+            "ran        {} steps of {:.3e} s = {:.4} s simulated in {:.3} s wall ({:.2} µs/step, {:.1}× real time)",
+            o.steps,
+            sim.dt(),
+            sim.time(),
+            o.wall_s,
+            us_per_step,
+            sim.time() / o.wall_s.max(1e-12)
+        );
+        println!(
+            "accuracy   max strain |l/l0 - 1| = {:.3e}",
+            sim.max_strain()
+        );
+        println!(
+            "energy     kinetic {:.6e} J, potential {:.6e} J",
+            e.kinetic(),
+            e.potential()
+        );
         println!("tip        [{:.6}, {:.6}, {:.6}] m", tip[0], tip[1], tip[2]);
         if let Some(d) = &o.divergence {
             println!("DIVERGED   {d}");
@@ -232,11 +323,20 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
 }
 
 fn demo() -> Result<ExitCode, String> {
-    let (builder, length, name) = parse_scene(Path::new("scenes/pendulum.toml"), DEMO_SCENE, &[]).map_err(|e| e.to_string())?;
-    println!("Running the built-in demo: the free-space pendulum of Korzeniowski et al. (section 3.1).");
-    println!("Try `cosserat run scenes/pendulum.toml --elements 1000 --json` or `cosserat --help`.\n");
+    let (builder, length, name) = parse_scene(Path::new("scenes/pendulum.toml"), DEMO_SCENE, &[])
+        .map_err(|e| e.to_string())?;
+    println!(
+        "Running the built-in demo: the free-space pendulum of Korzeniowski et al. (section 3.1)."
+    );
+    println!(
+        "Try `cosserat run scenes/pendulum.toml --elements 1000 --json` or `cosserat --help`.\n"
+    );
     let mut sim = builder.build().map_err(|e| e.to_string())?;
     let outcome = step_for(&mut sim, length.steps, &mut None, true);
     report(&sim, &name, &outcome, false);
-    Ok(if outcome.divergence.is_some() { ExitCode::from(1) } else { ExitCode::SUCCESS })
+    Ok(if outcome.divergence.is_some() {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }

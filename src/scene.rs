@@ -104,7 +104,7 @@ impl Default for SolverSection {
             duration: None,
             iterations: 10,
             mode: "inextensible".into(),
-            ordering: "gauss-seidel".into(),
+            ordering: "red-black".into(),
             precision: "f32".into(),
             gravity: [0.0, 0.0, -9.81],
             divergence_strain: 0.5,
@@ -227,9 +227,17 @@ pub struct RunLength {
 }
 
 /// Applies `key=value` overrides (dotted keys, `rod.0.elements`) to a parsed TOML document.
-fn apply_overrides(path: &Path, doc: &mut toml::Value, overrides: &[(String, String)]) -> Result<(), SceneError> {
+fn apply_overrides(
+    path: &Path,
+    doc: &mut toml::Value,
+    overrides: &[(String, String)],
+) -> Result<(), SceneError> {
     for (key, raw) in overrides {
-        let err = |reason: String| SceneError::Override { path: path.into(), key: key.clone(), reason };
+        let err = |reason: String| SceneError::Override {
+            path: path.into(),
+            key: key.clone(),
+            reason,
+        };
         let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {raw}"))
             .ok()
             .and_then(|mut t| t.remove("v"))
@@ -244,19 +252,28 @@ fn apply_overrides(path: &Path, doc: &mut toml::Value, overrides: &[(String, Str
                         t.insert(part.to_string(), value.clone());
                         break;
                     }
-                    t.entry(part.to_string()).or_insert_with(|| toml::Value::Table(Default::default()))
+                    t.entry(part.to_string())
+                        .or_insert_with(|| toml::Value::Table(Default::default()))
                 }
                 toml::Value::Array(a) => {
-                    let idx: usize = part.parse().map_err(|_| err(format!("`{part}` is not an index into an array")))?;
+                    let idx: usize = part
+                        .parse()
+                        .map_err(|_| err(format!("`{part}` is not an index into an array")))?;
                     let len = a.len();
-                    let slot = a.get_mut(idx).ok_or_else(|| err(format!("index {idx} is out of range (length {len})")))?;
+                    let slot = a.get_mut(idx).ok_or_else(|| {
+                        err(format!("index {idx} is out of range (length {len})"))
+                    })?;
                     if last {
                         *slot = value.clone();
                         break;
                     }
                     slot
                 }
-                _ => return Err(err(format!("`{part}` is inside a value that is not a table or array"))),
+                _ => {
+                    return Err(err(format!(
+                        "`{part}` is inside a value that is not a table or array"
+                    )));
+                }
             };
         }
     }
@@ -264,18 +281,34 @@ fn apply_overrides(path: &Path, doc: &mut toml::Value, overrides: &[(String, Str
 }
 
 /// Reads, overrides, checks and builds a scene.
-pub fn load_scene(path: &Path, overrides: &[(String, String)]) -> Result<(SimulationBuilder, RunLength, String), SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+pub fn load_scene(
+    path: &Path,
+    overrides: &[(String, String)],
+) -> Result<(SimulationBuilder, RunLength, String), SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.into(),
+        source,
+    })?;
     parse_scene(path, &text, overrides)
 }
 
 /// Parses a scene from text; `path` is used in messages and for the default name.
-pub fn parse_scene(path: &Path, text: &str, overrides: &[(String, String)]) -> Result<(SimulationBuilder, RunLength, String), SceneError> {
-    let parse_err = |e: toml::de::Error| SceneError::Parse { path: path.into(), message: e.to_string().trim_end().to_string() };
+pub fn parse_scene(
+    path: &Path,
+    text: &str,
+    overrides: &[(String, String)],
+) -> Result<(SimulationBuilder, RunLength, String), SceneError> {
+    let parse_err = |e: toml::de::Error| SceneError::Parse {
+        path: path.into(),
+        message: e.to_string().trim_end().to_string(),
+    };
     let mut doc: toml::Value = toml::from_str(text).map_err(parse_err)?;
     apply_overrides(path, &mut doc, overrides)?;
     let scene: SceneFile = doc.try_into().map_err(parse_err)?;
-    let name = scene.name.clone().unwrap_or_else(|| path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned()));
+    let name = scene.name.clone().unwrap_or_else(|| {
+        path.file_stem()
+            .map_or("scene".into(), |s| s.to_string_lossy().into_owned())
+    });
     let checker = Checker { path };
     let (builder, run) = checker.build(&scene)?;
     Ok((builder, run, name))
@@ -286,20 +319,42 @@ struct Checker<'a> {
 }
 
 impl Checker<'_> {
-    fn invalid(&self, field: impl Into<String>, value: impl std::fmt::Debug, expected: &str) -> SceneError {
-        SceneError::Invalid { path: self.path.into(), field: field.into(), value: format!("{value:?}"), expected: expected.into() }
+    fn invalid(
+        &self,
+        field: impl Into<String>,
+        value: impl std::fmt::Debug,
+        expected: &str,
+    ) -> SceneError {
+        SceneError::Invalid {
+            path: self.path.into(),
+            field: field.into(),
+            value: format!("{value:?}"),
+            expected: expected.into(),
+        }
     }
 
     fn positive(&self, field: &str, v: f64) -> Result<f64, SceneError> {
-        if v.is_finite() && v > 0.0 { Ok(v) } else { Err(self.invalid(field, v, "expected a finite number > 0")) }
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(self.invalid(field, v, "expected a finite number > 0"))
+        }
     }
 
     fn non_negative(&self, field: &str, v: f64) -> Result<f64, SceneError> {
-        if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(self.invalid(field, v, "expected a finite number >= 0")) }
+        if v.is_finite() && v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(self.invalid(field, v, "expected a finite number >= 0"))
+        }
     }
 
     fn finite3(&self, field: &str, v: [f64; 3]) -> Result<[f64; 3], SceneError> {
-        if v.iter().all(|x| x.is_finite()) { Ok(v) } else { Err(self.invalid(field, v, "expected three finite numbers")) }
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(v)
+        } else {
+            Err(self.invalid(field, v, "expected three finite numbers"))
+        }
     }
 
     fn build(&self, scene: &SceneFile) -> Result<(SimulationBuilder, RunLength), SceneError> {
@@ -311,25 +366,49 @@ impl Checker<'_> {
         let extensible = match s.mode.as_str() {
             "inextensible" => false,
             "extensible" => true,
-            other => return Err(self.invalid("solver.mode", other, "expected \"inextensible\" or \"extensible\"")),
+            other => {
+                return Err(self.invalid(
+                    "solver.mode",
+                    other,
+                    "expected \"inextensible\" or \"extensible\"",
+                ));
+            }
         };
         let ordering = match s.ordering.as_str() {
             "gauss-seidel" => Ordering::GaussSeidel,
             "red-black" => Ordering::RedBlack,
-            other => return Err(self.invalid("solver.ordering", other, "expected \"gauss-seidel\" or \"red-black\"")),
+            other => {
+                return Err(self.invalid(
+                    "solver.ordering",
+                    other,
+                    "expected \"gauss-seidel\" or \"red-black\"",
+                ));
+            }
         };
         let f64_precision = match s.precision.as_str() {
             "f32" => false,
             "f64" => true,
-            other => return Err(self.invalid("solver.precision", other, "expected \"f32\" or \"f64\"")),
+            other => {
+                return Err(self.invalid("solver.precision", other, "expected \"f32\" or \"f64\""));
+            }
         };
         let gravity = self.finite3("solver.gravity", s.gravity)?;
         let divergence_strain = self.positive("solver.divergence_strain", s.divergence_strain)?;
         if divergence_strain >= 1.0 {
-            return Err(self.invalid("solver.divergence_strain", divergence_strain, "expected a fraction below 1"));
+            return Err(self.invalid(
+                "solver.divergence_strain",
+                divergence_strain,
+                "expected a fraction below 1",
+            ));
         }
         let steps = match (s.steps, s.duration) {
-            (Some(_), Some(_)) => return Err(self.invalid("solver.steps", s.steps, "give either `steps` or `duration`, not both")),
+            (Some(_), Some(_)) => {
+                return Err(self.invalid(
+                    "solver.steps",
+                    s.steps,
+                    "give either `steps` or `duration`, not both",
+                ));
+            }
             (Some(n), None) => n,
             (None, Some(d)) => (self.positive("solver.duration", d)? / dt).round() as u64,
             (None, None) => 1000,
@@ -355,43 +434,78 @@ impl Checker<'_> {
         let f = |name: &str| format!("rod[{i}].{name}");
         let elements = match r.elements {
             Some(0) => return Err(self.invalid(f("elements"), 0, "expected at least 1 element")),
-            Some(n) if n > 10_000_000 => return Err(self.invalid(f("elements"), n, "expected at most 10 000 000 elements")),
+            Some(n) if n > 10_000_000 => {
+                return Err(self.invalid(f("elements"), n, "expected at most 10 000 000 elements"));
+            }
             other => other,
         };
         let m = &r.material;
         let young = self.positive(&f("material.young_modulus"), m.young_modulus)?;
         let shear = match (m.shear_modulus, m.poisson_ratio) {
             (Some(g), None) => self.positive(&f("material.shear_modulus"), g)?,
-            (Some(_), Some(_)) => return Err(self.invalid(f("material.poisson_ratio"), m.poisson_ratio, "give either shear_modulus or poisson_ratio, not both")),
+            (Some(_), Some(_)) => {
+                return Err(self.invalid(
+                    f("material.poisson_ratio"),
+                    m.poisson_ratio,
+                    "give either shear_modulus or poisson_ratio, not both",
+                ));
+            }
             (None, nu) => {
                 let nu = nu.unwrap_or(0.5);
                 if !(nu.is_finite() && nu > -1.0 && nu <= 0.5) {
-                    return Err(self.invalid(f("material.poisson_ratio"), nu, "expected -1 < ν <= 0.5"));
+                    return Err(self.invalid(
+                        f("material.poisson_ratio"),
+                        nu,
+                        "expected -1 < ν <= 0.5",
+                    ));
                 }
                 young / (2.0 * (1.0 + nu))
             }
         };
-        let material = Material::new(young, shear, self.positive(&f("material.density"), m.density)?, self.positive(&f("material.radius"), m.radius)?);
+        let material = Material::new(
+            young,
+            shear,
+            self.positive(&f("material.density"), m.density)?,
+            self.positive(&f("material.radius"), m.radius)?,
+        );
         let mut rb = match &r.shape {
-            ShapeSection::Straight { start, direction, length } => {
+            ShapeSection::Straight {
+                start,
+                direction,
+                length,
+            } => {
                 let start = self.finite3(&f("shape.start"), *start)?;
                 let direction = self.finite3(&f("shape.direction"), *direction)?;
                 if !(direction.iter().map(|x| x * x).sum::<f64>() > 0.0) {
-                    return Err(self.invalid(f("shape.direction"), direction, "expected a non-zero vector"));
+                    return Err(self.invalid(
+                        f("shape.direction"),
+                        direction,
+                        "expected a non-zero vector",
+                    ));
                 }
                 let length = self.positive(&f("shape.length"), *length)?;
                 RodBuilder::straight(start, direction, length, elements.unwrap_or(100), material)
             }
             ShapeSection::Polyline { points } => {
                 if points.len() < 2 {
-                    return Err(self.invalid(f("shape.points"), points.len(), "expected at least 2 points"));
+                    return Err(self.invalid(
+                        f("shape.points"),
+                        points.len(),
+                        "expected at least 2 points",
+                    ));
                 }
                 for (k, p) in points.iter().enumerate() {
                     self.finite3(&f(&format!("shape.points[{k}]")), *p)?;
                 }
                 let rb = RodBuilder::polyline(points.clone(), material);
                 match elements {
-                    Some(n) => rb.resampled(n).map_err(|k| self.invalid(f(&format!("shape.points[{k}]")), points[k], "expected distinct consecutive points"))?,
+                    Some(n) => rb.resampled(n).map_err(|k| {
+                        self.invalid(
+                            f(&format!("shape.points[{k}]")),
+                            points[k],
+                            "expected distinct consecutive points",
+                        )
+                    })?,
                     None => rb,
                 }
             }
@@ -399,12 +513,28 @@ impl Checker<'_> {
         rb = match &r.rest_shape {
             None => rb,
             Some(toml::Value::String(s)) if s == "initial" => rb.rest_shape(RestShape::Initial),
-            Some(toml::Value::String(s)) if s == "straight" => rb.rest_shape(RestShape::Uniform([0.0; 3])),
-            Some(toml::Value::Table(t)) if t.len() == 1 && t.contains_key("curvature") => {
-                let c: [f64; 3] = t["curvature"].clone().try_into().map_err(|_| self.invalid(f("rest_shape.curvature"), &t["curvature"], "expected [κ1, κ2, τ] in 1/m"))?;
-                rb.rest_shape(RestShape::Uniform(self.finite3(&f("rest_shape.curvature"), c)?))
+            Some(toml::Value::String(s)) if s == "straight" => {
+                rb.rest_shape(RestShape::Uniform([0.0; 3]))
             }
-            Some(v) => return Err(self.invalid(f("rest_shape"), v, "expected \"initial\", \"straight\" or { curvature = [κ1, κ2, τ] }")),
+            Some(toml::Value::Table(t)) if t.len() == 1 && t.contains_key("curvature") => {
+                let c: [f64; 3] = t["curvature"].clone().try_into().map_err(|_| {
+                    self.invalid(
+                        f("rest_shape.curvature"),
+                        &t["curvature"],
+                        "expected [κ1, κ2, τ] in 1/m",
+                    )
+                })?;
+                rb.rest_shape(RestShape::Uniform(
+                    self.finite3(&f("rest_shape.curvature"), c)?,
+                ))
+            }
+            Some(v) => {
+                return Err(self.invalid(
+                    f("rest_shape"),
+                    v,
+                    "expected \"initial\", \"straight\" or { curvature = [κ1, κ2, τ] }",
+                ));
+            }
         };
         if let Some(kp) = r.parallel_stiffness {
             rb = rb.parallel_stiffness(self.positive(&f("parallel_stiffness"), kp)?);
@@ -417,14 +547,27 @@ impl Checker<'_> {
         if let Some(d) = r.first_director {
             rb = rb.first_director(self.finite3(&f("first_director"), d)?);
         }
-        rb = rb.start(self.end(&f("start"), &r.start)?).end(self.end(&f("end"), &r.end)?);
+        rb = rb
+            .start(self.end(&f("start"), &r.start)?)
+            .end(self.end(&f("end"), &r.end)?);
         let n = rb.element_count() as i64;
         for (k, load) in r.loads.iter().enumerate() {
-            let idx = if load.point < 0 { n + 1 + load.point } else { load.point };
+            let idx = if load.point < 0 {
+                n + 1 + load.point
+            } else {
+                load.point
+            };
             if !(0..=n).contains(&idx) {
-                return Err(self.invalid(f(&format!("load[{k}].point")), load.point, &format!("expected a point index in -{} ..= {n}", n + 1)));
+                return Err(self.invalid(
+                    f(&format!("load[{k}].point")),
+                    load.point,
+                    &format!("expected a point index in -{} ..= {n}", n + 1),
+                ));
             }
-            rb = rb.load(idx as usize, self.finite3(&f(&format!("load[{k}].force")), load.force)?);
+            rb = rb.load(
+                idx as usize,
+                self.finite3(&f(&format!("load[{k}].force")), load.force)?,
+            );
         }
         Ok(rb)
     }
@@ -434,25 +577,52 @@ impl Checker<'_> {
             None | Some("free") => EndKind::Free,
             Some("pinned") => EndKind::Pinned,
             Some("clamped") => EndKind::Clamped,
-            Some(other) => return Err(self.invalid(format!("{field}.kind"), other, "expected \"free\", \"pinned\" or \"clamped\"")),
+            Some(other) => {
+                return Err(self.invalid(
+                    format!("{field}.kind"),
+                    other,
+                    "expected \"free\", \"pinned\" or \"clamped\"",
+                ));
+            }
         };
         let driven = e.velocity.is_some() || e.angular_velocity.is_some();
         if driven && kind == EndKind::Free {
-            return Err(self.invalid(format!("{field}.kind"), "free", "a driven end (velocity / angular_velocity) must be \"pinned\" or \"clamped\""));
+            return Err(self.invalid(
+                format!("{field}.kind"),
+                "free",
+                "a driven end (velocity / angular_velocity) must be \"pinned\" or \"clamped\"",
+            ));
         }
         if e.angular_velocity.is_some() && kind != EndKind::Clamped {
-            return Err(self.invalid(format!("{field}.kind"), e.kind.as_deref().unwrap_or("free"), "an angular_velocity needs a \"clamped\" end"));
+            return Err(self.invalid(
+                format!("{field}.kind"),
+                e.kind.as_deref().unwrap_or("free"),
+                "an angular_velocity needs a \"clamped\" end",
+            ));
         }
         let mut cond = EndCondition { kind, motion: None };
         if driven {
             let v = self.finite3(&format!("{field}.velocity"), e.velocity.unwrap_or([0.0; 3]))?;
-            let w = self.finite3(&format!("{field}.angular_velocity"), e.angular_velocity.unwrap_or([0.0; 3]))?;
-            let start_time = self.non_negative(&format!("{field}.start_time"), e.start_time.unwrap_or(0.0))?;
+            let w = self.finite3(
+                &format!("{field}.angular_velocity"),
+                e.angular_velocity.unwrap_or([0.0; 3]),
+            )?;
+            let start_time =
+                self.non_negative(&format!("{field}.start_time"), e.start_time.unwrap_or(0.0))?;
             let end_time = e.end_time.unwrap_or(f64::INFINITY);
             if !(end_time > start_time) {
-                return Err(self.invalid(format!("{field}.end_time"), end_time, "expected a time after start_time"));
+                return Err(self.invalid(
+                    format!("{field}.end_time"),
+                    end_time,
+                    "expected a time after start_time",
+                ));
             }
-            cond.motion = Some(PrescribedMotion { velocity: v.into(), angular_velocity: w.into(), start_time, end_time });
+            cond.motion = Some(PrescribedMotion {
+                velocity: v.into(),
+                angular_velocity: w.into(),
+                start_time,
+                end_time,
+            });
         }
         Ok(cond)
     }

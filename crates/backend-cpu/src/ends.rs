@@ -59,11 +59,17 @@ impl<T: Real> EndCondition<T> {
     }
     /// An end point held in place.
     pub fn pinned() -> Self {
-        Self { kind: EndKind::Pinned, motion: None }
+        Self {
+            kind: EndKind::Pinned,
+            motion: None,
+        }
     }
     /// An end point and frame held in place.
     pub fn clamped() -> Self {
-        Self { kind: EndKind::Clamped, motion: None }
+        Self {
+            kind: EndKind::Clamped,
+            motion: None,
+        }
     }
     /// This condition, driven with `motion`.
     #[must_use]
@@ -81,6 +87,7 @@ impl<T: Real> EndCondition<T> {
     }
     /// Prescribed (velocity, angular velocity) at time `t`; zero when held still.
     pub fn velocities_at(&self, t: f64) -> (Vec3<T>, Vec3<T>) {
-        self.motion.map_or((Vec3::zeros(), Vec3::zeros()), |m| m.at(t))
+        self.motion
+            .map_or((Vec3::zeros(), Vec3::zeros()), |m| m.at(t))
     }
 }

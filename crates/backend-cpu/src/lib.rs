@@ -12,8 +12,12 @@
 //! quantity instead of letting NaNs spread.
 
 pub mod ends;
+mod soa;
 pub mod stepper;
 
 pub use constraints::Ordering;
 pub use ends::{EndCondition, EndKind, PrescribedMotion};
-pub use stepper::{CpuRod, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod, step_rods};
+pub use stepper::{
+    CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
+    step_rod_batch, step_rods, step_rods_batch,
+};

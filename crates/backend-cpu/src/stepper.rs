@@ -1,10 +1,11 @@
 //! The time step (paper Fig. 5, without collisions) and its parallel driver.
 
 use crate::ends::EndCondition;
-use constraints::{Ordering, solve_distance_iteration};
-use cosserat_model::energy::{ForceModel, accumulate_forces};
+use crate::soa::{self, SoaParams, SoaState};
+use constraints::{Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa};
+use cosserat_model::energy::{bend_damping_node, stretch_damping_element};
 use cosserat_model::quat::rotate_inv;
-use cosserat_model::{Quat, Real, RodParams, RodState, Vec3};
+use cosserat_model::{Real, RodParams, RodState, Vec3};
 
 /// Serial or parallel execution, chosen at run time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -54,14 +55,21 @@ pub struct CpuRod<T: Real> {
     pub ends: [EndCondition<T>; 2],
     /// External point forces.
     pub loads: Vec<PointLoad<T>>,
-    inv_inertias: Vec<Vec3<T>>,
-    forces: Vec<Vec3<T>>,
-    torques: Vec<Vec3<T>>,
+    work: SoaState<T>,
+    work_params: SoaParams<T>,
+    red_black: Option<RedBlackSolver<T>>,
 }
 
 impl<T: Real> CpuRod<T> {
     /// Prepares a rod for stepping: held end points get zero inverse mass.
-    pub fn new(state: RodState<T>, mut params: RodParams<T>, ends: [EndCondition<T>; 2], loads: Vec<PointLoad<T>>) -> Self {
+    ///
+    /// The parameters are read here, once; to change them, build a new `CpuRod`.
+    pub fn new(
+        state: RodState<T>,
+        mut params: RodParams<T>,
+        ends: [EndCondition<T>; 2],
+        loads: Vec<PointLoad<T>>,
+    ) -> Self {
         let n = state.elements();
         if ends[0].holds_point() {
             params.inv_masses[0] = T::zero();
@@ -69,15 +77,14 @@ impl<T: Real> CpuRod<T> {
         if ends[1].holds_point() {
             params.inv_masses[n] = T::zero();
         }
-        let inv_inertias = params.inertias.iter().map(|i| i.map(|x| T::one() / x)).collect();
         Self {
+            work: SoaState::new(n),
+            work_params: SoaParams::new(&params),
             state,
             params,
             ends,
             loads,
-            inv_inertias,
-            forces: vec![Vec3::zeros(); n + 1],
-            torques: vec![Vec3::zeros(); n],
+            red_black: None,
         }
     }
 
@@ -116,7 +123,9 @@ impl std::fmt::Display for Divergence {
         let what = match self.quantity {
             DivergedQuantity::NonFinitePosition => "position is not finite".to_string(),
             DivergedQuantity::NonFiniteFrame => "frame is not finite".to_string(),
-            DivergedQuantity::Strain(s) => format!("strain |l/l0 - 1| = {s:.3e} exceeds the divergence limit"),
+            DivergedQuantity::Strain(s) => {
+                format!("strain |l/l0 - 1| = {s:.3e} exceeds the divergence limit")
+            }
         };
         write!(
             f,
@@ -147,100 +156,214 @@ impl StepStats {
 /// Advances one rod by one step of `settings.dt` starting at time `time`.
 ///
 /// `rod_index` and `step` only label a [`Divergence`].
-pub fn step_rod<T: Real>(rod: &mut CpuRod<T>, settings: &SolverSettings<T>, time: f64, rod_index: usize, step: u64) -> Result<StepStats, Divergence> {
+pub fn step_rod<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    time: f64,
+    rod_index: usize,
+    step: u64,
+) -> Result<StepStats, Divergence> {
+    step_rod_batch(rod, settings, time, rod_index, step, 1)
+}
+
+/// Advances one rod by `steps` steps starting at time `time` and step index `first_step`.
+///
+/// The rod is moved into the backend's working layout once for the whole batch, which is the
+/// CPU counterpart of running many time-steps per GPU dispatch. `rod.state` is up to date when
+/// this returns, also after a divergence (it then holds the diverged state). The returned stats
+/// cover every step of the batch.
+pub fn step_rod_batch<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    time: f64,
+    rod_index: usize,
+    first_step: u64,
+    steps: u64,
+) -> Result<StepStats, Divergence> {
     let h = settings.dt;
     let n = rod.elements();
-    let model = ForceModel { extensible: settings.extensible, gravity: settings.gravity };
-    accumulate_forces(&rod.state, &rod.params, &model, &mut rod.forces, &mut rod.torques);
-    for load in &rod.loads {
-        rod.forces[load.point] += load.force;
-    }
-
-    // Integrate velocities (semi-implicit Euler): v += h f / m, and Euler's equations for frames.
-    let s = &mut rod.state;
-    for ((v, f), &w) in s.velocities.iter_mut().zip(&rod.forces).zip(&rod.params.inv_masses) {
-        *v += f * (h * w);
-    }
-    for (((om, tq), inertia), inv) in s.angular_velocities.iter_mut().zip(&rod.torques).zip(&rod.params.inertias).zip(&rod.inv_inertias) {
-        let gyro = om.cross(&inertia.component_mul(om));
-        *om += (tq - gyro).component_mul(inv) * h;
-    }
-
-    // Held ends follow their prescribed motion exactly.
-    for (end, (point, frame)) in rod.ends.iter().zip([(0, 0), (n, n - 1)]) {
-        if end.holds_point() {
-            let (v, w) = end.velocities_at(time);
-            s.velocities[point] = v;
-            if end.holds_frame() {
-                s.angular_velocities[frame] = rotate_inv(&s.frames[frame], &w);
+    let w = &mut rod.work;
+    let p = &rod.work_params;
+    w.gather(&rod.state);
+    let bend_damping = rod.params.bend_damping.iter().any(|&c| c > T::zero());
+    let stretch_damping =
+        settings.extensible && rod.params.stretch_damping.iter().any(|&c| c > T::zero());
+    let limit = settings.divergence_strain;
+    let (lo2, hi2) = (
+        (T::one() - limit) * (T::one() - limit),
+        (T::one() + limit) * (T::one() + limit),
+    );
+    let mut stats = StepStats {
+        min_stretch: f64::MAX,
+        max_stretch: 0.0,
+    };
+    let mut result = Ok(());
+    for k in 0..steps {
+        let t = time + k as f64 * h.to_f64();
+        soa::elastic_forces(w, p, settings.gravity, rod.params.drag, settings.extensible);
+        if bend_damping {
+            for j in 0..n - 1 {
+                let (qa, qb) = (w.frame(j), w.frame(j + 1));
+                let (da, db) = bend_damping_node(
+                    &qa,
+                    &qb,
+                    &w.w.get(j),
+                    &w.w.get(j + 1),
+                    rod.params.bend_damping[j],
+                    rod.params.node_length(j),
+                );
+                w.tq.set(j, w.tq.get(j) + da);
+                w.tq.set(j + 1, w.tq.get(j + 1) + db);
+            }
+        }
+        if stretch_damping {
+            for j in 0..n {
+                let fd = stretch_damping_element(
+                    &w.r.get(j),
+                    &w.r.get(j + 1),
+                    &w.v.get(j),
+                    &w.v.get(j + 1),
+                    rod.params.stretch_damping[j],
+                    rod.params.rest_lengths[j],
+                );
+                w.f.set(j, w.f.get(j) - fd);
+                w.f.set(j + 1, w.f.get(j + 1) + fd);
+            }
+        }
+        for load in &rod.loads {
+            w.f.set(load.point, w.f.get(load.point) + load.force);
+        }
+        soa::integrate_velocities(w, p, h);
+        // Held ends follow their prescribed motion exactly.
+        for (end, (point, frame)) in rod.ends.iter().zip([(0, 0), (n, n - 1)]) {
+            if end.holds_point() {
+                let (v, omega) = end.velocities_at(t);
+                w.v.set(point, v);
+                if end.holds_frame() {
+                    let q = w.frame(frame);
+                    w.w.set(frame, rotate_inv(&q, &omega));
+                }
+            }
+        }
+        if !settings.extensible && settings.iterations > 0 {
+            let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
+            match settings.ordering {
+                Ordering::GaussSeidel => {
+                    for _ in 0..settings.iterations {
+                        solve_distance_gauss_seidel_soa(
+                            r,
+                            [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                            &p.inv_masses,
+                            &p.rest_lengths,
+                            h,
+                        );
+                    }
+                }
+                Ordering::RedBlack => {
+                    rod.red_black
+                        .get_or_insert_with(|| RedBlackSolver::new(&p.inv_masses, &p.rest_lengths))
+                        .solve_soa(
+                            r,
+                            [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                            h,
+                            settings.iterations,
+                        );
+                }
+            }
+        }
+        soa::integrate_positions(w, p, h);
+        match check(w, lo2, hi2) {
+            Ok((lo, hi)) => {
+                stats.min_stretch = stats.min_stretch.min(lo);
+                stats.max_stretch = stats.max_stretch.max(hi);
+            }
+            Err((element, quantity)) => {
+                result = Err(Divergence {
+                    rod: rod_index,
+                    element,
+                    step: first_step + k,
+                    quantity,
+                });
+                break;
             }
         }
     }
-
-    if !settings.extensible {
-        for _ in 0..settings.iterations {
-            solve_distance_iteration(&s.positions, &mut s.velocities, &rod.params.inv_masses, &rod.params.rest_lengths, h, settings.ordering);
-        }
-    }
-
-    integrate_positions(s, &rod.params, h, settings.divergence_strain).map_err(|(element, quantity)| Divergence { rod: rod_index, element, step, quantity })
+    w.scatter(&mut rod.state);
+    result.map(|()| stats)
 }
 
-/// `r += h v`, `q ← normalise(q ⊗ (1, h ω / 2))`, and the length-ratio check, in one sweep.
-fn integrate_positions<T: Real>(s: &mut RodState<T>, p: &RodParams<T>, h: T, limit: T) -> Result<StepStats, (usize, DivergedQuantity)> {
-    let n = s.elements();
-    let half_h = h * T::lit(0.5);
-    for (q, w) in s.frames.iter_mut().zip(&s.angular_velocities) {
-        // First-order quaternion update followed by renormalisation; the rotation per step is
-        // small, and this avoids a sine and cosine per frame.
-        let dq = *q * Quat::from_parts(T::zero(), w * half_h);
-        let next = *q + dq;
-        *q = next;
+/// The divergence check after a step: every frame finite, every length ratio inside the band.
+/// Returns the smallest and largest length ratio.
+fn check<T: Real>(
+    w: &SoaState<T>,
+    lo2: T,
+    hi2: T,
+) -> Result<(f64, f64), (usize, DivergedQuantity)> {
+    let qsum = w.q[3].iter().fold(T::zero(), |a, &b| a + b);
+    if !qsum.is_finite() {
+        let j = w.q[3].iter().position(|x| !x.is_finite()).unwrap_or(0);
+        return Err((j, DivergedQuantity::NonFiniteFrame));
     }
-    for (j, q) in s.frames.iter_mut().enumerate() {
-        let n2 = q.norm_squared();
-        if !(n2 > T::zero() && n2.is_finite()) {
-            return Err((j, DivergedQuantity::NonFiniteFrame));
-        }
-        *q /= n2.sqrt();
-    }
-    s.positions[0] += s.velocities[0] * h;
-    let (lo2, hi2) = ((T::one() - limit) * (T::one() - limit), (T::one() + limit) * (T::one() + limit));
-    let (mut min_r, mut max_r) = (T::lit(f64::MAX), T::zero());
-    for j in 0..n {
-        let next = s.positions[j + 1] + s.velocities[j + 1] * h;
-        s.positions[j + 1] = next;
-        let l0 = p.rest_lengths[j];
-        let r = (next - s.positions[j]).norm_squared() / (l0 * l0);
+    let (mut lo, mut hi) = (T::lit(f64::MAX), T::zero());
+    for (j, &r) in w.ratio2.iter().enumerate() {
         if !(r >= lo2 && r <= hi2) {
             if !r.is_finite() {
                 return Err((j, DivergedQuantity::NonFinitePosition));
             }
-            return Err((j, DivergedQuantity::Strain((r.sqrt() - T::one()).abs().to_f64())));
+            return Err((
+                j,
+                DivergedQuantity::Strain((r.sqrt() - T::one()).abs().to_f64()),
+            ));
         }
-        min_r = min_r.min(r);
-        max_r = max_r.max(r);
+        lo = lo.min(r);
+        hi = hi.max(r);
     }
-    Ok(StepStats { min_stretch: min_r.sqrt().to_f64(), max_stretch: max_r.sqrt().to_f64() })
+    Ok((lo.sqrt().to_f64(), hi.sqrt().to_f64()))
 }
 
 /// Advances many independent rods by one step, serially or in parallel; results are identical.
 ///
+/// On a divergence, rods after the failing one (serial) may not have been advanced.
+///
 /// Returns each rod's stats, or the divergence of the lowest-numbered rod that diverged.
-pub fn step_rods<T: Real>(rods: &mut [CpuRod<T>], settings: &SolverSettings<T>, time: f64, step: u64, par: Par, stats: &mut Vec<StepStats>) -> Result<(), Divergence> {
+pub fn step_rods<T: Real>(
+    rods: &mut [CpuRod<T>],
+    settings: &SolverSettings<T>,
+    time: f64,
+    step: u64,
+    par: Par,
+    stats: &mut Vec<StepStats>,
+) -> Result<(), Divergence> {
+    step_rods_batch(rods, settings, time, step, 1, par, stats)
+}
+
+/// Advances many independent rods by `steps` steps each (see [`step_rod_batch`]).
+pub fn step_rods_batch<T: Real>(
+    rods: &mut [CpuRod<T>],
+    settings: &SolverSettings<T>,
+    time: f64,
+    step: u64,
+    steps: u64,
+    par: Par,
+    stats: &mut Vec<StepStats>,
+) -> Result<(), Divergence> {
     stats.clear();
     match par {
         #[cfg(feature = "rayon")]
         Par::Rayon => {
             use rayon::prelude::*;
-            let results: Vec<_> = rods.par_iter_mut().enumerate().map(|(i, rod)| step_rod(rod, settings, time, i, step)).collect();
+            let results: Vec<_> = rods
+                .par_iter_mut()
+                .enumerate()
+                .map(|(i, rod)| step_rod_batch(rod, settings, time, i, step, steps))
+                .collect();
             for r in results {
                 stats.push(r?);
             }
         }
         _ => {
             for (i, rod) in rods.iter_mut().enumerate() {
-                stats.push(step_rod(rod, settings, time, i, step)?);
+                stats.push(step_rod_batch(rod, settings, time, i, step, steps)?);
             }
         }
     }

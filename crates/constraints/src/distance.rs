@@ -32,14 +32,23 @@ pub enum Ordering {
 
 /// Applies the impulse of the distance constraint between points `a` and `a + 1`.
 #[inline(always)]
-fn project<T: Real>(positions: &[Vec3<T>], velocities: &mut [Vec3<T>], inv_masses: &[T], l0: T, h: T, a: usize) {
+fn project<T: Real>(
+    positions: &[Vec3<T>],
+    velocities: &mut [Vec3<T>],
+    inv_masses: &[T],
+    l0: T,
+    h: T,
+    a: usize,
+) {
     let b = a + 1;
     let (wa, wb) = (inv_masses[a], inv_masses[b]);
     let w = wa + wb;
     if w <= T::zero() {
         return;
     }
-    let d = (positions[b] + velocities[b] * h) - (positions[a] + velocities[a] * h);
+    // Element vector first, then the velocity term: in f32 the difference of two predicted
+    // absolute positions would lose most digits of a short element far from the origin.
+    let d = (positions[b] - positions[a]) + (velocities[b] - velocities[a]) * h;
     let len2 = d.norm_squared();
     let len = len2.sqrt();
     // λ/len folds the normalisation of d into the impulse.
@@ -79,6 +88,38 @@ pub fn solve_distance_iteration<T: Real>(
     }
 }
 
+/// One Gauss–Seidel sweep of [`solve_distance_iteration`] on coordinate slices (`[x, y, z]`).
+pub fn solve_distance_gauss_seidel_soa<T: Real>(
+    positions: [&[T]; 3],
+    velocities: [&mut [T]; 3],
+    inv_masses: &[T],
+    rest_lengths: &[T],
+    h: T,
+) {
+    let [rx, ry, rz] = positions;
+    let [vx, vy, vz] = velocities;
+    for (j, &l0) in rest_lengths.iter().enumerate() {
+        let (a, b) = (j, j + 1);
+        let (wa, wb) = (inv_masses[a], inv_masses[b]);
+        let w = wa + wb;
+        if w <= T::zero() {
+            continue;
+        }
+        let dx = (rx[b] - rx[a]) + (vx[b] - vx[a]) * h;
+        let dy = (ry[b] - ry[a]) + (vy[b] - vy[a]) * h;
+        let dz = (rz[b] - rz[a]) + (vz[b] - vz[a]) * h;
+        let len = (dx * dx + dy * dy + dz * dz).sqrt();
+        let s = (l0 - len) / (h * w * len);
+        let (sa, sb) = (s * wa, s * wb);
+        vx[a] -= dx * sa;
+        vy[a] -= dy * sa;
+        vz[a] -= dz * sa;
+        vx[b] += dx * sb;
+        vy[b] += dy * sb;
+        vz[b] += dz * sb;
+    }
+}
+
 /// The smallest and largest of `|r_{j+1} − r_j| / l0_j` over a rod, from squared lengths (one
 /// square root per call, not per element).
 pub fn strain_extremes<T: Real>(positions: &[Vec3<T>], rest_lengths: &[T]) -> (T, T) {
@@ -97,8 +138,12 @@ mod tests {
     use super::*;
 
     fn wobbly(n: usize) -> (Vec<Vec3<f64>>, Vec<Vec3<f64>>, Vec<f64>, Vec<f64>) {
-        let pos: Vec<_> = (0..=n).map(|i| Vec3::new(i as f64 * 0.01, 0.002 * (i as f64).sin(), 0.0)).collect();
-        let vel: Vec<_> = (0..=n).map(|i| Vec3::new((i as f64 * 0.7).cos(), (i as f64 * 1.3).sin(), 0.3)).collect();
+        let pos: Vec<_> = (0..=n)
+            .map(|i| Vec3::new(i as f64 * 0.01, 0.002 * (i as f64).sin(), 0.0))
+            .collect();
+        let vel: Vec<_> = (0..=n)
+            .map(|i| Vec3::new((i as f64 * 0.7).cos(), (i as f64 * 1.3).sin(), 0.3))
+            .collect();
         let inv: Vec<_> = (0..=n).map(|i| 1.0 / (1.0 + 0.1 * i as f64)).collect();
         let l0 = vec![0.01; n];
         (pos, vel, inv, l0)
@@ -106,7 +151,10 @@ mod tests {
 
     fn predicted_lengths_error(pos: &[Vec3<f64>], vel: &[Vec3<f64>], l0: &[f64], h: f64) -> f64 {
         (0..l0.len())
-            .map(|j| (((pos[j + 1] + vel[j + 1] * h) - (pos[j] + vel[j] * h)).norm() - l0[j]).abs() / l0[j])
+            .map(|j| {
+                (((pos[j + 1] + vel[j + 1] * h) - (pos[j] + vel[j] * h)).norm() - l0[j]).abs()
+                    / l0[j]
+            })
             .fold(0.0, f64::max)
     }
 
@@ -115,10 +163,14 @@ mod tests {
         for ordering in [Ordering::GaussSeidel, Ordering::RedBlack] {
             let (pos, mut vel, inv, l0) = wobbly(40);
             let h = 1e-3;
-            let momentum = |v: &[Vec3<f64>]| -> Vec3<f64> { v.iter().zip(&inv).map(|(v, w)| v / *w).sum() };
+            let momentum =
+                |v: &[Vec3<f64>]| -> Vec3<f64> { v.iter().zip(&inv).map(|(v, w)| v / *w).sum() };
             let p0 = momentum(&vel);
             let e0 = predicted_lengths_error(&pos, &vel, &l0, h);
-            assert!(e0 > 1e-2, "the test must start far from the constraint, e0 = {e0}");
+            assert!(
+                e0 > 1e-2,
+                "the test must start far from the constraint, e0 = {e0}"
+            );
             for _ in 0..2000 {
                 solve_distance_iteration(&pos, &mut vel, &inv, &l0, h, ordering);
             }
@@ -141,7 +193,11 @@ mod tests {
 
     #[test]
     fn strain_extremes_of_a_stretched_rod() {
-        let pos = vec![Vec3::new(0.0_f64, 0.0, 0.0), Vec3::new(1.1, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0)];
+        let pos = vec![
+            Vec3::new(0.0_f64, 0.0, 0.0),
+            Vec3::new(1.1, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.0),
+        ];
         let (lo, hi) = strain_extremes(&pos, &[1.0, 1.0]);
         assert!((lo - 0.9).abs() < 1e-12 && (hi - 1.1).abs() < 1e-12);
     }

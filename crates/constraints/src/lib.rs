@@ -12,5 +12,9 @@
 
 pub mod direct;
 pub mod distance;
+pub mod red_black;
 
-pub use distance::{Ordering, solve_distance_iteration, strain_extremes};
+pub use distance::{
+    Ordering, solve_distance_gauss_seidel_soa, solve_distance_iteration, strain_extremes,
+};
+pub use red_black::RedBlackSolver;
