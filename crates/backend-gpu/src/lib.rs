@@ -1,0 +1,155 @@
+//! GPU time stepping of Cosserat rods with wgpu compute shaders.
+//!
+//! The step is the CPU backend's (`backend_cpu::step_rod`, the paper's Fig. 5 without
+//! collisions): forces and torques → integrate velocities and Euler's equations → held ends take
+//! their prescribed velocities → red–black distance-constraint sweeps (inextensible mode) →
+//! integrate positions and frames → NaN / strain check. What differs is where the rod lives
+//! while it is stepped, because on a GPU that decides the speed (see `/docs/gpu.md` and the
+//! measurements it cites): a dependent phase costs ~0.1 µs inside a workgroup and ~2 µs
+//! across workgroups, and a launch costs ~50–80 µs as seen from the host. Hence three kernel
+//! paths, all built from one WGSL kernel ([`KernelPath`]):
+//!
+//! - **single workgroup**: one rod per workgroup, its points in registers (several per thread),
+//!   neighbours exchanged through workgroup memory, `k` steps per dispatch. Many rods fill the
+//!   GPU with no inter-workgroup synchronisation at all.
+//! - **multi-workgroup (grid)**: a rod too long for one workgroup is cut into chunks, each
+//!   stepped by a co-resident workgroup on a window that overlaps its neighbours by a halo wider
+//!   than the information travels in one step. One grid barrier per step (spin on a storage
+//!   atomic, capped, with a timeout reported as an error) exchanges the halos through atomics.
+//! - **dispatch per step**: the same chunks and halos, one dispatch per step, for adapters on
+//!   which co-residency cannot be established (lavapipe, unknown GPUs).
+//!
+//! The host uploads everything once; afterwards a batch sends only its step range and any
+//! changed end motion, and positions are read back only when asked, into one of two staging
+//! buffers, so the next batch can be submitted before the previous result is read.
+
+mod shader;
+mod sim;
+
+pub use backend_cpu::stepper::DivergedQuantity;
+pub use backend_cpu::{
+    Divergence, EndCondition, EndKind, Ordering, PointLoad, PrescribedMotion, SolverSettings,
+};
+pub use sim::{AdapterSummary, GpuSimulation};
+
+use cosserat_model::{RodParams, RodState};
+
+/// One rod to simulate on the GPU: the same pieces as `backend_cpu::CpuRod::new` takes.
+#[derive(Clone, Debug)]
+pub struct GpuRodInput {
+    /// Initial state.
+    pub state: RodState<f32>,
+    /// Parameters (inverse masses of held end points are zeroed by the backend, as on the CPU).
+    pub params: RodParams<f32>,
+    /// Conditions at the first (`[0]`) and last (`[1]`) end.
+    pub ends: [EndCondition<f32>; 2],
+    /// Constant point forces.
+    pub loads: Vec<PointLoad<f32>>,
+}
+
+/// Which kernel path steps the rods.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum KernelPath {
+    /// Chosen from the scene and the adapter (see [`GpuSimulation::new`]).
+    #[default]
+    Auto,
+    /// One workgroup per rod, the rod in registers, many steps per dispatch.
+    SingleWorkgroup,
+    /// Several co-resident workgroups per rod with a grid barrier, many steps per dispatch.
+    MultiWorkgroup,
+    /// Several workgroups per rod, one dispatch per step.
+    DispatchPerStep,
+}
+
+impl std::fmt::Display for KernelPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Auto => "auto",
+            Self::SingleWorkgroup => "single-workgroup",
+            Self::MultiWorkgroup => "multi-workgroup",
+            Self::DispatchPerStep => "dispatch-per-step",
+        })
+    }
+}
+
+/// Options of a [`GpuSimulation`] besides the physics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GpuOptions {
+    /// Kernel path; [`KernelPath::Auto`] picks one.
+    pub path: KernelPath,
+    /// Record GPU time with timestamp queries where the adapter supports them
+    /// (see [`GpuSimulation::take_gpu_time`]).
+    pub timestamps: bool,
+    /// The number of workgroups the caller guarantees to be co-resident on this adapter. `None`
+    /// uses the built-in table (NVIDIA H100/H200: one per SM); adapters not in it cannot use the
+    /// multi-workgroup path. Asserting a wrong number can only make the grid barrier time out
+    /// (reported as [`GpuError::GridTimeout`]), never hang.
+    pub co_resident_workgroups: Option<u32>,
+    /// Iteration cap of each grid-barrier spin loop.
+    pub spin_cap: u32,
+    /// Upper bound on threads per workgroup (further limited by the adapter's workgroup memory).
+    pub max_threads: u32,
+    /// Upper bound on steps per dispatch of the persistent paths. On software adapters
+    /// (lavapipe), which silently stop a shader's loops after 65 535 iterations in total, the
+    /// backend lowers it further so that no dispatch reaches that cap.
+    pub max_steps_per_dispatch: u32,
+}
+
+impl Default for GpuOptions {
+    fn default() -> Self {
+        Self {
+            path: KernelPath::Auto,
+            timestamps: false,
+            co_resident_workgroups: None,
+            spin_cap: 1 << 20,
+            max_threads: 256,
+            max_steps_per_dispatch: 10_000,
+        }
+    }
+}
+
+/// What went wrong on the GPU side.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GpuError {
+    /// No adapter (or no device) could be obtained.
+    NoAdapter(String),
+    /// The scene is not valid for this backend.
+    InvalidInput(String),
+    /// The requested kernel path cannot run this scene on this adapter.
+    PathUnavailable {
+        /// The path asked for.
+        path: KernelPath,
+        /// Why not.
+        reason: String,
+    },
+    /// A rod diverged (NaN or strain beyond the limit), as the CPU backend reports it.
+    Diverged(Divergence),
+    /// The grid barrier of the multi-workgroup path did not complete within its spin cap: the
+    /// workgroups were not co-resident. The state after this is not meaningful.
+    GridTimeout,
+    /// wgpu reported an error (shader compilation, validation, mapping, device loss).
+    Wgpu(String),
+}
+
+impl std::fmt::Display for GpuError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NoAdapter(why) => write!(f, "no GPU adapter available ({why}); run with `--backend cpu` to use the CPU backend"),
+            Self::InvalidInput(why) => write!(f, "invalid scene for the GPU backend: {why}"),
+            Self::PathUnavailable { path, reason } => write!(f, "the {path} kernel path is unavailable: {reason}"),
+            Self::Diverged(d) => write!(f, "{d}"),
+            Self::GridTimeout => f.write_str(
+                "the multi-workgroup grid barrier timed out (its workgroups were not co-resident); use the single-workgroup or dispatch-per-step path",
+            ),
+            Self::Wgpu(e) => write!(f, "wgpu error: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for GpuError {}
+
+impl From<Divergence> for GpuError {
+    fn from(d: Divergence) -> Self {
+        Self::Diverged(d)
+    }
+}

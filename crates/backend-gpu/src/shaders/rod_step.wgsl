@@ -1,0 +1,589 @@
+// The CoRdE time-step (paper Fig. 5 without collisions) for one window of one rod per workgroup.
+//
+// Composed by src/shader.rs as: a prelude of constants (WG, EPT, ITER, HALO, SPIN_CAP), then
+// common.wgsl, then this file, with the `//#if FLAG` / `//#else` / `//#endif` lines resolved
+// on the host so that a scene compiles only the terms it uses. Flags:
+//   EXTENSIBLE    stretch energy instead of distance constraints
+//   STRETCH_DAMP  stretching-rate damping (extensible only)
+//   BEND_DAMP     relative-angular-velocity damping
+//   DRAG          medium drag -drag*m*v
+//   LOADS         constant point loads
+//   GRID          several co-resident workgroups per rod, one grid barrier per step
+//   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
+//
+// Layout: thread `lid` owns the EPT consecutive window points (and elements) with local index
+// lid*EPT .. lid*EPT+EPT-1 and keeps them in registers for the whole dispatch. Element j is the
+// segment from point j to point j+1 and carries frame j. Neighbouring threads exchange only
+// their first and last point through workgroup memory. EPT and the window start are even, so a
+// thread's boundary constraints (its left element lid*EPT-1 and its right element lid*EPT+EPT-1)
+// are both odd: the red (even) half-sweep touches only a thread's own points and needs no
+// barrier; only the black half-sweep does. Boundary constraints are evaluated by both threads
+// from the same values, each applying its own half of the impulse, so the result equals the
+// CPU's red–black sweep.
+
+struct Params {
+    // xyz gravity, w time step h.
+    gravity: vec4<f32>,
+    // Allowed band of squared length ratios (l/l0)^2.
+    lo2: f32,
+    hi2: f32,
+    // Index of the first step of this submission.
+    base_step: u32,
+    // Number of work items (workgroups) in this dispatch.
+    num_items: u32,
+}
+
+// One 256-byte entry per dispatch of a submission (dynamic uniform offset).
+struct Chunk {
+    // First step of this dispatch relative to base_step, and its number of steps.
+    offset: u32,
+    count: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+// Per-point and per-element parameters; slot i holds point i, element i and node i of a rod.
+struct Slot {
+    // l0 (element), inverse mass (point), mass (point), Kp (element)
+    a: vec4<f32>,
+    // inertia (element), Ks (element)
+    b: vec4<f32>,
+    // inverse inertia (element), stretch damping (element)
+    c: vec4<f32>,
+    // rest Darboux vector (node), node length (node)
+    d: vec4<f32>,
+    // bend/twist stiffness (node), bend damping (node)
+    e: vec4<f32>,
+}
+
+// One workgroup's share of a rod: the window of points it steps and the part it owns.
+struct Item {
+    rod: u32,
+    // Slot of the rod's point 0.
+    base: u32,
+    // Elements of the rod.
+    n: u32,
+    // bit0 end 0 holds its point, bit1 its frame, bit2 end 1 holds its point, bit3 its frame.
+    flags: u32,
+    // Window [w0, w1) and owned range [o0, o1) of point indices.
+    w0: u32,
+    w1: u32,
+    o0: u32,
+    o1: u32,
+    // Neighbouring items of the same rod (GRID), or 0xffffffff.
+    left: u32,
+    right: u32,
+    drag: f32,
+    pad: u32,
+}
+
+// Prescribed motion of one end: velocity, angular velocity (world), active steps [x, y).
+struct Drive {
+    v: vec4<f32>,
+    w: vec4<f32>,
+    window: vec4<u32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<uniform> chunk: Chunk;
+@group(0) @binding(2) var<storage, read> slots: array<Slot>;
+@group(0) @binding(3) var<storage, read> items: array<Item>;
+@group(0) @binding(4) var<storage, read> drives: array<Drive>;
+@group(0) @binding(5) var<storage, read_write> pos: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> vel: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> frm: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read_write> omg: array<vec4<f32>>;
+// Per item: code (0 ok, 1 frame not finite, 2 position not finite, 3 strain), element, step,
+// bits of the length ratio.
+@group(0) @binding(9) var<storage, read_write> status: array<atomic<u32>>;
+//#if LOADS
+@group(0) @binding(10) var<storage, read> loads: array<vec4<f32>>;
+//#endif
+//#if PERSTEP
+@group(0) @binding(11) var<storage, read> src_pos: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read> src_vel: array<vec4<f32>>;
+@group(0) @binding(13) var<storage, read> src_frm: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read> src_omg: array<vec4<f32>>;
+//#endif
+//#if GRID
+// [0]: arrivals at the grid barrier (low 30 bits), bit 31 abort (divergence), bit 30 timeout.
+@group(0) @binding(15) var<storage, read_write> sync: array<atomic<u32>>;
+// Halo exchange: per parity, item and side, HALO points of 16 words (r, v, q, ω). Written and
+// read only through atomics: plain loads of another workgroup's stores can be stale (GPU.md).
+@group(0) @binding(16) var<storage, read_write> xch: array<atomic<u32>>;
+//#endif
+
+// Neighbour exchange: 2*lid holds a thread's first point, 2*lid+1 its last.
+var<workgroup> sh_r: array<vec4<f32>, 2 * WG>;
+var<workgroup> sh_q: array<vec4<f32>, 2 * WG>;
+//#if BEND_DAMP
+var<workgroup> sh_w: array<vec4<f32>, 2 * WG>;
+//#endif
+//#if !EXTENSIBLE
+// Double-buffered velocities: consecutive exchanges alternate, so one barrier per exchange.
+var<workgroup> sh_v: array<vec4<f32>, 4 * WG>;
+//#else
+//#if STRETCH_DAMP
+var<workgroup> sh_v: array<vec4<f32>, 4 * WG>;
+//#endif
+//#endif
+// Earliest divergence in this dispatch: (relative step << 16) | (local element << 2) | code.
+var<workgroup> wg_key: atomic<u32>;
+// Nonzero once the workgroup must stop (divergence here or, with GRID, anywhere).
+var<workgroup> wg_stop: u32;
+
+const NONE: u32 = 0xffffffffu;
+const XP: u32 = EPT + 2u;
+
+fn key_of(rel_step: u32, local_elem: u32, code: u32) -> u32 {
+    return (rel_step << 16u) | (local_elem << 2u) | code;
+}
+
+//#if GRID
+fn xch_index(parity: u32, item: u32, side: u32, k: u32) -> u32 {
+    return (((parity * params.num_items + item) * 2u + side) * HALO + k) * 16u;
+}
+
+fn xch_store4(i: u32, x: vec4<f32>) {
+    atomicStore(&xch[i], bitcast<u32>(x.x));
+    atomicStore(&xch[i + 1u], bitcast<u32>(x.y));
+    atomicStore(&xch[i + 2u], bitcast<u32>(x.z));
+    atomicStore(&xch[i + 3u], bitcast<u32>(x.w));
+}
+
+fn xch_load4(i: u32) -> vec4<f32> {
+    return vec4<f32>(
+        bitcast<f32>(atomicLoad(&xch[i])),
+        bitcast<f32>(atomicLoad(&xch[i + 1u])),
+        bitcast<f32>(atomicLoad(&xch[i + 2u])),
+        bitcast<f32>(atomicLoad(&xch[i + 3u])),
+    );
+}
+//#endif
+
+@compute @workgroup_size(WG)
+fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+    let item_index = wid.x;
+    let it = items[item_index];
+    let h = params.gravity.w;
+    let g = params.gravity.xyz;
+    let b0 = lid * EPT;
+    let end_elem = it.w1 - 1u;  // window elements are [w0, w1 - 1)
+
+    // Registers: the thread's points, velocities, frames and angular velocities.
+    var r: array<vec3<f32>, EPT>;
+    var v: array<vec3<f32>, EPT>;
+    var q: array<vec4<f32>, EPT>;
+    var w: array<vec3<f32>, EPT>;
+    for (var e = 0u; e < EPT; e++) {
+        let gp = it.w0 + b0 + e;
+        if gp < it.w1 {
+            let s = it.base + gp;
+//#if PERSTEP
+            r[e] = src_pos[s].xyz;
+            v[e] = src_vel[s].xyz;
+            q[e] = src_frm[s];
+            w[e] = src_omg[s].xyz;
+//#else
+            r[e] = pos[s].xyz;
+            v[e] = vel[s].xyz;
+            q[e] = frm[s];
+            w[e] = omg[s].xyz;
+//#endif
+        } else {
+            q[e] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        }
+    }
+    if lid == 0u {
+        atomicStore(&wg_key, NONE);
+        // A rod that has diverged stays where it stopped.
+        wg_stop = select(0u, 1u, atomicLoad(&status[item_index * 4u]) != 0u);
+    }
+    var my_key = NONE;
+    var my_val = 0.0;
+    var xpar = 0u;
+    var steps_done = 0u;
+    let has_left = lid > 0u;
+    let has_right = lid + 1u < WG;
+
+    for (var s = 0u; s < chunk.count; s++) {
+        let step_rel = chunk.offset + s;
+        let step = params.base_step + step_rel;
+//#if GRID
+        // Grid barrier: publish owned boundary slabs, wait for every workgroup, read halos.
+        if s > 0u {
+            let par = s & 1u;
+            for (var e = 0u; e < EPT; e++) {
+                let gp = it.w0 + b0 + e;
+                var side = NONE;
+                var k = 0u;
+                if it.left != NONE && gp >= it.o0 && gp < it.o0 + HALO {
+                    side = 0u;
+                    k = gp - it.o0;
+                }
+                if it.right != NONE && gp + HALO >= it.o1 && gp < it.o1 {
+                    side = 1u;
+                    k = gp + HALO - it.o1;
+                }
+                if side != NONE {
+                    let i = xch_index(par, item_index, side, k);
+                    xch_store4(i, vec4<f32>(r[e], 0.0));
+                    xch_store4(i + 4u, vec4<f32>(v[e], 0.0));
+                    xch_store4(i + 8u, q[e]);
+                    xch_store4(i + 12u, vec4<f32>(w[e], 0.0));
+                }
+            }
+        }
+        storageBarrier();
+        if lid == 0u {
+            if wg_stop != 0u {
+                atomicOr(&sync[0], 0x80000000u);
+            }
+            // The counter is cleared once per submission and every step of every dispatch
+            // arrives once, so the target counts from the submission's first step. An abort bit
+            // is set before its setter arrives, so whoever sees the target reached sees it too.
+            let goal = params.num_items * (chunk.offset + s + 1u);
+            var seen = atomicAdd(&sync[0], 1u) + 1u;
+            for (var i = 0u; i < SPIN_CAP; i++) {
+                if (seen & 0x3fffffffu) >= goal || (seen & 0xc0000000u) != 0u {
+                    break;
+                }
+                seen = atomicLoad(&sync[0]);
+            }
+            // Checked after the loop, not by a loop flag: a driver that cuts loops short (see
+            // GPU.md on lavapipe) must still report a timeout, never run on with stale halos.
+            if (seen & 0x3fffffffu) < goal && (seen & 0xc0000000u) == 0u {
+                seen = atomicOr(&sync[0], 0x40000000u) | 0x40000000u;
+                atomicOr(&status[item_index * 4u], 0x100u);
+            }
+            wg_stop = select(0u, 1u, (seen & 0xc0000000u) != 0u);
+        }
+        storageBarrier();
+        if s > 0u {
+            let par = s & 1u;
+            for (var e = 0u; e < EPT; e++) {
+                let gp = it.w0 + b0 + e;
+                var i = NONE;
+                if gp < it.o0 && it.left != NONE {
+                    i = xch_index(par, it.left, 1u, gp + HALO - it.o0);
+                }
+                if gp >= it.o1 && gp < it.w1 && it.right != NONE {
+                    i = xch_index(par, it.right, 0u, gp - it.o1);
+                }
+                if i != NONE {
+                    r[e] = xch_load4(i).xyz;
+                    v[e] = xch_load4(i + 4u).xyz;
+                    q[e] = xch_load4(i + 8u);
+                    w[e] = xch_load4(i + 12u).xyz;
+                }
+            }
+        }
+//#endif
+        // Publish this thread's first and last point for its neighbours.
+        sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
+        sh_r[2u * lid + 1u] = vec4<f32>(r[EPT - 1u], 0.0);
+        sh_q[2u * lid] = q[0];
+        sh_q[2u * lid + 1u] = q[EPT - 1u];
+//#if BEND_DAMP
+        sh_w[2u * lid] = vec4<f32>(w[0], 0.0);
+        sh_w[2u * lid + 1u] = vec4<f32>(w[EPT - 1u], 0.0);
+//#endif
+//#if STRETCH_DAMP
+        sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(v[0], 0.0);
+        sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(v[EPT - 1u], 0.0);
+//#endif
+        if workgroupUniformLoad(&wg_stop) != 0u {
+            break;
+        }
+
+        // Extended arrays: index x is local point b0 - 1 + x (0: left neighbour's last,
+        // EPT + 1: right neighbour's first).
+        var rx: array<vec3<f32>, XP>;
+        var qx: array<vec4<f32>, XP>;
+        var vx: array<vec3<f32>, XP>;
+//#if BEND_DAMP
+        var wx: array<vec3<f32>, XP>;
+//#endif
+        if has_left {
+            rx[0] = sh_r[2u * lid - 1u].xyz;
+            qx[0] = sh_q[2u * lid - 1u];
+//#if BEND_DAMP
+            wx[0] = sh_w[2u * lid - 1u].xyz;
+//#endif
+//#if STRETCH_DAMP
+            vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
+//#endif
+        }
+        if has_right {
+            rx[EPT + 1u] = sh_r[2u * lid + 2u].xyz;
+            qx[EPT + 1u] = sh_q[2u * lid + 2u];
+//#if BEND_DAMP
+            wx[EPT + 1u] = sh_w[2u * lid + 2u].xyz;
+//#endif
+//#if STRETCH_DAMP
+            vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
+//#endif
+        }
+//#if STRETCH_DAMP
+        xpar ^= 1u;
+//#endif
+//#if EXTENSIBLE
+        // Without constraint sweeps no other barrier separates these reads from the next
+        // step's writes of sh_r / sh_q / sh_w.
+        workgroupBarrier();
+//#endif
+        for (var e = 0u; e < EPT; e++) {
+            rx[e + 1u] = r[e];
+            qx[e + 1u] = q[e];
+            vx[e + 1u] = v[e];
+//#if BEND_DAMP
+            wx[e + 1u] = w[e];
+//#endif
+        }
+
+        // Deferred length check of the previous step's result, for owned elements whose two
+        // points this thread now sees.
+        if s > 0u {
+            for (var e = 0u; e < EPT; e++) {
+                let ge = it.w0 + b0 + e;
+                if ge < end_elem && ge >= it.o0 && ge < it.o1 {
+                    let l0 = slots[it.base + ge].a.x;
+                    let d = rx[e + 2u] - rx[e + 1u];
+                    let ratio = dot(d, d) / (l0 * l0);
+                    if !(ratio >= params.lo2 && ratio <= params.hi2) {
+                        let code = select(3u, 2u, not_finite(ratio));
+                        let key = key_of(step_rel - 1u, ge - it.w0, code);
+                        if key < my_key {
+                            my_key = key;
+                            my_val = ratio;
+                        }
+                        atomicMin(&wg_key, key);
+                        wg_stop = 1u;
+                    }
+                }
+            }
+        }
+
+        // Forces on the thread's points and torques on its frames. Element / node x covers local
+        // index b0 - 1 + x, x = 0..=EPT; contributions are summed in the CPU's order.
+        var fb: array<vec3<f32>, XP>;
+        var te: array<vec3<f32>, XP>;
+        var ta: array<vec3<f32>, XP>;
+        var tb: array<vec3<f32>, XP>;
+        for (var x = 0u; x <= EPT; x++) {
+            fb[x] = vec3<f32>(0.0);
+            te[x] = vec3<f32>(0.0);
+            ta[x] = vec3<f32>(0.0);
+            tb[x] = vec3<f32>(0.0);
+            let le = b0 + x;  // local element index + 1
+            if le >= 1u && it.w0 + le - 1u < end_elem {
+                let ge = it.w0 + le - 1u;
+                let sl = slots[it.base + ge];
+                let pe = parallel_element(rx[x], rx[x + 1u], qx[x], sl.a.w, sl.a.x);
+                var f = pe.fb;
+//#if EXTENSIBLE
+                f += stretch_element(rx[x], rx[x + 1u], sl.b.w, sl.a.x);
+//#if STRETCH_DAMP
+                if sl.c.w > 0.0 {
+                    f += stretch_damping_element(rx[x], rx[x + 1u], vx[x], vx[x + 1u], sl.c.w, sl.a.x);
+                }
+//#endif
+//#endif
+                fb[x] = f;
+                te[x] = pe.torque;
+                // Node ge between frames ge and ge + 1.
+                if ge + 1u < end_elem {
+                    let nt = bend_twist_node(qx[x], qx[x + 1u], sl.d.xyz, sl.e.xyz, sl.d.w);
+                    ta[x] = nt.ta;
+                    tb[x] = nt.tb;
+//#if BEND_DAMP
+                    let nd = bend_damping_node(qx[x], qx[x + 1u], wx[x], wx[x + 1u], sl.e.w, sl.d.w);
+                    ta[x] += nd.ta;
+                    tb[x] += nd.tb;
+//#endif
+                }
+            }
+        }
+
+        // Integrate velocities: v += h f / m and Euler's equations with the gyroscopic term.
+        for (var e = 0u; e < EPT; e++) {
+            let gp = it.w0 + b0 + e;
+            if gp < it.w1 {
+                let sl = slots[it.base + gp];
+//#if DRAG
+                var f = (g - vx[e + 1u] * it.drag) * sl.a.z;
+//#else
+                var f = g * sl.a.z;
+//#endif
+                f += fb[e];
+                f -= fb[e + 1u];
+//#if LOADS
+                f += loads[it.base + gp].xyz;
+//#endif
+                var vn = vx[e + 1u] + f * (h * sl.a.y);
+                var wn = w[e];
+                if gp < end_elem {
+                    // Torque order as on the CPU: parallel, node j-1 (as its b), node j (as its a).
+                    let tq = ((te[e + 1u] + tb[e]) + ta[e + 1u]);
+                    let gyro = cross(wn, sl.b.xyz * wn);
+                    wn += (tq - gyro) * sl.c.xyz * h;
+                }
+                // Held ends follow their prescribed motion exactly.
+                if gp == 0u && (it.flags & 1u) != 0u {
+                    let dr = drives[it.rod * 2u];
+                    let on = step >= dr.window.x && step < dr.window.y;
+                    vn = select(vec3<f32>(0.0), dr.v.xyz, on);
+                }
+                if gp == it.n && (it.flags & 4u) != 0u {
+                    let dr = drives[it.rod * 2u + 1u];
+                    let on = step >= dr.window.x && step < dr.window.y;
+                    vn = select(vec3<f32>(0.0), dr.v.xyz, on);
+                }
+                if gp == 0u && (it.flags & 2u) != 0u {
+                    let dr = drives[it.rod * 2u];
+                    let on = step >= dr.window.x && step < dr.window.y;
+                    wn = quat_rotate_inv(q[e], select(vec3<f32>(0.0), dr.w.xyz, on));
+                }
+                if gp + 1u == it.n && (it.flags & 8u) != 0u {
+                    let dr = drives[it.rod * 2u + 1u];
+                    let on = step >= dr.window.x && step < dr.window.y;
+                    wn = quat_rotate_inv(q[e], select(vec3<f32>(0.0), dr.w.xyz, on));
+                }
+                vx[e + 1u] = vn;
+                w[e] = wn;
+            }
+        }
+
+//#if !EXTENSIBLE
+        // Distance constraints, red–black. Inverse masses of the extended points.
+        var wm: array<f32, XP>;
+        for (var x = 0u; x < XP; x++) {
+            let lp = b0 + x;  // local point + 1
+            let gp = it.w0 + lp - 1u;
+            if lp >= 1u && gp < it.w1 {
+                wm[x] = slots[it.base + gp].a.y;
+            } else {
+                wm[x] = 0.0;
+            }
+        }
+        for (var iter = 0u; iter < ITER; iter++) {
+            for (var colour = 0u; colour < 2u; colour++) {
+                if colour == 1u {
+                    sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(vx[1], 0.0);
+                    sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(vx[EPT], 0.0);
+                    workgroupBarrier();
+                    if has_left {
+                        vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
+                    }
+                    if has_right {
+                        vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
+                    }
+                    xpar ^= 1u;
+                }
+                // x is local element b0 - 1 + x, whose global parity is that of x - 1 (w0, b0 even).
+                for (var x = 1u - colour; x <= EPT; x += 2u) {
+                    let le = b0 + x;
+                    if le >= 1u && it.w0 + le - 1u < end_elem {
+                        let ge = it.w0 + le - 1u;
+                        let wa = wm[x];
+                        let wb = wm[x + 1u];
+                        let ws = wa + wb;
+                        if ws > 0.0 {
+                            let l0 = slots[it.base + ge].a.x;
+                            let d = (rx[x + 1u] + vx[x + 1u] * h) - (rx[x] + vx[x] * h);
+                            let len = sqrt(dot(d, d));
+                            let sc = (l0 - len) / (h * ws * len);
+                            vx[x] -= d * (sc * wa);
+                            vx[x + 1u] += d * (sc * wb);
+                        }
+                    }
+                }
+            }
+        }
+//#endif
+
+        // Integrate positions and frames: r += h v, q <- normalise(q + q ⊗ (0, h ω / 2)).
+        for (var e = 0u; e < EPT; e++) {
+            let gp = it.w0 + b0 + e;
+            if gp < it.w1 {
+                v[e] = vx[e + 1u];
+                r[e] = r[e] + v[e] * h;
+                if gp < end_elem {
+                    let qn = q[e] + quat_mul(q[e], vec4<f32>(w[e] * (h * 0.5), 0.0));
+                    let n2 = dot(qn, qn);
+                    q[e] = qn / sqrt(n2);
+                    if !(n2 > 0.0) || not_finite(n2) {
+                        if gp >= it.o0 && gp < it.o1 {
+                            let key = key_of(step_rel, gp - it.w0, 1u);
+                            if key < my_key {
+                                my_key = key;
+                                my_val = n2;
+                            }
+                            atomicMin(&wg_key, key);
+                            wg_stop = 1u;
+                        }
+                    }
+                }
+            }
+        }
+        steps_done = s + 1u;
+    }
+
+    // Length check of the last step, then write the owned points back.
+    sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
+    let stopped = workgroupUniformLoad(&wg_stop);
+    if steps_done > 0u && stopped == 0u && has_right {
+        let e = EPT - 1u;
+        let ge = it.w0 + b0 + e;
+        let rn = sh_r[2u * lid + 2u].xyz;
+        if ge < end_elem && ge >= it.o0 && ge < it.o1 {
+            let l0 = slots[it.base + ge].a.x;
+            let d = rn - r[e];
+            let ratio = dot(d, d) / (l0 * l0);
+            if !(ratio >= params.lo2 && ratio <= params.hi2) {
+                let key = key_of(chunk.offset + steps_done - 1u, ge - it.w0, select(3u, 2u, not_finite(ratio)));
+                if key < my_key {
+                    my_key = key;
+                    my_val = ratio;
+                }
+                atomicMin(&wg_key, key);
+            }
+        }
+    }
+    if steps_done > 0u && stopped == 0u {
+        for (var e = 0u; e + 1u < EPT; e++) {
+            let ge = it.w0 + b0 + e;
+            if ge < end_elem && ge >= it.o0 && ge < it.o1 {
+                let l0 = slots[it.base + ge].a.x;
+                let d = r[e + 1u] - r[e];
+                let ratio = dot(d, d) / (l0 * l0);
+                if !(ratio >= params.lo2 && ratio <= params.hi2) {
+                    let key = key_of(chunk.offset + steps_done - 1u, ge - it.w0, select(3u, 2u, not_finite(ratio)));
+                    if key < my_key {
+                        my_key = key;
+                        my_val = ratio;
+                    }
+                    atomicMin(&wg_key, key);
+                }
+            }
+        }
+    }
+    workgroupBarrier();
+    let first = atomicLoad(&wg_key);
+    if my_key != NONE && my_key == first {
+        atomicStore(&status[item_index * 4u + 1u], it.w0 + ((first >> 2u) & 0x3fffu));
+        atomicStore(&status[item_index * 4u + 2u], params.base_step + (first >> 16u));
+        atomicStore(&status[item_index * 4u + 3u], bitcast<u32>(my_val));
+        atomicOr(&status[item_index * 4u], first & 3u);
+    }
+    for (var e = 0u; e < EPT; e++) {
+        let gp = it.w0 + b0 + e;
+        if gp >= it.o0 && gp < it.o1 {
+            let s = it.base + gp;
+            pos[s] = vec4<f32>(r[e], 0.0);
+            vel[s] = vec4<f32>(v[e], 0.0);
+            frm[s] = q[e];
+            omg[s] = vec4<f32>(w[e], 0.0);
+        }
+    }
+}
