@@ -1,0 +1,67 @@
+//! The `cosserat` command as a user runs it.
+
+use std::process::Command;
+
+fn cosserat() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_cosserat"))
+}
+
+#[test]
+fn run_json_reports_every_field() {
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--elements", "32", "--steps", "200", "--json"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["scene", "backend", "elements", "steps", "dt", "wall_s", "us_per_step", "max_strain", "kinetic_energy", "potential_energy", "tip", "diverged"] {
+        assert!(v.get(key).is_some(), "missing `{key}` in {v}");
+    }
+    assert_eq!(v["elements"], 32);
+    assert_eq!(v["steps"], 200);
+    assert_eq!(v["diverged"], false);
+    assert!(v["max_strain"].as_f64().unwrap() < 1e-2);
+    assert!(v["kinetic_energy"].as_f64().unwrap() > 0.0, "the pendulum has started to swing");
+}
+
+#[test]
+fn a_diverging_run_says_where_and_exits_nonzero() {
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--elements", "200", "--steps", "2000", "--set", "solver.dt=5e-3", "--json"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["diverged"], true);
+    let why = v["divergence"].as_str().unwrap();
+    assert!(why.contains("rod 0") && why.contains("element") && why.contains("step"), "{why}");
+}
+
+#[test]
+fn out_writes_the_trajectory() {
+    let dir = std::env::temp_dir().join(format!("cosserat-cli-{}", std::process::id()));
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--elements", "16", "--steps", "100", "--frames", "5", "--json", "--out"])
+        .arg(&dir)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for f in ["trajectory.npz", "trajectory.pvd", "frame_00000.vtp", "frame_00005.vtp"] {
+        assert!(dir.join(f).is_file(), "missing {f}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_input_is_an_error_message() {
+    let out = cosserat().args(["run", "no-such-scene.toml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no-such-scene.toml"), "{err}");
+    let out = cosserat().args(["run", "scenes/pendulum.toml", "--backend", "quantum"]).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("quantum"));
+}
