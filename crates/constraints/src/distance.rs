@@ -137,7 +137,10 @@ pub fn strain_extremes<T: Real>(positions: &[Vec3<T>], rest_lengths: &[T]) -> (T
 mod tests {
     use super::*;
 
-    fn wobbly(n: usize) -> (Vec<Vec3<f64>>, Vec<Vec3<f64>>, Vec<f64>, Vec<f64>) {
+    /// Positions, velocities, inverse masses and rest lengths of a test chain.
+    type Chain = (Vec<Vec3<f64>>, Vec<Vec3<f64>>, Vec<f64>, Vec<f64>);
+
+    fn wobbly(n: usize) -> Chain {
         let pos: Vec<_> = (0..=n)
             .map(|i| Vec3::new(i as f64 * 0.01, 0.002 * (i as f64).sin(), 0.0))
             .collect();
