@@ -12,11 +12,13 @@
 //! quantity instead of letting NaNs spread.
 
 pub mod ends;
+pub mod mesh_contact;
 mod soa;
 pub mod stepper;
 
 pub use constraints::Ordering;
 pub use ends::{EndCondition, EndKind, PrescribedMotion};
+pub use mesh_contact::{CollisionStats, MeshContactSettings};
 pub use stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
     step_rod_batch, step_rods, step_rods_batch,

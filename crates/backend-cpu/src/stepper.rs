@@ -1,8 +1,9 @@
 //! The time step (paper Fig. 5, without collisions) and its parallel driver.
 
 use crate::ends::EndCondition;
+use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
 use crate::soa::{self, SoaParams, SoaState};
-use constraints::{Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa};
+use constraints::{ContactSet, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa};
 use cosserat_model::energy::{bend_damping_node, stretch_damping_element};
 use cosserat_model::quat::rotate_inv;
 use cosserat_model::{Real, RodParams, RodState, Vec3};
@@ -58,6 +59,7 @@ pub struct CpuRod<T: Real> {
     work: SoaState<T>,
     work_params: SoaParams<T>,
     red_black: Option<RedBlackSolver<T>>,
+    mesh: Option<Box<RodMeshContact<T>>>,
 }
 
 impl<T: Real> CpuRod<T> {
@@ -85,12 +87,31 @@ impl<T: Real> CpuRod<T> {
             ends,
             loads,
             red_black: None,
+            mesh: None,
         }
     }
 
     /// Number of elements.
     pub fn elements(&self) -> usize {
         self.state.elements()
+    }
+
+    /// Makes the rod collide with a static mesh.
+    #[must_use]
+    pub fn with_mesh(mut self, settings: MeshContactSettings) -> Self {
+        self.mesh = Some(Box::new(RodMeshContact::new(settings)));
+        self
+    }
+
+    /// Contact measurements since the last reset, if the rod collides with a mesh.
+    pub fn collision_stats(&self) -> Option<CollisionStats> {
+        self.mesh.as_ref().map(|m| m.stats)
+    }
+
+    /// The contacts of the last step and their accumulated impulses, if the rod collides with a
+    /// mesh.
+    pub fn contacts(&self) -> Option<&ContactSet<T>> {
+        self.mesh.as_ref().map(|m| &m.contacts)
     }
 }
 
@@ -245,8 +266,16 @@ pub fn step_rod_batch<T: Real>(
                 }
             }
         }
+        if let Some(mesh) = rod.mesh.as_mut() {
+            mesh.detect(&w.r.x, &w.r.y, &w.r.z, rod.params.radius.to_f64());
+        }
+        let mut contacts = rod
+            .mesh
+            .as_mut()
+            .filter(|m| !m.contacts.is_empty())
+            .map(|m| (&mut m.contacts, &m.friction));
+        let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
         if !settings.extensible && settings.iterations > 0 {
-            let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
             match settings.ordering {
                 Ordering::GaussSeidel => {
                     for _ in 0..settings.iterations {
@@ -257,18 +286,37 @@ pub fn step_rod_batch<T: Real>(
                             &p.rest_lengths,
                             h,
                         );
+                        if let Some((set, friction)) = contacts.as_mut() {
+                            set.sweep_soa(
+                                h,
+                                friction,
+                                &p.inv_masses,
+                                [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                            );
+                        }
                     }
                 }
                 Ordering::RedBlack => {
                     rod.red_black
                         .get_or_insert_with(|| RedBlackSolver::new(&p.inv_masses, &p.rest_lengths))
-                        .solve_soa(
+                        .solve_soa_with_contacts(
                             r,
                             [&mut w.v.x, &mut w.v.y, &mut w.v.z],
                             h,
                             settings.iterations,
+                            contacts,
                         );
                 }
+            }
+        } else if let Some((set, friction)) = contacts.as_mut() {
+            // Extensible rods have no distance constraints; their contacts still get solved.
+            for _ in 0..settings.iterations.max(1) {
+                set.sweep_soa(
+                    h,
+                    friction,
+                    &p.inv_masses,
+                    [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                );
             }
         }
         soa::integrate_positions(w, p, h);

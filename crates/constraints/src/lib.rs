@@ -10,10 +10,12 @@
 //! This crate knows rods only as arrays of points, velocities, inverse masses and rest lengths;
 //! it has no notion of frames, forces, threads or devices.
 
+pub mod contact;
 pub mod direct;
 pub mod distance;
 pub mod red_black;
 
+pub use contact::{ContactSet, Friction, PointContact};
 pub use distance::{
     Ordering, solve_distance_gauss_seidel_soa, solve_distance_iteration, strain_extremes,
 };

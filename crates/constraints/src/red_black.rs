@@ -12,6 +12,7 @@
 //! rather than as the difference of two predicted absolute positions, which in `f32` would lose
 //! most of the digits of a millimetre element a metre away from the origin.
 
+use crate::contact::{ContactSet, Friction};
 use cosserat_model::{Real, Vec3};
 
 /// Structure-of-arrays scratch for one rod, sized once and reused every step.
@@ -131,6 +132,19 @@ impl<T: Real> RedBlackSolver<T> {
         h: T,
         iterations: usize,
     ) {
+        self.solve_soa_with_contacts(positions, velocities, h, iterations, None);
+    }
+
+    /// [`Self::solve_soa`] with a sweep over `contacts` after each distance sweep, as in the
+    /// constraint loop of the paper's Fig. 5.
+    pub fn solve_soa_with_contacts(
+        &mut self,
+        positions: [&[T]; 3],
+        velocities: [&mut [T]; 3],
+        h: T,
+        iterations: usize,
+        mut contacts: Option<(&mut ContactSet<T>, &Friction<T>)>,
+    ) {
         if iterations == 0 {
             return;
         }
@@ -150,7 +164,19 @@ impl<T: Real> RedBlackSolver<T> {
                 self.black_e[c][k] = r[2 * k + 2] - r[2 * k + 1];
             }
         }
-        self.sweeps(h, iterations);
+        for _ in 0..iterations {
+            self.sweeps(h, 1);
+            if let Some((set, friction)) = contacts.as_mut() {
+                set.sweep_split(
+                    h,
+                    friction,
+                    &self.even_w,
+                    &self.odd_w,
+                    &mut self.even_v,
+                    &mut self.odd_v,
+                );
+            }
+        }
         for (c, v) in velocities.into_iter().enumerate() {
             for (k, x) in v.iter_mut().step_by(2).enumerate() {
                 *x = self.even_v[c][k];
