@@ -699,7 +699,7 @@ impl GpuSimulation {
         self.steps
     }
 
-    /// Simulated time of the submitted steps [s], as the CPU backend counts it.
+    /// Simulated time of the submitted steps in seconds, as the CPU backend counts it.
     pub fn time(&self) -> f64 {
         self.steps as f64 * self.settings.dt as f64
     }
@@ -1052,7 +1052,7 @@ impl GpuSimulation {
             .collect())
     }
 
-    /// GPU time [s] of all batches submitted since the last call, from timestamp queries
+    /// GPU time in seconds of all batches submitted since the last call, from timestamp queries
     /// (blocking); `None` when timestamps were not requested or the adapter lacks them.
     pub fn take_gpu_time(&mut self) -> Result<Option<f64>, GpuError> {
         if self.query.is_none() {
