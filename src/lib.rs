@@ -19,6 +19,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod environment;
 pub mod output;
 pub mod scene;
 pub mod sim;
@@ -26,4 +27,7 @@ pub mod sim;
 pub use backend_cpu::{self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion};
 pub use constraints;
 pub use cosserat_model::{self, Material};
-pub use sim::{Backend, BuildError, RodBuilder, RodHandle, Simulation, SimulationBuilder};
+pub use environment::Environment;
+pub use sim::{
+    Backend, BuildError, ContactReport, RodBuilder, RodHandle, Simulation, SimulationBuilder,
+};

@@ -285,6 +285,14 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "diverged": o.divergence.is_some(),
             "divergence": o.divergence,
         });
+        let mut v = v;
+        if let Some(c) = sim.contact_report() {
+            v["triangles"] = serde_json::json!(sim.environment().map_or(0, |e| e.triangles()));
+            v["max_penetration"] = serde_json::json!(c.max_penetration);
+            v["escaped_points"] = serde_json::json!(c.escaped_points);
+            v["contacts"] = serde_json::json!(c.contacts);
+            v["collision_us_per_step"] = serde_json::json!(c.detection_us_per_step);
+        }
         println!("{v}");
     } else {
         println!(
@@ -316,6 +324,12 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             e.potential()
         );
         println!("tip        [{:.6}, {:.6}, {:.6}] m", tip[0], tip[1], tip[2]);
+        if let Some(c) = sim.contact_report() {
+            println!(
+                "contact    {} points in contact, max penetration {:.3e} m, {} escaped, detection {:.2} µs/step",
+                c.contacts, c.max_penetration, c.escaped_points, c.detection_us_per_step
+            );
+        }
         if let Some(d) = &o.divergence {
             println!("DIVERGED   {d}");
         }

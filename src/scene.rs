@@ -8,6 +8,7 @@
 //! Values can be overridden from the command line before checking (`--set rod.0.elements=1000`),
 //! which is how one scene file serves several resolutions.
 
+use crate::environment::Environment;
 use crate::sim::{RodBuilder, SimulationBuilder};
 use backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
 use cosserat_model::Material;
@@ -70,6 +71,58 @@ pub struct SceneFile {
     /// The rods.
     #[serde(default, rename = "rod")]
     pub rods: Vec<RodSection>,
+    /// The static mesh the rods collide with, if any.
+    pub environment: Option<EnvironmentSection>,
+}
+
+/// `[environment]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentSection {
+    /// The mesh.
+    pub mesh: MeshSection,
+    /// Coulomb friction with the mesh.
+    pub friction: Option<FrictionSection>,
+    /// Speculative contact margin [m] (default 1e-4).
+    pub margin: Option<f64>,
+}
+
+/// `environment.mesh`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
+pub enum MeshSection {
+    /// The procedural vessel tree (an aorta-like trunk with branches).
+    Vessel {
+        /// Approximate number of triangles (default 26 000, like the paper's phantom).
+        triangles: Option<usize>,
+    },
+    /// An OBJ or STL file, relative to the scene file.
+    File {
+        /// Path of the mesh.
+        path: PathBuf,
+        /// Factor from file units to metres (0.001 for millimetres).
+        scale: f64,
+    },
+    /// A square floor.
+    Plane {
+        /// A point on the plane [m].
+        point: [f64; 3],
+        /// The side the rods are on.
+        normal: [f64; 3],
+        /// Side length [m].
+        size: f64,
+    },
+}
+
+/// `environment.friction`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionSection {
+    /// Static coefficient `μ_s`.
+    #[serde(rename = "static")]
+    pub static_coefficient: f64,
+    /// Kinetic coefficient `μ_k ≤ μ_s`.
+    pub kinetic: f64,
 }
 
 /// `[solver]`.
@@ -143,6 +196,8 @@ pub struct RodSection {
     pub loads: Vec<LoadSection>,
     /// Direction the first frame's `d1` should point to.
     pub first_director: Option<[f64; 3]>,
+    /// Whether the rod collides with the environment (default true).
+    pub collides: Option<bool>,
 }
 
 /// `rod.shape`.
@@ -162,6 +217,21 @@ pub enum ShapeSection {
     Polyline {
         /// The points.
         points: Vec<[f64; 3]>,
+    },
+    /// Along the centreline of the environment's vessel trunk, between two fractions of it.
+    VesselTrunk {
+        /// Start, as a fraction of the trunk (0 = entry).
+        from: f64,
+        /// End, as a fraction of the trunk.
+        to: f64,
+    },
+    /// A straight wire ready to be pushed into the environment's vessel: it ends `inserted`
+    /// metres inside the entry point, along the entry direction, and is `length` long.
+    Insertion {
+        /// Total length [m].
+        length: f64,
+        /// Length already inside the vessel [m].
+        inserted: f64,
     },
 }
 
@@ -203,6 +273,11 @@ pub struct EndSection {
     pub velocity: Option<[f64; 3]>,
     /// Prescribed angular velocity of the end frame [rad/s] (clamped ends).
     pub angular_velocity: Option<[f64; 3]>,
+    /// Prescribed speed along the rod's own tangent at this end [m/s], positive in the
+    /// direction from the first point to the last (a push, for the first end).
+    pub axial_speed: Option<f64>,
+    /// Prescribed spin about the rod's own tangent at this end [rad/s] (clamped ends).
+    pub axial_angular_velocity: Option<f64>,
     /// When the prescribed motion starts [s].
     pub start_time: Option<f64>,
     /// When it stops [s].
@@ -416,6 +491,11 @@ impl Checker<'_> {
         if scene.rods.is_empty() {
             return Err(self.invalid("rod", "[]", "a scene needs at least one [[rod]]"));
         }
+        let environment = scene
+            .environment
+            .as_ref()
+            .map(|e| self.environment(e))
+            .transpose()?;
         let mut b = SimulationBuilder::new()
             .dt(dt)
             .iterations(s.iterations)
@@ -425,12 +505,85 @@ impl Checker<'_> {
             .double_precision(f64_precision)
             .divergence_strain(divergence_strain);
         for (i, rod) in scene.rods.iter().enumerate() {
-            b.add_rod(self.rod(i, rod)?);
+            b.add_rod(self.rod(i, rod, environment.as_ref())?);
+        }
+        if let Some(env) = environment {
+            b = b.environment(env);
         }
         Ok((b, RunLength { steps }))
     }
 
-    fn rod(&self, i: usize, r: &RodSection) -> Result<RodBuilder, SceneError> {
+    fn environment(&self, e: &EnvironmentSection) -> Result<Environment, SceneError> {
+        let mesh_err = |field: &str, err: collide::MeshError| {
+            self.invalid(field, err.to_string(), "a readable, valid triangle mesh")
+        };
+        let mut env = match &e.mesh {
+            MeshSection::Vessel { triangles } => {
+                let t = triangles.unwrap_or(26_000);
+                if !(100..=5_000_000).contains(&t) {
+                    return Err(self.invalid(
+                        "environment.mesh.triangles",
+                        t,
+                        "expected 100 ..= 5 000 000",
+                    ));
+                }
+                Environment::vessel(t).map_err(|err| mesh_err("environment.mesh", err))?
+            }
+            MeshSection::File { path, scale } => {
+                let scale = self.positive("environment.mesh.scale", *scale)?;
+                let full = self
+                    .path
+                    .parent()
+                    .map_or_else(|| path.clone(), |dir| dir.join(path));
+                Environment::from_file(&full, scale)
+                    .map_err(|err| mesh_err("environment.mesh.path", err))?
+            }
+            MeshSection::Plane {
+                point,
+                normal,
+                size,
+            } => {
+                let point = self.finite3("environment.mesh.point", *point)?;
+                let normal = self.finite3("environment.mesh.normal", *normal)?;
+                if !(normal.iter().map(|x| x * x).sum::<f64>() > 0.0) {
+                    return Err(self.invalid(
+                        "environment.mesh.normal",
+                        normal,
+                        "expected a non-zero vector",
+                    ));
+                }
+                let size = self.positive("environment.mesh.size", *size)?;
+                Environment::plane(point, normal, size)
+                    .map_err(|err| mesh_err("environment.mesh", err))?
+            }
+        };
+        if let Some(f) = &e.friction {
+            let mu_s = self.non_negative("environment.friction.static", f.static_coefficient)?;
+            let mu_k = self.non_negative("environment.friction.kinetic", f.kinetic)?;
+            if mu_k > mu_s {
+                return Err(self.invalid(
+                    "environment.friction.kinetic",
+                    mu_k,
+                    "expected kinetic <= static",
+                ));
+            }
+            env.friction = constraints::Friction {
+                static_coefficient: mu_s,
+                kinetic_coefficient: mu_k,
+            };
+        }
+        if let Some(m) = e.margin {
+            env.margin = self.non_negative("environment.margin", m)?;
+        }
+        Ok(env)
+    }
+
+    fn rod(
+        &self,
+        i: usize,
+        r: &RodSection,
+        env: Option<&Environment>,
+    ) -> Result<RodBuilder, SceneError> {
         let f = |name: &str| format!("rod[{i}].{name}");
         let elements = match r.elements {
             Some(0) => return Err(self.invalid(f("elements"), 0, "expected at least 1 element")),
@@ -509,6 +662,59 @@ impl Checker<'_> {
                     None => rb,
                 }
             }
+            ShapeSection::VesselTrunk { from, to } => {
+                let vessel = env.and_then(|e| e.vessel.as_ref()).ok_or_else(|| {
+                    self.invalid(
+                        f("shape.kind"),
+                        "vessel-trunk",
+                        "needs [environment] mesh = { kind = \"vessel\" }",
+                    )
+                })?;
+                for (name, v) in [("shape.from", *from), ("shape.to", *to)] {
+                    if !(0.0..=1.0).contains(&v) {
+                        return Err(self.invalid(f(name), v, "expected a fraction in 0 ..= 1"));
+                    }
+                }
+                if !(to > from) {
+                    return Err(self.invalid(f("shape.to"), *to, "expected to > from"));
+                }
+                let samples = 400;
+                let pts = (0..=samples)
+                    .map(|k| {
+                        vessel
+                            .trunk
+                            .sample(from + (to - from) * k as f64 / samples as f64)
+                            .0
+                    })
+                    .collect();
+                RodBuilder::polyline(pts, material)
+                    .resampled(elements.unwrap_or(100))
+                    .map_err(|k| {
+                        self.invalid(f("shape"), k, "the trunk centreline has coincident points")
+                    })?
+            }
+            ShapeSection::Insertion { length, inserted } => {
+                let vessel = env.and_then(|e| e.vessel.as_ref()).ok_or_else(|| {
+                    self.invalid(
+                        f("shape.kind"),
+                        "insertion",
+                        "needs [environment] mesh = { kind = \"vessel\" }",
+                    )
+                })?;
+                let length = self.positive(&f("shape.length"), *length)?;
+                let inserted = self.non_negative(&f("shape.inserted"), *inserted)?;
+                if inserted > length {
+                    return Err(self.invalid(
+                        f("shape.inserted"),
+                        inserted,
+                        "expected at most the rod's length",
+                    ));
+                }
+                let (p, d) = (vessel.entry_point, vessel.entry_direction);
+                let back = length - inserted;
+                let start = [p[0] - d[0] * back, p[1] - d[1] * back, p[2] - d[2] * back];
+                RodBuilder::straight(start, d, length, elements.unwrap_or(100), material)
+            }
         };
         rb = match &r.rest_shape {
             None => rb,
@@ -547,9 +753,11 @@ impl Checker<'_> {
         if let Some(d) = r.first_director {
             rb = rb.first_director(self.finite3(&f("first_director"), d)?);
         }
+        let (t_start, t_end) = rb.end_tangents();
         rb = rb
-            .start(self.end(&f("start"), &r.start)?)
-            .end(self.end(&f("end"), &r.end)?);
+            .collides(r.collides.unwrap_or(true))
+            .start(self.end(&f("start"), &r.start, t_start)?)
+            .end(self.end(&f("end"), &r.end, t_end)?);
         let n = rb.element_count() as i64;
         for (k, load) in r.loads.iter().enumerate() {
             let idx = if load.point < 0 {
@@ -572,7 +780,46 @@ impl Checker<'_> {
         Ok(rb)
     }
 
-    fn end(&self, field: &str, e: &EndSection) -> Result<EndCondition<f64>, SceneError> {
+    fn end(
+        &self,
+        field: &str,
+        e: &EndSection,
+        tangent: [f64; 3],
+    ) -> Result<EndCondition<f64>, SceneError> {
+        let axial = |name: &str,
+                     value: Option<f64>,
+                     vector: Option<[f64; 3]>|
+         -> Result<Option<[f64; 3]>, SceneError> {
+            match (value, vector) {
+                (Some(_), Some(_)) => Err(self.invalid(
+                    format!("{field}.{name}"),
+                    value,
+                    "give either the vector or the axial value, not both",
+                )),
+                (Some(a), None) if a.is_finite() => {
+                    Ok(Some([tangent[0] * a, tangent[1] * a, tangent[2] * a]))
+                }
+                (Some(a), None) => {
+                    Err(self.invalid(format!("{field}.{name}"), a, "expected a finite number"))
+                }
+                (None, v) => Ok(v),
+            }
+        };
+        let velocity = axial("axial_speed", e.axial_speed, e.velocity)?;
+        let angular_velocity = axial(
+            "axial_angular_velocity",
+            e.axial_angular_velocity,
+            e.angular_velocity,
+        )?;
+        let e = &EndSection {
+            velocity,
+            angular_velocity,
+            axial_speed: None,
+            axial_angular_velocity: None,
+            kind: e.kind.clone(),
+            start_time: e.start_time,
+            end_time: e.end_time,
+        };
         let kind = match e.kind.as_deref() {
             None | Some("free") => EndKind::Free,
             Some("pinned") => EndKind::Pinned,

@@ -5,6 +5,7 @@
 //! read results. It picks the precision (`f32` or `f64`) and the backend at run time, so a
 //! scene file or a command-line flag can choose them.
 
+use crate::environment::Environment;
 use backend_cpu::{
     CpuRod, Divergence, EndCondition, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
     StepStats,
@@ -47,6 +48,7 @@ pub struct RodBuilder {
     ends: [EndCondition<f64>; 2],
     loads: Vec<(usize, [f64; 3])>,
     name: Option<String>,
+    collides: bool,
 }
 
 impl RodBuilder {
@@ -72,6 +74,7 @@ impl RodBuilder {
             ends: [EndCondition::free(); 2],
             loads: Vec::new(),
             name: None,
+            collides: true,
         }
     }
 
@@ -100,6 +103,19 @@ impl RodBuilder {
             })
             .collect();
         Ok(self)
+    }
+
+    /// Unit tangents of the first and the last element.
+    pub fn end_tangents(&self) -> ([f64; 3], [f64; 3]) {
+        let p: Vec<Vec3<f64>> = self.points.iter().map(|a| Vec3::from(*a)).collect();
+        let unit = |v: Vec3<f64>| {
+            let n = v.norm();
+            if n > 0.0 { (v / n).into() } else { [0.0; 3] }
+        };
+        match p.len() {
+            0 | 1 => ([0.0; 3], [0.0; 3]),
+            k => (unit(p[1] - p[0]), unit(p[k - 1] - p[k - 2])),
+        }
     }
 
     /// Number of elements.
@@ -161,13 +177,22 @@ impl RodBuilder {
         self.start(EndCondition::pinned())
     }
 
+    /// Whether the rod collides with the simulation's environment (default: yes).
+    pub fn collides(mut self, yes: bool) -> Self {
+        self.collides = yes;
+        self
+    }
+
     /// Adds a constant force [N] on point `point`.
     pub fn load(mut self, point: usize, force: [f64; 3]) -> Self {
         self.loads.push((point, force));
         self
     }
 
-    fn build<T: Real>(&self) -> Result<CpuRod<T>, RodBuildError> {
+    fn build<T: Real>(
+        &self,
+        environment: Option<&Environment>,
+    ) -> Result<CpuRod<T>, RodBuildError> {
         let (state, params) = build_rod::<T>(&self.points, &self.spec)?;
         let ends = self.ends.map(cast_end);
         let loads = self
@@ -178,7 +203,11 @@ impl RodBuilder {
                 force: v3(f),
             })
             .collect();
-        Ok(CpuRod::new(state, params, ends, loads))
+        let rod = CpuRod::new(state, params, ends, loads);
+        Ok(match environment {
+            Some(env) if self.collides => rod.with_mesh(env.contact_settings()),
+            _ => rod,
+        })
     }
 }
 
@@ -232,6 +261,7 @@ pub struct SimulationBuilder {
     settings: SolverSettings<f64>,
     double_precision: bool,
     backend: Backend,
+    environment: Option<Environment>,
 }
 
 impl Default for SimulationBuilder {
@@ -255,7 +285,19 @@ impl SimulationBuilder {
             },
             double_precision: false,
             backend: Backend::Cpu,
+            environment: None,
         }
+    }
+
+    /// The static mesh the rods collide with.
+    pub fn environment(mut self, env: Environment) -> Self {
+        self.environment = Some(env);
+        self
+    }
+
+    /// The environment, if one was set.
+    pub fn environment_ref(&self) -> Option<&Environment> {
+        self.environment.as_ref()
     }
 
     /// Time step [s].
@@ -338,10 +380,11 @@ impl SimulationBuilder {
                 }
             }
         }
+        let env = self.environment.as_ref();
         let world = if self.double_precision {
-            World::F64(Rods::build(&self.rods, s)?)
+            World::F64(Rods::build(&self.rods, s, env)?)
         } else {
-            World::F32(Rods::build(&self.rods, &cast_settings(s))?)
+            World::F32(Rods::build(&self.rods, &cast_settings(s), env)?)
         };
         Ok(Simulation {
             world,
@@ -358,6 +401,7 @@ impl SimulationBuilder {
             steps: 0,
             max_strain: 0.0,
             extensible: s.extensible,
+            environment: self.environment,
         })
     }
 }
@@ -380,12 +424,16 @@ struct Rods<T: Real> {
 }
 
 impl<T: Real> Rods<T> {
-    fn build(rods: &[RodBuilder], settings: &SolverSettings<T>) -> Result<Self, BuildError> {
+    fn build(
+        rods: &[RodBuilder],
+        settings: &SolverSettings<T>,
+        env: Option<&Environment>,
+    ) -> Result<Self, BuildError> {
         let rods = rods
             .iter()
             .enumerate()
             .map(|(i, r)| {
-                r.build::<T>()
+                r.build::<T>(env)
                     .map_err(|source| BuildError::Rod { rod: i, source })
             })
             .collect::<Result<_, _>>()?;
@@ -423,6 +471,21 @@ pub struct Simulation {
     steps: u64,
     max_strain: f64,
     extensible: bool,
+    environment: Option<Environment>,
+}
+
+/// Contact measurements of a whole simulation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactReport {
+    /// Largest penetration of any point into the mesh at the start of any step [m].
+    pub max_penetration: f64,
+    /// Points outside the lumen: the most seen at the start of any step, or found by a full
+    /// search of the current state, whichever is larger.
+    pub escaped_points: usize,
+    /// Points in contact at the last step.
+    pub contacts: usize,
+    /// Mean wall time of collision detection per step [µs], all rods together.
+    pub detection_us_per_step: f64,
 }
 
 impl Simulation {
@@ -518,6 +581,41 @@ impl Simulation {
     /// The first director `d1` of each element of a rod.
     pub fn first_directors(&self, h: RodHandle) -> Vec<[f64; 3]> {
         with_rods!(&self.world, w => w.rods[h.0].state.frames.iter().map(|q| { let d = directors(q)[0]; [d.x.to_f64(), d.y.to_f64(), d.z.to_f64()] }).collect())
+    }
+
+    /// The environment, if the rods collide with one.
+    pub fn environment(&self) -> Option<&Environment> {
+        self.environment.as_ref()
+    }
+
+    /// Contact measurements since the start, or `None` without an environment.
+    pub fn contact_report(&self) -> Option<ContactReport> {
+        let env = self.environment.as_ref()?;
+        let mut report = ContactReport::default();
+        let mut seconds = 0.0;
+        let mut steps = 0;
+        with_rods!(&self.world, w => {
+            for r in &w.rods {
+                if let Some(st) = r.collision_stats() {
+                    report.max_penetration = report.max_penetration.max(st.max_penetration);
+                    report.escaped_points += st.escaped_points;
+                    report.contacts += st.contacts;
+                    seconds += st.detection_seconds;
+                    steps = steps.max(st.steps);
+                }
+            }
+        });
+        let now: usize = self
+            .rods()
+            .map(|h| env.escaped(&self.positions(h), 1.0))
+            .sum();
+        report.escaped_points = report.escaped_points.max(now);
+        report.detection_us_per_step = if steps > 0 {
+            seconds * 1e6 / steps as f64
+        } else {
+            0.0
+        };
+        Some(report)
     }
 
     /// Energies summed over all rods.
