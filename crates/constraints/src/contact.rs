@@ -158,7 +158,7 @@ impl<T: Real> ContactSet<T> {
     ) {
         for k in 0..self.contacts.len() {
             let i = self.contacts[k].point as usize;
-            let (w, buf) = if i % 2 == 0 {
+            let (w, buf) = if i.is_multiple_of(2) {
                 (even_w, &mut *even)
             } else {
                 (odd_w, &mut *odd)

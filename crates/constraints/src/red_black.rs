@@ -93,7 +93,7 @@ impl<T: Real> RedBlackSolver<T> {
         assert_eq!(positions.len(), n + 1);
         assert_eq!(velocities.len(), n + 1);
         for (i, v) in velocities.iter().enumerate() {
-            let (buf, k) = if i % 2 == 0 {
+            let (buf, k) = if i.is_multiple_of(2) {
                 (&mut self.even_v, i / 2)
             } else {
                 (&mut self.odd_v, i / 2)
@@ -104,7 +104,7 @@ impl<T: Real> RedBlackSolver<T> {
         }
         for j in 0..n {
             let e = positions[j + 1] - positions[j];
-            let (buf, k) = if j % 2 == 0 {
+            let (buf, k) = if j.is_multiple_of(2) {
                 (&mut self.red_e, j / 2)
             } else {
                 (&mut self.black_e, j / 2)
@@ -115,7 +115,7 @@ impl<T: Real> RedBlackSolver<T> {
         }
         self.sweeps(h, iterations);
         for (i, v) in velocities.iter_mut().enumerate() {
-            let (buf, k) = if i % 2 == 0 {
+            let (buf, k) = if i.is_multiple_of(2) {
                 (&self.even_v, i / 2)
             } else {
                 (&self.odd_v, i / 2)
