@@ -15,6 +15,7 @@ pub mod ends;
 pub mod mesh_contact;
 mod soa;
 pub mod stepper;
+pub mod stiff;
 
 pub use constraints::Ordering;
 pub use ends::{EndCondition, EndKind, PrescribedMotion};
@@ -23,3 +24,4 @@ pub use stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
     step_rod_batch, step_rods, step_rods_batch,
 };
+pub use stiff::{Refactor, StiffReport, StiffScheme, StiffScratch, StiffSettings, step_rod_stiff};

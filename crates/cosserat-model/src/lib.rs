@@ -18,6 +18,7 @@
 pub mod darboux;
 pub mod energy;
 pub mod material;
+pub mod presets;
 pub mod quat;
 pub mod real;
 pub mod rod;

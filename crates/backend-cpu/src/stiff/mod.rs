@@ -1,0 +1,540 @@
+//! A stiffness-independent time step: the rod's elasticity as compliant constraints (XPBD),
+//! solved directly along the rod.
+//!
+//! The explicit scheme of the reference paper (section 2.1, `crate::stepper`) integrates forces
+//! from the energies with semi-implicit Euler. Its stable step is bounded by the fastest
+//! elastic mode, which for a thin stiff wire is the rotation of a frame (inertia `ρ I l`)
+//! against the bending, torsion and parallel-penalty springs: `h ≲ l √(ρ/E)` and
+//! `h ≲ r √(ρ/G)` (`cosserat_model::stability`), microseconds for nitinol, steel or a suture at
+//! a millimetre per element. A haptic loop needs 0.1–1 ms.
+//!
+//! This module takes the same discrete rod (same state, parameters, end conditions and loads)
+//! and moves its elastic energies into constraints with compliance, after
+//! - Kugelstadt & Schömer (2016), *Position and orientation based Cosserat rods*: a
+//!   stretch–shear constraint between the centreline and `d3` of each frame and a bend–twist
+//!   constraint on the Darboux vector of neighbouring frames (their eqs. 31, 32; our
+//!   [`constraints`]);
+//! - Macklin, Müller & Chentanez (2016), *XPBD*: a constraint `C` with compliance `α` stands
+//!   for the potential `½ Cᵀ α⁻¹ C`; with `α̃ = α / h²` each Newton step solves
+//!   `(J M⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ)` (their eqs. 9–12) and the step is implicit Euler in
+//!   the positions, so no stiffness limits `h`;
+//! - Deul, Kugelstadt, Weiler & Bender (2018), *Direct position-based solver for stiff rods*:
+//!   that system is block tridiagonal along a rod and is solved exactly in `O(n)` ([`direct`]),
+//!   which keeps the iteration count independent of the rod's length and stiffness.
+//!
+//! **Compliances** follow from the energies of `docs/model.md`, so a converged step has the
+//! same static equilibrium as the explicit scheme: for element `j` with rest length `l0`,
+//! `α_Γ = diag(1/(K_p l0), 1/(K_p l0), 1/(K_s l0))` (`K_p` is `G A` by default, `K_s = E A`);
+//! in inextensible mode the third entry is zero, an exact constraint `d3 · e = l0` that is the
+//! inextensibility condition up to the squared shear angle. For node `j` with length `l̄`,
+//! `α_Ω = diag(1/(l̄ E I), 1/(l̄ E I), 1/(l̄ G J))`.
+//!
+//! **One step** (XPBD, Macklin et al. Algorithm 1, with rotations as in Kugelstadt & Schömer):
+//! 1. predict `v += h (g + f/m)`, `v /= 1 + h γ` (drag, implicit), `x̃ = x + h v`; frames
+//!    `ω += −h I⁻¹ (ω × I ω)`, `q̃ = q ⊗ exp(h ω / 2)`; held ends follow their prescribed
+//!    motion;
+//! 2. from `λ = 0`, iterate the constraint solve (direct or Gauss–Seidel), updating points by
+//!    `M⁻¹ Jᵀ Δλ` and frames by the body rotation `I⁻¹ J_θᵀ Δλ`;
+//! 3. `v = (x − x_old)/h`, `ω = log(q̄_old q)/h`.
+//!
+//! The solve always runs in `f64`, whatever the rod's precision; see [`direct`] for why.
+//!
+//! Not supported here (yet): the internal damping coefficients `bend_damping` and
+//! `stretch_damping` of `RodParams` are ignored by this scheme (implicit Euler is itself
+//! dissipative, `docs/stiff-solver.md` quantifies it); drag is applied.
+
+pub mod constraints;
+mod direct;
+mod xpbd;
+
+use crate::ends::EndKind;
+use crate::stepper::{CpuRod, DivergedQuantity, Divergence, SolverSettings, StepStats};
+use constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
+use cosserat_model::darboux::relative_rotation;
+use cosserat_model::quat::exp_rotation;
+use cosserat_model::{Quat, Real, Vec3};
+use direct::{BlockTridiagonal, Masses};
+
+/// How the constraints of a step are solved.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StiffScheme {
+    /// All constraints of a rod at once, by the block-tridiagonal factorisation of Deul et al.
+    /// (2018). Converges in a few iterations whatever the stiffness and length.
+    #[default]
+    Direct,
+    /// XPBD with Gauss–Seidel sweeps, one constraint at a time (Macklin et al. 2016). Cheap per
+    /// sweep, but needs many sweeps on long stiff rods; kept for comparison.
+    GaussSeidel,
+}
+
+/// When the direct solver refactorises `J M⁻¹ Jᵀ + α̃`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Refactor {
+    /// At every iteration: Newton's method, as Deul et al. do.
+    EveryIteration,
+    /// At the first iteration of every step, reused by the later ones (a chord method).
+    EveryStep,
+    /// Kept across steps and rebuilt only when an iteration fails to reduce the residual by a
+    /// factor of 4. The matrix is written in body frames, so it depends only on the relative
+    /// rotations of neighbouring frames and on the strains, not on the rod's rigid motion.
+    #[default]
+    Lagged,
+}
+
+/// Settings of the stiff scheme (the rest — `dt`, gravity, extensibility, divergence limit —
+/// comes from the shared [`SolverSettings`]; its `iterations` and `ordering` belong to the
+/// explicit scheme's distance constraints and are not used here).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StiffSettings {
+    /// Solver of the constraint system.
+    pub scheme: StiffScheme,
+    /// Largest number of iterations (direct) or sweeps (Gauss–Seidel) per step.
+    pub iterations: usize,
+    /// Stop iterating once every residual `|C + α̃ λ|` is at most this (strains, and angles
+    /// `l̄ |ΔΩ|` for bend–twist). Zero always runs `iterations`.
+    pub tolerance: f64,
+    /// Refactorisation policy of the direct solver.
+    pub refactor: Refactor,
+}
+
+impl Default for StiffSettings {
+    /// Direct solve, lagged factorisation, at most 4 iterations, stopping at a residual of 1e-10.
+    fn default() -> Self {
+        Self {
+            scheme: StiffScheme::Direct,
+            iterations: 4,
+            tolerance: 1e-10,
+            refactor: Refactor::Lagged,
+        }
+    }
+}
+
+/// What the last step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StiffReport {
+    /// Iterations (or sweeps) run in the last step.
+    pub iterations: usize,
+    /// Largest residual at the last evaluation of the last step (see
+    /// [`StiffSettings::tolerance`]); with `tolerance = 0` this is the residual before the
+    /// last iteration.
+    pub residual: f64,
+    /// Factorisations since the scratch was created.
+    pub factorisations: u64,
+}
+
+/// Per-rod constants of the stiff scheme, in `f64`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Consts {
+    pub(crate) l0: Vec<f64>,
+    pub(crate) lbar: Vec<f64>,
+    pub(crate) rest_u: Vec<Vec3<f64>>,
+    pub(crate) inv_mass: Vec<f64>,
+    pub(crate) mass: Vec<f64>,
+    pub(crate) inertia: Vec<Vec3<f64>>,
+    pub(crate) inv_inertia: Vec<Vec3<f64>>,
+    pub(crate) alpha_gamma: Vec<Vec3<f64>>,
+    pub(crate) alpha_omega: Vec<Vec3<f64>>,
+    key: Option<(usize, u64, bool, [EndKind; 2])>,
+}
+
+/// The working state of a step, in `f64`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Work {
+    pub(crate) x: Vec<Vec3<f64>>,
+    v: Vec<Vec3<f64>>,
+    x_old: Vec<Vec3<f64>>,
+    pub(crate) q: Vec<Quat<f64>>,
+    q_old: Vec<Quat<f64>>,
+    omega: Vec<Vec3<f64>>,
+    force: Vec<Vec3<f64>>,
+    pub(crate) lambda: Vec<[f64; 6]>,
+    ss: Vec<StretchShear<f64>>,
+    bt: Vec<BendTwist<f64>>,
+    rhs: Vec<[f64; 6]>,
+    dtheta: Vec<Vec3<f64>>,
+}
+
+/// Scratch memory and cached constants of the stiff scheme for one rod; the caller owns one per
+/// rod and passes it to every [`step_rod_stiff`] call. It sizes itself on first use, and
+/// rebuilds its constants when the element count, `dt`, the mode or the kinds of end change.
+/// Create a fresh one if a rod's parameters change in any other way.
+#[derive(Clone, Debug, Default)]
+pub struct StiffScratch {
+    k: Consts,
+    w: Work,
+    factor: BlockTridiagonal,
+    factor_valid: bool,
+    report: StiffReport,
+}
+
+impl StiffScratch {
+    /// Empty scratch; sized on the first step.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// What the last step did.
+    pub fn report(&self) -> StiffReport {
+        self.report
+    }
+}
+
+/// `q ← normalise(q ⊗ (1, θ/2))`: a body-frame rotation by `θ`, to first order (the Newton
+/// iteration evaluates its residual exactly, so the map only has to be consistent).
+#[inline(always)]
+pub(crate) fn apply_rotation(q: &mut Quat<f64>, theta: &Vec3<f64>) {
+    let r = *q * Quat::new(1.0, 0.5 * theta.x, 0.5 * theta.y, 0.5 * theta.z);
+    *q = r / r.norm();
+}
+
+fn v64<T: Real>(v: &Vec3<T>) -> Vec3<f64> {
+    Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64())
+}
+
+fn vt<T: Real>(v: &Vec3<f64>) -> Vec3<T> {
+    Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z))
+}
+
+impl Consts {
+    fn rebuild<T: Real>(&mut self, rod: &CpuRod<T>, h: f64, extensible: bool) {
+        let n = rod.elements();
+        let key = (
+            n,
+            h.to_bits(),
+            extensible,
+            [rod.ends[0].kind, rod.ends[1].kind],
+        );
+        if self.key == Some(key) {
+            return;
+        }
+        let p = &rod.params;
+        let h2 = h * h;
+        // A zero stiffness means no constraint: a compliance so large that λ stays zero.
+        let compliance = |k: f64, l: f64| (1.0 / (k * l)).min(1e300) / h2;
+        self.l0 = p.rest_lengths.iter().map(|l| l.to_f64()).collect();
+        self.lbar = (0..n.saturating_sub(1))
+            .map(|j| p.node_length(j).to_f64())
+            .collect();
+        self.rest_u = p.rest_darboux.iter().map(v64).collect();
+        self.inv_mass = p.inv_masses.iter().map(|w| w.to_f64()).collect();
+        self.mass = p.masses.iter().map(|m| m.to_f64()).collect();
+        self.inertia = p.inertias.iter().map(v64).collect();
+        self.inv_inertia = self.inertia.iter().map(|i| i.map(|x| 1.0 / x)).collect();
+        if rod.ends[0].holds_frame() {
+            self.inv_inertia[0] = Vec3::zeros();
+        }
+        if rod.ends[1].holds_frame() {
+            self.inv_inertia[n - 1] = Vec3::zeros();
+        }
+        self.alpha_gamma = (0..n)
+            .map(|j| {
+                let (l, kp) = (self.l0[j], p.parallel_stiffness[j].to_f64());
+                let stretch = if extensible {
+                    compliance(p.stretch_stiffness[j].to_f64(), l)
+                } else {
+                    0.0
+                };
+                Vec3::new(compliance(kp, l), compliance(kp, l), stretch)
+            })
+            .collect();
+        self.alpha_omega = (0..n.saturating_sub(1))
+            .map(|j| {
+                let k = v64(&p.bend_twist_stiffness[j]);
+                let l = self.lbar[j];
+                Vec3::new(compliance(k.x, l), compliance(k.y, l), compliance(k.z, l))
+            })
+            .collect();
+        self.key = Some(key);
+    }
+}
+
+impl Work {
+    fn resize(&mut self, n: usize) {
+        if self.q.len() == n {
+            return;
+        }
+        let z = Vec3::zeros();
+        self.x = vec![z; n + 1];
+        self.v = vec![z; n + 1];
+        self.x_old = vec![z; n + 1];
+        self.force = vec![z; n + 1];
+        self.q = vec![Quat::identity(); n];
+        self.q_old = vec![Quat::identity(); n];
+        self.omega = vec![z; n];
+        self.dtheta = vec![z; n];
+        self.lambda = vec![[0.0; 6]; n];
+        self.rhs = vec![[0.0; 6]; n];
+        let m = nalgebra::Matrix3::zeros();
+        self.ss = vec![
+            StretchShear {
+                value: z,
+                d_rb: m,
+                d_theta: m
+            };
+            n
+        ];
+        self.bt = vec![
+            BendTwist {
+                value: z,
+                d_theta_a: m,
+                d_theta_b: m
+            };
+            n.saturating_sub(1)
+        ];
+    }
+
+    /// Evaluates every constraint and its Jacobian, stores `−(C + α̃ λ)` in `rhs`, and returns
+    /// the largest residual (strains, and bend–twist as angles `l̄ |ΔΩ|`).
+    fn evaluate(&mut self, k: &Consts) -> f64 {
+        let n = k.l0.len();
+        let mut worst: f64 = 0.0;
+        for j in 0..n {
+            let s = stretch_shear(&self.x[j], &self.x[j + 1], &self.q[j], k.l0[j]);
+            let (lam, a) = (&self.lambda[j], &k.alpha_gamma[j]);
+            let r = &mut self.rhs[j];
+            for c in 0..3 {
+                r[c] = -(s.value[c] + a[c] * lam[c]);
+                worst = worst.max(r[c].abs());
+            }
+            self.ss[j] = s;
+        }
+        for j in 0..n.saturating_sub(1) {
+            let b = bend_twist(&self.q[j], &self.q[j + 1], &k.rest_u[j], k.lbar[j]);
+            let (lam, a) = (&self.lambda[j], &k.alpha_omega[j]);
+            let r = &mut self.rhs[j];
+            for c in 0..3 {
+                r[3 + c] = -(b.value[c] + a[c] * lam[3 + c]);
+                worst = worst.max(r[3 + c].abs() * k.lbar[j]);
+            }
+            self.bt[j] = b;
+        }
+        if n > 0 {
+            self.rhs[n - 1][3..].fill(0.0);
+        }
+        worst
+    }
+
+    /// Applies the multiplier increments in `rhs` through the Jacobians of the last
+    /// [`evaluate`](Self::evaluate): `Δx = M⁻¹ Jᵀ Δλ`, `Δθ = I⁻¹ J_θᵀ Δλ`; adds them to `λ`.
+    fn apply(&mut self, k: &Consts) {
+        let n = k.l0.len();
+        for j in 0..n {
+            let d = &self.rhs[j];
+            let dl = Vec3::new(d[0], d[1], d[2]);
+            let s = &self.ss[j];
+            let f = s.d_rb.tr_mul(&dl);
+            self.x[j] -= f * k.inv_mass[j];
+            self.x[j + 1] += f * k.inv_mass[j + 1];
+            self.dtheta[j] = s.d_theta.tr_mul(&dl);
+        }
+        for j in 0..n.saturating_sub(1) {
+            let d = &self.rhs[j];
+            let dl = Vec3::new(d[3], d[4], d[5]);
+            let b = &self.bt[j];
+            self.dtheta[j] += b.d_theta_a.tr_mul(&dl);
+            self.dtheta[j + 1] += b.d_theta_b.tr_mul(&dl);
+        }
+        for j in 0..n {
+            let th = self.dtheta[j].component_mul(&k.inv_inertia[j]);
+            apply_rotation(&mut self.q[j], &th);
+            for c in 0..6 {
+                self.lambda[j][c] += self.rhs[j][c];
+            }
+        }
+    }
+}
+
+/// Advances one rod by `steps` steps of `settings.dt` with the stiff scheme, starting at time
+/// `time` and step index `first_step` (which only labels a [`Divergence`]).
+///
+/// Uses `rod.state`, `rod.params`, `rod.ends` and `rod.loads` exactly as
+/// [`step_rod_batch`](crate::step_rod_batch) does; `settings.iterations` and
+/// `settings.ordering` are the explicit scheme's and are ignored. `rod.state` is up to date when
+/// this returns, also after a divergence. Bend and stretch damping coefficients are not applied
+/// (see the module docs).
+pub fn step_rod_stiff<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    stiff: &StiffSettings,
+    scratch: &mut StiffScratch,
+    time: f64,
+    rod_index: usize,
+    first_step: u64,
+    steps: u64,
+) -> Result<StepStats, Divergence> {
+    let h = settings.dt.to_f64();
+    let n = rod.elements();
+    scratch.k.rebuild(rod, h, settings.extensible);
+    let StiffScratch {
+        k,
+        w,
+        factor,
+        factor_valid,
+        report,
+    } = scratch;
+    w.resize(n);
+    for i in 0..=n {
+        w.x[i] = v64(&rod.state.positions[i]);
+        w.v[i] = v64(&rod.state.velocities[i]);
+    }
+    for j in 0..n {
+        let q = &rod.state.frames[j];
+        w.q[j] = Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64());
+        w.omega[j] = v64(&rod.state.angular_velocities[j]);
+    }
+    w.force.fill(Vec3::zeros());
+    for load in &rod.loads {
+        w.force[load.point] += v64(&load.force);
+    }
+    let gravity = v64(&settings.gravity);
+    let drag = 1.0 / (1.0 + h * rod.params.drag.to_f64());
+    let limit = settings.divergence_strain.to_f64();
+    let mut stats = StepStats {
+        min_stretch: f64::MAX,
+        max_stretch: 0.0,
+    };
+    let mut result = Ok(());
+    let held_points = [(0, &rod.ends[0]), (n, &rod.ends[1])];
+    let held_frames = [(0, &rod.ends[0]), (n - 1, &rod.ends[1])];
+    for step in 0..steps {
+        let t = time + step as f64 * h;
+        // 1. Prediction.
+        for i in 0..=n {
+            w.x_old[i] = w.x[i];
+            if k.inv_mass[i] > 0.0 {
+                w.v[i] = (w.v[i] + (gravity + w.force[i] * k.inv_mass[i]) * h) * drag;
+            }
+        }
+        for (i, end) in held_points {
+            if end.holds_point() {
+                w.v[i] = v64(&end.velocities_at(t).0);
+            }
+        }
+        for i in 0..=n {
+            w.x[i] += w.v[i] * h;
+        }
+        for j in 0..n {
+            w.q_old[j] = w.q[j];
+            let (o, inertia) = (w.omega[j], k.inertia[j]);
+            let gyro = o.cross(&inertia.component_mul(&o)).component_div(&inertia);
+            w.omega[j] = o - gyro * h;
+            let r = w.q[j] * exp_rotation(&(w.omega[j] * h));
+            w.q[j] = r / r.norm();
+        }
+        for (j, end) in held_frames {
+            if end.holds_frame() {
+                let omega = v64(&end.velocities_at(t).1);
+                let r = exp_rotation(&(omega * h)) * w.q_old[j];
+                w.q[j] = r / r.norm();
+            }
+        }
+        // 2. Constraint solve.
+        w.lambda.fill([0.0; 6]);
+        let mut used = 0;
+        let mut residual = f64::NAN;
+        match stiff.scheme {
+            StiffScheme::Direct => {
+                let mut previous = f64::INFINITY;
+                for it in 0..=stiff.iterations {
+                    let last = it == stiff.iterations;
+                    if last && stiff.tolerance <= 0.0 {
+                        break;
+                    }
+                    residual = w.evaluate(k);
+                    if residual <= stiff.tolerance || last {
+                        break;
+                    }
+                    let refactor = match stiff.refactor {
+                        Refactor::EveryIteration => true,
+                        Refactor::EveryStep => it == 0,
+                        Refactor::Lagged => !*factor_valid || residual > 0.25 * previous,
+                    };
+                    if refactor || !*factor_valid {
+                        let m = Masses {
+                            inv_mass: &k.inv_mass,
+                            inv_inertia: &k.inv_inertia,
+                            alpha_gamma: &k.alpha_gamma,
+                            alpha_omega: &k.alpha_omega,
+                        };
+                        factor.factor(&w.ss, &w.bt, &m);
+                        *factor_valid = true;
+                        report.factorisations += 1;
+                    }
+                    previous = residual;
+                    factor.solve(&mut w.rhs);
+                    w.apply(k);
+                    used += 1;
+                }
+            }
+            StiffScheme::GaussSeidel => {
+                for _ in 0..stiff.iterations {
+                    residual = xpbd::sweep(w, k);
+                    used += 1;
+                    if residual <= stiff.tolerance {
+                        break;
+                    }
+                }
+            }
+        }
+        report.iterations = used;
+        report.residual = residual;
+        // 3. Velocities from the positions and frames.
+        let inv_h = 1.0 / h;
+        for i in 0..=n {
+            w.v[i] = (w.x[i] - w.x_old[i]) * inv_h;
+        }
+        for j in 0..n {
+            let s = relative_rotation(&w.q_old[j], &w.q[j]);
+            let sv = s.imag();
+            let sn = sv.norm();
+            let angle = 2.0 * sn.atan2(s.w);
+            w.omega[j] = if sn > 1e-300 {
+                sv * (angle / sn * inv_h)
+            } else {
+                Vec3::zeros()
+            };
+        }
+        // Divergence check, as the explicit stepper's.
+        let (mut lo, mut hi) = (f64::MAX, 0.0_f64);
+        let mut bad = None;
+        for j in 0..n {
+            if !w.q[j].coords.iter().all(|c| c.is_finite()) {
+                bad = Some((j, DivergedQuantity::NonFiniteFrame));
+                break;
+            }
+            let r = (w.x[j + 1] - w.x[j]).norm() / k.l0[j];
+            if !r.is_finite() {
+                bad = Some((j, DivergedQuantity::NonFinitePosition));
+                break;
+            }
+            if (r - 1.0).abs() > limit {
+                bad = Some((j, DivergedQuantity::Strain((r - 1.0).abs())));
+                break;
+            }
+            lo = lo.min(r);
+            hi = hi.max(r);
+        }
+        if let Some((element, quantity)) = bad {
+            *factor_valid = false;
+            result = Err(Divergence {
+                rod: rod_index,
+                element,
+                step: first_step + step,
+                quantity,
+            });
+            break;
+        }
+        stats.min_stretch = stats.min_stretch.min(lo);
+        stats.max_stretch = stats.max_stretch.max(hi);
+    }
+    for i in 0..=n {
+        rod.state.positions[i] = vt(&w.x[i]);
+        rod.state.velocities[i] = vt(&w.v[i]);
+    }
+    for j in 0..n {
+        let q = &w.q[j];
+        rod.state.frames[j] = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
+        rod.state.angular_velocities[j] = vt(&w.omega[j]);
+    }
+    result.map(|()| stats)
+}
