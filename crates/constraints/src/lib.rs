@@ -8,15 +8,24 @@
 //! on many threads, or on the GPU.
 //!
 //! This crate knows rods only as arrays of points, velocities, inverse masses and rest lengths;
-//! it has no notion of frames, forces, threads or devices.
+//! it has no notion of frames, forces, threads or devices. Constraints between two rods —
+//! binding an inner instrument to an outer one ([`binding`]) and rod–rod or self-contact
+//! ([`rod_contact`]) — reach the rods' points through [`PointVelocities`], whatever layout the
+//! distance solver keeps them in.
 
+pub mod binding;
 pub mod contact;
 pub mod direct;
 pub mod distance;
 pub mod red_black;
+pub mod rod_contact;
+pub mod velocities;
 
+pub use binding::{BindingSet, BindingVariant, BoundPoint};
 pub use contact::{ContactSet, Friction, PointContact};
 pub use distance::{
     Ordering, solve_distance_gauss_seidel_soa, solve_distance_iteration, strain_extremes,
 };
-pub use red_black::RedBlackSolver;
+pub use red_black::{RedBlackSolver, SplitVelocities};
+pub use rod_contact::{RodContactSet, SegmentContact};
+pub use velocities::{KinematicImpulses, PointVelocities, SoaVelocities};

@@ -13,6 +13,7 @@
 //! most of the digits of a millimetre element a metre away from the origin.
 
 use crate::contact::{ContactSet, Friction};
+use crate::velocities::{KinematicImpulses, PointVelocities, record_kinematic};
 use cosserat_model::{Real, Vec3};
 
 /// Structure-of-arrays scratch for one rod, sized once and reused every step.
@@ -33,6 +34,11 @@ pub struct RedBlackSolver<T: Real> {
     red_inv_w: Vec<T>,
     black_l0: Vec<T>,
     black_inv_w: Vec<T>,
+    /// Whether the impulses of the first / last distance constraint are measured (a held end
+    /// whose reaction is reported).
+    track: [bool; 2],
+    /// Sum of the velocity changes the first / last constraint gave its free point.
+    end_dv: [Vec3<T>; 2],
 }
 
 impl<T: Real> RedBlackSolver<T> {
@@ -75,6 +81,118 @@ impl<T: Real> RedBlackSolver<T> {
             red_inv_w,
             black_l0,
             black_inv_w,
+            track: [false; 2],
+            end_dv: [Vec3::zeros(); 2],
+        }
+    }
+
+    /// Measures the impulses of the first (`first`) and last (`last`) distance constraint, which
+    /// are what a held end point delivers to the rod (see [`Self::take_end_impulses`]).
+    pub fn track_ends(&mut self, first: bool, last: bool) {
+        self.track = [first, last];
+    }
+
+    /// The impulses [N s] the first and the last distance constraint delivered to their
+    /// *other* point (point 1 and point `n − 1`) since the last call, and resets them. The
+    /// held end point received the opposite impulse. Zero for an end that is not tracked.
+    pub fn take_end_impulses(&mut self) -> [Vec3<T>; 2] {
+        let n = self.red_l0.len() + self.black_l0.len();
+        let (first, last) = (
+            self.point_slot(1.min(n)),
+            self.point_slot(n.saturating_sub(1)),
+        );
+        let mass = |(odd, k): (bool, usize)| {
+            let w = if odd { self.odd_w[k] } else { self.even_w[k] };
+            if w > T::zero() {
+                T::one() / w
+            } else {
+                T::zero()
+            }
+        };
+        let out = [self.end_dv[0] * mass(first), self.end_dv[1] * mass(last)];
+        self.end_dv = [Vec3::zeros(); 2];
+        out
+    }
+
+    /// (is odd, index in its buffer) of point `i`.
+    #[inline]
+    fn point_slot(&self, i: usize) -> (bool, usize) {
+        (!i.is_multiple_of(2), i / 2)
+    }
+
+    #[inline]
+    fn split_velocity(&self, (odd, k): (bool, usize)) -> Vec3<T> {
+        let b = if odd { &self.odd_v } else { &self.even_v };
+        Vec3::new(b[0][k], b[1][k], b[2][k])
+    }
+
+    /// Loads the velocities (`[x, y, z]`) and the element vectors of the step into the solver's
+    /// layout; the first half of [`Self::solve_soa_with_contacts`], for callers that interleave
+    /// their own sweeps ([`Self::sweep`], [`Self::sweep_contacts`], coupling constraints through
+    /// [`Self::velocities`]) before [`Self::finish_soa`].
+    pub fn begin_soa(&mut self, positions: [&[T]; 3], velocities: [&[T]; 3]) {
+        let n = self.red_l0.len() + self.black_l0.len();
+        for c in 0..3 {
+            let (r, v) = (&positions[c][..n + 1], &velocities[c][..n + 1]);
+            for (k, x) in v.iter().step_by(2).enumerate() {
+                self.even_v[c][k] = *x;
+            }
+            for (k, x) in v.iter().skip(1).step_by(2).enumerate() {
+                self.odd_v[c][k] = *x;
+            }
+            for k in 0..self.red_l0.len() {
+                self.red_e[c][k] = r[2 * k + 1] - r[2 * k];
+            }
+            for k in 0..self.black_l0.len() {
+                self.black_e[c][k] = r[2 * k + 2] - r[2 * k + 1];
+            }
+        }
+    }
+
+    /// One red–black sweep of the distance constraints.
+    pub fn sweep(&mut self, h: T) {
+        self.sweeps(h, 1);
+    }
+
+    /// One sweep over point contacts, on the solver's velocities.
+    pub fn sweep_contacts(&mut self, set: &mut ContactSet<T>, friction: &Friction<T>, h: T) {
+        set.sweep_split(
+            h,
+            friction,
+            &self.even_w,
+            &self.odd_w,
+            &mut self.even_v,
+            &mut self.odd_v,
+        );
+    }
+
+    /// Writes the solver's velocities back (`[x, y, z]`); the end of [`Self::begin_soa`].
+    pub fn finish_soa(&self, velocities: [&mut [T]; 3]) {
+        for (c, v) in velocities.into_iter().enumerate() {
+            for (k, x) in v.iter_mut().step_by(2).enumerate() {
+                *x = self.even_v[c][k];
+            }
+            for (k, x) in v.iter_mut().skip(1).step_by(2).enumerate() {
+                *x = self.odd_v[c][k];
+            }
+        }
+    }
+
+    /// The solver's velocities as [`PointVelocities`], for coupling constraints between
+    /// [`Self::begin_soa`] and [`Self::finish_soa`]. Impulses on kinematic end points go to
+    /// `held`.
+    pub fn velocities<'a>(
+        &'a mut self,
+        held: &'a mut KinematicImpulses<T>,
+    ) -> SplitVelocities<'a, T> {
+        let last = self.red_l0.len() + self.black_l0.len();
+        SplitVelocities {
+            even: &mut self.even_v,
+            odd: &mut self.odd_v,
+            even_w: &self.even_w,
+            odd_w: &self.odd_w,
+            last,
+            held,
         }
     }
 
@@ -148,49 +266,32 @@ impl<T: Real> RedBlackSolver<T> {
         if iterations == 0 {
             return;
         }
-        let n = self.red_l0.len() + self.black_l0.len();
-        for c in 0..3 {
-            let (r, v) = (&positions[c][..n + 1], &velocities[c][..n + 1]);
-            for (k, x) in v.iter().step_by(2).enumerate() {
-                self.even_v[c][k] = *x;
-            }
-            for (k, x) in v.iter().skip(1).step_by(2).enumerate() {
-                self.odd_v[c][k] = *x;
-            }
-            for k in 0..self.red_l0.len() {
-                self.red_e[c][k] = r[2 * k + 1] - r[2 * k];
-            }
-            for k in 0..self.black_l0.len() {
-                self.black_e[c][k] = r[2 * k + 2] - r[2 * k + 1];
-            }
-        }
+        let [vx, vy, vz] = velocities;
+        self.begin_soa(positions, [&*vx, &*vy, &*vz]);
         for _ in 0..iterations {
             self.sweeps(h, 1);
             if let Some((set, friction)) = contacts.as_mut() {
-                set.sweep_split(
-                    h,
-                    friction,
-                    &self.even_w,
-                    &self.odd_w,
-                    &mut self.even_v,
-                    &mut self.odd_v,
-                );
+                self.sweep_contacts(set, friction, h);
             }
         }
-        for (c, v) in velocities.into_iter().enumerate() {
-            for (k, x) in v.iter_mut().step_by(2).enumerate() {
-                *x = self.even_v[c][k];
-            }
-            for (k, x) in v.iter_mut().skip(1).step_by(2).enumerate() {
-                *x = self.odd_v[c][k];
-            }
-        }
+        self.finish_soa([vx, vy, vz]);
     }
 
     fn sweeps(&mut self, h: T, iterations: usize) {
         let nr = self.red_l0.len();
         let nb = self.black_l0.len();
+        let n = nr + nb;
+        // The free neighbour of each held end, and whether its end constraint is red.
+        let tracked = self.track[0] || self.track[1];
+        let first = self.point_slot(1.min(n));
+        let last = self.point_slot(n.saturating_sub(1));
+        let last_red = (n.saturating_sub(1)).is_multiple_of(2);
         for _ in 0..iterations {
+            let before = if tracked {
+                [self.split_velocity(first), self.split_velocity(last)]
+            } else {
+                [Vec3::zeros(); 2]
+            };
             {
                 // Red: even point k (a) with odd point k (b).
                 let [ex, ey, ez] = &mut self.even_v;
@@ -206,6 +307,19 @@ impl<T: Real> RedBlackSolver<T> {
                     h,
                 );
             }
+            if tracked {
+                if self.track[0] {
+                    self.end_dv[0] += self.split_velocity(first) - before[0];
+                }
+                if self.track[1] && last_red {
+                    self.end_dv[1] += self.split_velocity(last) - before[1];
+                }
+            }
+            let before_black = if tracked && self.track[1] && !last_red {
+                self.split_velocity(last)
+            } else {
+                Vec3::zeros()
+            };
             {
                 // Black: odd point k (a) with even point k + 1 (b).
                 let [ex, ey, ez] = &mut self.even_v;
@@ -221,6 +335,56 @@ impl<T: Real> RedBlackSolver<T> {
                     h,
                 );
             }
+            if tracked && self.track[1] && !last_red {
+                self.end_dv[1] += self.split_velocity(last) - before_black;
+            }
+        }
+    }
+}
+
+/// The velocities of a [`RedBlackSolver`] as [`PointVelocities`] (point `i` is entry `i / 2` of
+/// the even or odd buffer).
+pub struct SplitVelocities<'a, T: Real> {
+    even: &'a mut [Vec<T>; 3],
+    odd: &'a mut [Vec<T>; 3],
+    even_w: &'a [T],
+    odd_w: &'a [T],
+    last: usize,
+    held: &'a mut KinematicImpulses<T>,
+}
+
+impl<T: Real> PointVelocities<T> for SplitVelocities<'_, T> {
+    #[inline]
+    fn velocity(&self, i: usize) -> Vec3<T> {
+        let (b, k) = if i.is_multiple_of(2) {
+            (&*self.even, i / 2)
+        } else {
+            (&*self.odd, i / 2)
+        };
+        Vec3::new(b[0][k], b[1][k], b[2][k])
+    }
+    #[inline]
+    fn inv_mass(&self, i: usize) -> T {
+        if i.is_multiple_of(2) {
+            self.even_w[i / 2]
+        } else {
+            self.odd_w[i / 2]
+        }
+    }
+    #[inline]
+    fn apply_impulse(&mut self, i: usize, j: Vec3<T>) {
+        let (b, w, k) = if i.is_multiple_of(2) {
+            (&mut *self.even, self.even_w, i / 2)
+        } else {
+            (&mut *self.odd, self.odd_w, i / 2)
+        };
+        let w = w[k];
+        if w > T::zero() {
+            b[0][k] += j.x * w;
+            b[1][k] += j.y * w;
+            b[2][k] += j.z * w;
+        } else {
+            record_kinematic(self.held, self.last, i, j);
         }
     }
 }
