@@ -1,0 +1,139 @@
+//! `cargo xtask`: maintainer tools for the workspace.
+//!
+//! - `cargo xtask validate` — every validation case at full size against its independent
+//!   reference, the 10⁵-step long runs and the measured stable-dt map; prints the table,
+//!   writes `docs/validation.md` and `docs/stability.md`, exits non-zero on a failure.
+//!   `--only NAME` runs only the cases whose name contains NAME (and writes no docs).
+//! - `cargo xtask validate --timings` — the paper's free-space test at 100 and 1000 elements
+//!   next to the published timings.
+//! - `cargo xtask bench --pareto` — run time against error, work-precision diagrams in
+//!   `docs/benchmarks/`.
+//! - `cargo xtask bench` / `cargo xtask bench --gpu` — hooks for the criterion and GPU benches.
+//!
+//! The flag parser is deliberately small: a handful of commands and flags, no dependency.
+
+#[path = "../../tests/support/mod.rs"]
+#[allow(unreachable_pub)]
+mod support;
+
+mod literature;
+mod pareto;
+mod stability_map;
+mod validate;
+
+use std::process::ExitCode;
+
+/// Parsed command line: the command, its flags, and `--key value` options.
+struct Args {
+    command: String,
+    flags: Vec<String>,
+    options: Vec<(String, String)>,
+}
+
+impl Args {
+    fn parse(mut it: impl Iterator<Item = String>) -> Result<Self, String> {
+        let command = it.next().ok_or_else(usage)?;
+        let (mut flags, mut options) = (Vec::new(), Vec::new());
+        let rest: Vec<String> = it.collect();
+        let mut k = 0;
+        while k < rest.len() {
+            let a = &rest[k];
+            let Some(name) = a.strip_prefix("--") else {
+                return Err(format!("unexpected argument `{a}`\n{}", usage()));
+            };
+            if VALUE_OPTIONS.contains(&name) {
+                let v = rest
+                    .get(k + 1)
+                    .ok_or_else(|| format!("`--{name}` needs a value"))?;
+                options.push((name.to_string(), v.clone()));
+                k += 2;
+            } else {
+                flags.push(name.to_string());
+                k += 1;
+            }
+        }
+        Ok(Self {
+            command,
+            flags,
+            options,
+        })
+    }
+
+    fn flag(&self, name: &str) -> bool {
+        self.flags.iter().any(|f| f == name)
+    }
+
+    fn option(&self, name: &str) -> Option<&str> {
+        self.options
+            .iter()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.as_str())
+    }
+
+    fn reject_unknown(&self, known: &[&str]) -> Result<(), String> {
+        match self.flags.iter().find(|f| !known.contains(&f.as_str())) {
+            Some(f) => Err(format!(
+                "`{}` does not take `--{f}`\n{}",
+                self.command,
+                usage()
+            )),
+            None => Ok(()),
+        }
+    }
+}
+
+const VALUE_OPTIONS: &[&str] = &["only"];
+
+fn usage() -> String {
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --gpu]".into()
+}
+
+fn run() -> Result<bool, String> {
+    let args = Args::parse(std::env::args().skip(1))?;
+    match args.command.as_str() {
+        "validate" => {
+            args.reject_unknown(&["timings"])?;
+            if args.flag("timings") {
+                return literature::run();
+            }
+            validate::run(args.option("only"))
+        }
+        "bench" => {
+            args.reject_unknown(&["pareto", "gpu"])?;
+            if args.flag("pareto") {
+                pareto::run()
+            } else if args.flag("gpu") {
+                bench_gpu()
+            } else {
+                bench_criterion()
+            }
+        }
+        "help" | "--help" | "-h" => {
+            println!("{}", usage());
+            Ok(true)
+        }
+        other => Err(format!("unknown command `{other}`\n{}", usage())),
+    }
+}
+
+/// Hook: `cargo xtask bench` without flags — the criterion benches (to be filled in by the
+/// integrator, e.g. by running `cargo bench` with the right features).
+fn bench_criterion() -> Result<bool, String> {
+    Err("`cargo xtask bench` (criterion benches) is not wired yet: run `cargo bench`, or `cargo xtask bench --pareto`".into())
+}
+
+/// Hook: `cargo xtask bench --gpu` — the GPU benchmark (to be filled in with the GPU backend).
+fn bench_gpu() -> Result<bool, String> {
+    Err("`cargo xtask bench --gpu` is not wired yet".into())
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
