@@ -35,7 +35,7 @@ enum Command {
 struct RunArgs {
     /// The scene (TOML).
     scene: PathBuf,
-    /// Backend: cpu or cpu-rayon.
+    /// Backend: cpu, cpu-rayon or gpu.
     #[arg(long, default_value = "cpu")]
     backend: String,
     /// Number of steps (default: the scene's).
@@ -80,11 +80,9 @@ fn parse_backend(name: &str) -> Result<Backend, String> {
     match name {
         "cpu" => Ok(Backend::Cpu),
         "cpu-rayon" => Ok(Backend::CpuRayon),
-        "gpu" => Err(
-            "the gpu backend is not built into this binary; use --backend cpu or cpu-rayon".into(),
-        ),
+        "gpu" => Ok(Backend::Gpu),
         other => Err(format!(
-            "unknown backend `{other}`: expected cpu or cpu-rayon"
+            "unknown backend `{other}`: expected cpu, cpu-rayon or gpu"
         )),
     }
 }

@@ -23,6 +23,8 @@ pub enum Backend {
     Cpu,
     /// CPU, rods stepped in parallel on rayon's pool.
     CpuRayon,
+    /// GPU through wgpu (`f32`, many steps per dispatch); needs the `gpu` feature.
+    Gpu,
 }
 
 impl Backend {
@@ -31,6 +33,7 @@ impl Backend {
         match self {
             Backend::Cpu => "cpu",
             Backend::CpuRayon => "cpu-rayon",
+            Backend::Gpu => "gpu",
         }
     }
 }
@@ -381,7 +384,13 @@ impl SimulationBuilder {
             }
         }
         let env = self.environment.as_ref();
-        let world = if self.double_precision {
+        let world = if self.backend == Backend::Gpu {
+            gpu_world(
+                Rods::build(&self.rods, &cast_settings(s), env)?,
+                self.double_precision,
+                env.is_some(),
+            )?
+        } else if self.double_precision {
             World::F64(Rods::build(&self.rods, s, env)?)
         } else {
             World::F32(Rods::build(&self.rods, &cast_settings(s), env)?)
@@ -443,21 +452,140 @@ impl<T: Real> Rods<T> {
             stats: Vec::new(),
         })
     }
+
+    /// Steps every rod `n` times on the CPU; returns the largest strain seen.
+    fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
+        backend_cpu::step_rods_batch(
+            &mut self.rods,
+            &self.settings,
+            time,
+            step,
+            n,
+            par,
+            &mut self.stats,
+        )?;
+        Ok(self
+            .stats
+            .iter()
+            .map(StepStats::max_strain)
+            .fold(0.0, f64::max))
+    }
 }
 
 enum World {
     F32(Rods<f32>),
     F64(Rods<f64>),
+    /// Rods on the GPU, with a CPU-side mirror of their state refreshed after every batch.
+    #[cfg(feature = "gpu")]
+    Gpu(Box<GpuWorld>),
 }
 
-/// Dispatches a generic expression over the precision of the world.
+/// Dispatches a generic expression over the precision of the world (reading the GPU world's
+/// mirror).
 macro_rules! with_rods {
     ($world:expr, $r:ident => $body:expr) => {
         match $world {
             World::F32($r) => $body,
             World::F64($r) => $body,
+            #[cfg(feature = "gpu")]
+            World::Gpu(g) => {
+                let $r = &g.mirror;
+                $body
+            }
         }
     };
+}
+
+/// Why a step failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// A rod diverged.
+    #[error("{0}")]
+    Diverged(#[from] Divergence),
+    /// The backend failed for a reason of its own (a GPU device error, a timeout).
+    #[error("{0}")]
+    Backend(String),
+}
+
+impl StepError {
+    /// The divergence, if that is what happened.
+    pub fn divergence(&self) -> Option<&Divergence> {
+        match self {
+            StepError::Diverged(d) => Some(d),
+            StepError::Backend(_) => None,
+        }
+    }
+}
+
+#[cfg(feature = "gpu")]
+struct GpuWorld {
+    sim: backend_gpu::GpuSimulation,
+    mirror: Rods<f32>,
+}
+
+#[cfg(feature = "gpu")]
+impl GpuWorld {
+    /// Runs `n` steps on the GPU, then refreshes the mirror. Returns the largest strain of the
+    /// final state (the GPU checks every step for divergence itself).
+    fn run(&mut self, n: u64) -> Result<f64, StepError> {
+        let to_step = |e: backend_gpu::GpuError| match e {
+            backend_gpu::GpuError::Diverged(d) => StepError::Diverged(d),
+            other => StepError::Backend(other.to_string()),
+        };
+        let mut left = n;
+        while left > 0 {
+            let k = left.min(u64::from(u32::MAX)) as u32;
+            self.sim.step(k).map_err(to_step)?;
+            left -= u64::from(k);
+        }
+        self.sim.check().map_err(to_step)?;
+        let states = self.sim.read_state().map_err(to_step)?;
+        let mut worst = 0.0f64;
+        for (rod, state) in self.mirror.rods.iter_mut().zip(states) {
+            let (lo, hi) = constraints::strain_extremes(&state.positions, &rod.params.rest_lengths);
+            worst = worst.max(f64::from(hi) - 1.0).max(1.0 - f64::from(lo));
+            rod.state = state;
+        }
+        Ok(worst)
+    }
+}
+
+#[cfg(feature = "gpu")]
+fn gpu_world(mirror: Rods<f32>, double: bool, environment: bool) -> Result<World, BuildError> {
+    if double {
+        return Err(BuildError::Setting(
+            "the GPU backend runs in f32: set solver.precision = \"f32\" or use --backend cpu"
+                .into(),
+        ));
+    }
+    if environment {
+        return Err(BuildError::Setting("the GPU backend does not collide with meshes yet: use --backend cpu for scenes with an [environment]".into()));
+    }
+    let inputs = mirror
+        .rods
+        .iter()
+        .map(|r| backend_gpu::GpuRodInput {
+            state: r.state.clone(),
+            params: r.params.clone(),
+            ends: r.ends,
+            loads: r.loads.clone(),
+        })
+        .collect();
+    let sim = backend_gpu::GpuSimulation::new(
+        inputs,
+        &mirror.settings,
+        backend_gpu::GpuOptions::default(),
+    )
+    .map_err(|e| BuildError::Setting(e.to_string()))?;
+    Ok(World::Gpu(Box::new(GpuWorld { sim, mirror })))
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_world(_: Rods<f32>, _: bool, _: bool) -> Result<World, BuildError> {
+    Err(BuildError::Setting(
+        "this build has no GPU backend: rebuild with the `gpu` feature, or use --backend cpu"
+            .into(),
+    ))
 }
 
 /// A running simulation: rods, their state and the clock.
@@ -490,7 +618,7 @@ pub struct ContactReport {
 
 impl Simulation {
     /// Advances every rod by one time step.
-    pub fn step(&mut self) -> Result<(), Divergence> {
+    pub fn step(&mut self) -> Result<(), StepError> {
         self.run(1)
     }
 
@@ -499,25 +627,32 @@ impl Simulation {
     ///
     /// The steps are taken in one batch per rod, so a long run costs less per step than single
     /// calls to [`Simulation::step`].
-    pub fn run(&mut self, n: u64) -> Result<(), Divergence> {
+    pub fn run(&mut self, n: u64) -> Result<(), StepError> {
         if n == 0 {
             return Ok(());
         }
-        let par = match self.backend {
-            Backend::Cpu => Par::Serial,
-            Backend::CpuRayon => Par::Rayon,
+        let par = if self.backend == Backend::CpuRayon {
+            Par::Rayon
+        } else {
+            Par::Serial
         };
         let (time, step) = (self.time, self.steps);
-        let result = with_rods!(&mut self.world, w => {
-            backend_cpu::step_rods_batch(&mut w.rods, &w.settings, time, step, n, par, &mut w.stats)
-                .map(|()| w.stats.iter().map(StepStats::max_strain).fold(0.0, f64::max))
-        });
-        match result {
+        let result: Result<f64, StepError> = match &mut self.world {
+            World::F32(w) => w.run(time, step, n, par),
+            World::F64(w) => w.run(time, step, n, par),
+            #[cfg(feature = "gpu")]
+            World::Gpu(g) => g.run(n),
+        };
+        match &result {
             Ok(worst) => {
-                self.max_strain = self.max_strain.max(worst);
+                self.max_strain = self.max_strain.max(*worst);
                 self.steps += n;
             }
-            Err(d) => self.steps = d.step,
+            Err(e) => {
+                if let Some(d) = e.divergence() {
+                    self.steps = d.step;
+                }
+            }
         }
         self.time = self.steps as f64 * self.dt;
         result.map(|_| ())

@@ -9,26 +9,64 @@ fn cosserat() -> Command {
 #[test]
 fn run_json_reports_every_field() {
     let out = cosserat()
-        .args(["run", "scenes/pendulum.toml", "--elements", "32", "--steps", "200", "--json"])
+        .args([
+            "run",
+            "scenes/pendulum.toml",
+            "--elements",
+            "32",
+            "--steps",
+            "200",
+            "--json",
+        ])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    for key in ["scene", "backend", "elements", "steps", "dt", "wall_s", "us_per_step", "max_strain", "kinetic_energy", "potential_energy", "tip", "diverged"] {
+    for key in [
+        "scene",
+        "backend",
+        "elements",
+        "steps",
+        "dt",
+        "wall_s",
+        "us_per_step",
+        "max_strain",
+        "kinetic_energy",
+        "potential_energy",
+        "tip",
+        "diverged",
+    ] {
         assert!(v.get(key).is_some(), "missing `{key}` in {v}");
     }
     assert_eq!(v["elements"], 32);
     assert_eq!(v["steps"], 200);
     assert_eq!(v["diverged"], false);
     assert!(v["max_strain"].as_f64().unwrap() < 1e-2);
-    assert!(v["kinetic_energy"].as_f64().unwrap() > 0.0, "the pendulum has started to swing");
+    assert!(
+        v["kinetic_energy"].as_f64().unwrap() > 0.0,
+        "the pendulum has started to swing"
+    );
 }
 
 #[test]
 fn a_diverging_run_says_where_and_exits_nonzero() {
     let out = cosserat()
-        .args(["run", "scenes/pendulum.toml", "--elements", "200", "--steps", "2000", "--set", "solver.dt=5e-3", "--json"])
+        .args([
+            "run",
+            "scenes/pendulum.toml",
+            "--elements",
+            "200",
+            "--steps",
+            "2000",
+            "--set",
+            "solver.dt=5e-3",
+            "--json",
+        ])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
@@ -36,20 +74,43 @@ fn a_diverging_run_says_where_and_exits_nonzero() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["diverged"], true);
     let why = v["divergence"].as_str().unwrap();
-    assert!(why.contains("rod 0") && why.contains("element") && why.contains("step"), "{why}");
+    assert!(
+        why.contains("rod 0") && why.contains("element") && why.contains("step"),
+        "{why}"
+    );
 }
 
 #[test]
 fn out_writes_the_trajectory() {
     let dir = std::env::temp_dir().join(format!("cosserat-cli-{}", std::process::id()));
     let out = cosserat()
-        .args(["run", "scenes/pendulum.toml", "--elements", "16", "--steps", "100", "--frames", "5", "--json", "--out"])
+        .args([
+            "run",
+            "scenes/pendulum.toml",
+            "--elements",
+            "16",
+            "--steps",
+            "100",
+            "--frames",
+            "5",
+            "--json",
+            "--out",
+        ])
         .arg(&dir)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    for f in ["trajectory.npz", "trajectory.pvd", "frame_00000.vtp", "frame_00005.vtp"] {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in [
+        "trajectory.npz",
+        "trajectory.pvd",
+        "frame_00000.vtp",
+        "frame_00005.vtp",
+    ] {
         assert!(dir.join(f).is_file(), "missing {f}");
     }
     std::fs::remove_dir_all(&dir).ok();
@@ -57,11 +118,78 @@ fn out_writes_the_trajectory() {
 
 #[test]
 fn bad_input_is_an_error_message() {
-    let out = cosserat().args(["run", "no-such-scene.toml"]).output().unwrap();
+    let out = cosserat()
+        .args(["run", "no-such-scene.toml"])
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no-such-scene.toml"), "{err}");
-    let out = cosserat().args(["run", "scenes/pendulum.toml", "--backend", "quantum"]).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--backend", "quantum"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("quantum"));
+}
+
+/// `--backend gpu` runs the same scene as the CPU and lands in the same place. Skips (with a
+/// note) where no GPU adapter exists at all; CI installs lavapipe so it runs there.
+#[test]
+fn the_gpu_backend_agrees_with_the_cpu() {
+    let run = |backend: &str| {
+        cosserat()
+            .args([
+                "run",
+                "scenes/pendulum.toml",
+                "--elements",
+                "64",
+                "--steps",
+                "400",
+                "--json",
+                "--backend",
+                backend,
+            ])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .unwrap()
+    };
+    let gpu = run("gpu");
+    if !gpu.status.success() {
+        let err = String::from_utf8_lossy(&gpu.stderr);
+        assert!(
+            err.contains("adapter"),
+            "the GPU run failed for another reason than a missing adapter: {err}"
+        );
+        eprintln!("note: no GPU adapter here, skipping: {err}");
+        return;
+    }
+    let cpu = run("cpu");
+    let (g, c): (serde_json::Value, serde_json::Value) = (
+        serde_json::from_slice(&gpu.stdout).unwrap(),
+        serde_json::from_slice(&cpu.stdout).unwrap(),
+    );
+    assert_eq!(g["backend"], "gpu");
+    let tip = |v: &serde_json::Value| -> Vec<f64> {
+        v["tip"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (tg, tc) = (tip(&g), tip(&c));
+    // The tip has dropped ~2 mm in 8 ms; both backends are f32 with red–black sweeps.
+    let drop = tc[2].abs();
+    assert!(drop > 1e-4, "the pendulum moved ({drop} m)");
+    for k in 0..3 {
+        assert!(
+            (tg[k] - tc[k]).abs() < 1e-3 * drop + 1e-6,
+            "tip[{k}]: gpu {} vs cpu {}",
+            tg[k],
+            tc[k]
+        );
+    }
 }
