@@ -7,19 +7,29 @@
 //! or on rayon's pool according to a [`Par`] value, with identical results either way because
 //! rods do not interact.
 //!
+//! Rods that act on each other — a guidewire bound inside a catheter, rod–rod contact,
+//! self-contact — are stepped together by [`step_coupled_batch`] ([`coupling`]), whose
+//! constraint iterations interleave every rod's distance sweep with the coupling constraints.
+//! Held ends report the force and torque the holder applies ([`reaction`]), the signal a
+//! haptic device renders.
+//!
 //! The stepper owns no scene logic: it takes rods whose parameters and end conditions were set
 //! up by the caller, and reports divergence as a value naming the rod, element, step and
 //! quantity instead of letting NaNs spread.
 
+pub mod coupling;
 pub mod ends;
 pub mod mesh_contact;
+pub mod reaction;
 mod soa;
 pub mod stepper;
 pub mod stiff;
 
 pub use constraints::Ordering;
+pub use coupling::{BindingSpec, Coupling, CouplingStats, RodContactSpec, step_coupled_batch};
 pub use ends::{EndCondition, EndKind, PrescribedMotion};
 pub use mesh_contact::{CollisionStats, MeshContactSettings};
+pub use reaction::EndReaction;
 pub use stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
     step_rod_batch, step_rods, step_rods_batch,

@@ -2,8 +2,11 @@
 
 use crate::ends::EndCondition;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
+use crate::reaction::{EndReaction, Reactions};
 use crate::soa::{self, SoaParams, SoaState};
-use constraints::{ContactSet, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa};
+use constraints::{
+    ContactSet, KinematicImpulses, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa,
+};
 use cosserat_model::energy::{bend_damping_node, stretch_damping_element};
 use cosserat_model::quat::rotate_inv;
 use cosserat_model::{Real, RodParams, RodState, Vec3};
@@ -56,10 +59,17 @@ pub struct CpuRod<T: Real> {
     pub ends: [EndCondition<T>; 2],
     /// External point forces.
     pub loads: Vec<PointLoad<T>>,
-    work: SoaState<T>,
-    work_params: SoaParams<T>,
-    red_black: Option<RedBlackSolver<T>>,
-    mesh: Option<Box<RodMeshContact<T>>>,
+    pub(crate) work: SoaState<T>,
+    pub(crate) work_params: SoaParams<T>,
+    pub(crate) red_black: Option<RedBlackSolver<T>>,
+    pub(crate) mesh: Option<Box<RodMeshContact<T>>>,
+    /// Reaction bookkeeping of held ends (`None` when both ends are free).
+    pub(crate) reaction: Option<Box<Reactions<T>>>,
+    /// Impulses that coupling constraints delivered to the kinematic end points this step.
+    pub(crate) kinematic: KinematicImpulses<T>,
+    /// Impulses the end distance constraints gave their free neighbours this step
+    /// (Gauss–Seidel ordering; the red–black solver keeps its own).
+    pub(crate) end_impulses: [Vec3<T>; 2],
 }
 
 impl<T: Real> CpuRod<T> {
@@ -79,6 +89,13 @@ impl<T: Real> CpuRod<T> {
         if ends[1].holds_point() {
             params.inv_masses[n] = T::zero();
         }
+        let held = [ends[0].holds_point(), ends[1].holds_point()];
+        let reaction = (held[0] || held[1]).then(|| {
+            Box::new(Reactions::new(
+                held,
+                [ends[0].holds_frame(), ends[1].holds_frame()],
+            ))
+        });
         Self {
             work: SoaState::new(n),
             work_params: SoaParams::new(&params),
@@ -88,7 +105,38 @@ impl<T: Real> CpuRod<T> {
             loads,
             red_black: None,
             mesh: None,
+            reaction,
+            kinematic: [Vec3::zeros(); 2],
+            end_impulses: [Vec3::zeros(); 2],
         }
+    }
+
+    /// Sets the cut-off frequency [Hz] of the low-pass filter on the reported end reactions
+    /// (default [`crate::reaction::DEFAULT_CUTOFF_HZ`]; `f64::INFINITY` reports the raw value).
+    #[must_use]
+    pub fn with_reaction_cutoff(mut self, hz: f64) -> Self {
+        if let Some(r) = self.reaction.as_mut() {
+            r.set_cutoff(hz);
+        }
+        self
+    }
+
+    /// The filtered reaction at a held end (`0`: first, `1`: last) after the last step: the
+    /// force and torque the holder applies to the rod (see [`crate::reaction`]). `None` for a
+    /// free end.
+    pub fn end_reaction(&self, end: usize) -> Option<EndReaction> {
+        self.reaction.as_ref().and_then(|r| r.filtered(end.min(1)))
+    }
+
+    /// The unfiltered reaction of the last step at a held end.
+    pub fn end_reaction_raw(&self, end: usize) -> Option<EndReaction> {
+        self.reaction.as_ref().and_then(|r| r.raw(end.min(1)))
+    }
+
+    /// Largest filtered reaction force at any held end over all steps so far [N] (`None` when
+    /// both ends are free).
+    pub fn max_reaction_force(&self) -> Option<f64> {
+        self.reaction.as_ref().map(|r| r.max_filtered())
     }
 
     /// Number of elements.
@@ -202,18 +250,8 @@ pub fn step_rod_batch<T: Real>(
     steps: u64,
 ) -> Result<StepStats, Divergence> {
     let h = settings.dt;
-    let n = rod.elements();
-    let w = &mut rod.work;
-    let p = &rod.work_params;
-    w.gather(&rod.state);
-    let bend_damping = rod.params.bend_damping.iter().any(|&c| c > T::zero());
-    let stretch_damping =
-        settings.extensible && rod.params.stretch_damping.iter().any(|&c| c > T::zero());
-    let limit = settings.divergence_strain;
-    let (lo2, hi2) = (
-        (T::one() - limit) * (T::one() - limit),
-        (T::one() + limit) * (T::one() + limit),
-    );
+    let consts = BatchConsts::new(rod, settings);
+    rod.work.gather(&rod.state);
     let mut stats = StepStats {
         min_stretch: f64::MAX,
         max_stretch: 0.0,
@@ -221,106 +259,9 @@ pub fn step_rod_batch<T: Real>(
     let mut result = Ok(());
     for k in 0..steps {
         let t = time + k as f64 * h.to_f64();
-        soa::elastic_forces(w, p, settings.gravity, rod.params.drag, settings.extensible);
-        if bend_damping {
-            for j in 0..n - 1 {
-                let (qa, qb) = (w.frame(j), w.frame(j + 1));
-                let (da, db) = bend_damping_node(
-                    &qa,
-                    &qb,
-                    &w.w.get(j),
-                    &w.w.get(j + 1),
-                    rod.params.bend_damping[j],
-                    rod.params.node_length(j),
-                );
-                w.tq.set(j, w.tq.get(j) + da);
-                w.tq.set(j + 1, w.tq.get(j + 1) + db);
-            }
-        }
-        if stretch_damping {
-            for j in 0..n {
-                let fd = stretch_damping_element(
-                    &w.r.get(j),
-                    &w.r.get(j + 1),
-                    &w.v.get(j),
-                    &w.v.get(j + 1),
-                    rod.params.stretch_damping[j],
-                    rod.params.rest_lengths[j],
-                );
-                w.f.set(j, w.f.get(j) - fd);
-                w.f.set(j + 1, w.f.get(j + 1) + fd);
-            }
-        }
-        for load in &rod.loads {
-            w.f.set(load.point, w.f.get(load.point) + load.force);
-        }
-        soa::integrate_velocities(w, p, h);
-        // Held ends follow their prescribed motion exactly.
-        for (end, (point, frame)) in rod.ends.iter().zip([(0, 0), (n, n - 1)]) {
-            if end.holds_point() {
-                let (v, omega) = end.velocities_at(t);
-                w.v.set(point, v);
-                if end.holds_frame() {
-                    let q = w.frame(frame);
-                    w.w.set(frame, rotate_inv(&q, &omega));
-                }
-            }
-        }
-        if let Some(mesh) = rod.mesh.as_mut() {
-            mesh.detect(&w.r.x, &w.r.y, &w.r.z, rod.params.radius.to_f64());
-        }
-        let mut contacts = rod
-            .mesh
-            .as_mut()
-            .filter(|m| !m.contacts.is_empty())
-            .map(|m| (&mut m.contacts, &m.friction));
-        let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
-        if !settings.extensible && settings.iterations > 0 {
-            match settings.ordering {
-                Ordering::GaussSeidel => {
-                    for _ in 0..settings.iterations {
-                        solve_distance_gauss_seidel_soa(
-                            r,
-                            [&mut w.v.x, &mut w.v.y, &mut w.v.z],
-                            &p.inv_masses,
-                            &p.rest_lengths,
-                            h,
-                        );
-                        if let Some((set, friction)) = contacts.as_mut() {
-                            set.sweep_soa(
-                                h,
-                                friction,
-                                &p.inv_masses,
-                                [&mut w.v.x, &mut w.v.y, &mut w.v.z],
-                            );
-                        }
-                    }
-                }
-                Ordering::RedBlack => {
-                    rod.red_black
-                        .get_or_insert_with(|| RedBlackSolver::new(&p.inv_masses, &p.rest_lengths))
-                        .solve_soa_with_contacts(
-                            r,
-                            [&mut w.v.x, &mut w.v.y, &mut w.v.z],
-                            h,
-                            settings.iterations,
-                            contacts,
-                        );
-                }
-            }
-        } else if let Some((set, friction)) = contacts.as_mut() {
-            // Extensible rods have no distance constraints; their contacts still get solved.
-            for _ in 0..settings.iterations.max(1) {
-                set.sweep_soa(
-                    h,
-                    friction,
-                    &p.inv_masses,
-                    [&mut w.v.x, &mut w.v.y, &mut w.v.z],
-                );
-            }
-        }
-        soa::integrate_positions(w, p, h);
-        match check(w, lo2, hi2) {
+        before_constraints(rod, settings, &consts, t);
+        let distance = solve_constraints(rod, settings);
+        match after_constraints(rod, settings, &consts, distance) {
             Ok((lo, hi)) => {
                 stats.min_stretch = stats.min_stretch.min(lo);
                 stats.max_stretch = stats.max_stretch.max(hi);
@@ -336,13 +277,284 @@ pub fn step_rod_batch<T: Real>(
             }
         }
     }
-    w.scatter(&mut rod.state);
+    rod.work.scatter(&mut rod.state);
     result.map(|()| stats)
+}
+
+/// What a batch of steps decides once per rod.
+pub(crate) struct BatchConsts<T> {
+    bend_damping: bool,
+    stretch_damping: bool,
+    lo2: T,
+    hi2: T,
+}
+
+impl<T: Real> BatchConsts<T> {
+    pub(crate) fn new(rod: &CpuRod<T>, settings: &SolverSettings<T>) -> Self {
+        let limit = settings.divergence_strain;
+        Self {
+            bend_damping: rod.params.bend_damping.iter().any(|&c| c > T::zero()),
+            stretch_damping: settings.extensible
+                && rod.params.stretch_damping.iter().any(|&c| c > T::zero()),
+            lo2: (T::one() - limit) * (T::one() - limit),
+            hi2: (T::one() + limit) * (T::one() + limit),
+        }
+    }
+}
+
+/// Forces and torques, velocity integration, end conditions (recording what the reaction at a
+/// held end needs) and mesh-contact detection: the step up to the constraint iterations.
+#[inline(always)]
+pub(crate) fn before_constraints<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    consts: &BatchConsts<T>,
+    t: f64,
+) {
+    let h = settings.dt;
+    let n = rod.elements();
+    let w = &mut rod.work;
+    let p = &rod.work_params;
+    soa::elastic_forces(w, p, settings.gravity, rod.params.drag, settings.extensible);
+    if consts.bend_damping {
+        for j in 0..n - 1 {
+            let (qa, qb) = (w.frame(j), w.frame(j + 1));
+            let (da, db) = bend_damping_node(
+                &qa,
+                &qb,
+                &w.w.get(j),
+                &w.w.get(j + 1),
+                rod.params.bend_damping[j],
+                rod.params.node_length(j),
+            );
+            w.tq.set(j, w.tq.get(j) + da);
+            w.tq.set(j + 1, w.tq.get(j + 1) + db);
+        }
+    }
+    if consts.stretch_damping {
+        for j in 0..n {
+            let fd = stretch_damping_element(
+                &w.r.get(j),
+                &w.r.get(j + 1),
+                &w.v.get(j),
+                &w.v.get(j + 1),
+                rod.params.stretch_damping[j],
+                rod.params.rest_lengths[j],
+            );
+            w.f.set(j, w.f.get(j) - fd);
+            w.f.set(j + 1, w.f.get(j + 1) + fd);
+        }
+    }
+    for load in &rod.loads {
+        w.f.set(load.point, w.f.get(load.point) + load.force);
+    }
+    soa::integrate_velocities(w, p, h);
+    // Held ends follow their prescribed motion exactly.
+    for (e, (end, (point, frame))) in rod.ends.iter().zip([(0, 0), (n, n - 1)]).enumerate() {
+        if end.holds_point() {
+            let (v, omega) = end.velocities_at(t);
+            if let Some(rx) = rod.reaction.as_deref_mut() {
+                rx.record_point(e, p.masses[point], w.f.get(point), w.v.get(point), v, h);
+            }
+            w.v.set(point, v);
+            if end.holds_frame() {
+                let q = w.frame(frame);
+                let body = rotate_inv(&q, &omega);
+                if let Some(rx) = rod.reaction.as_deref_mut() {
+                    rx.record_frame(e, &q, p.inertia.get(frame), w.w.get(frame), body, h);
+                }
+                w.w.set(frame, body);
+            }
+        }
+    }
+    if let Some(mesh) = rod.mesh.as_mut() {
+        mesh.detect(&w.r.x, &w.r.y, &w.r.z, rod.params.radius.to_f64());
+    }
+}
+
+/// Whether the red–black solver runs this rod's distance constraints.
+#[inline]
+pub(crate) fn uses_red_black<T: Real>(settings: &SolverSettings<T>) -> bool {
+    !settings.extensible && settings.iterations > 0 && settings.ordering == Ordering::RedBlack
+}
+
+/// The rod's red–black solver, created on first use (measuring the end constraints' impulses
+/// when an end is held).
+#[inline]
+pub(crate) fn red_black_of<'a, T: Real>(
+    solver: &'a mut Option<RedBlackSolver<T>>,
+    p: &SoaParams<T>,
+    reaction: Option<&Reactions<T>>,
+) -> &'a mut RedBlackSolver<T> {
+    solver.get_or_insert_with(|| {
+        let mut s = RedBlackSolver::new(&p.inv_masses, &p.rest_lengths);
+        if let Some(r) = reaction {
+            s.track_ends(r.held[0], r.held[1]);
+        }
+        s
+    })
+}
+
+/// The constraint iterations of a rod on its own: distance constraints interleaved with its
+/// mesh contacts. Returns the impulses the end distance constraints gave their free
+/// neighbours (zero unless an end is held).
+#[inline(always)]
+fn solve_constraints<T: Real>(rod: &mut CpuRod<T>, settings: &SolverSettings<T>) -> [Vec3<T>; 2] {
+    let h = settings.dt;
+    let w = &mut rod.work;
+    let p = &rod.work_params;
+    let track = rod.reaction.as_deref().map_or([false; 2], |r| r.held);
+    let mut distance = [Vec3::zeros(); 2];
+    let mut contacts = rod
+        .mesh
+        .as_mut()
+        .filter(|m| !m.contacts.is_empty())
+        .map(|m| (&mut m.contacts, &m.friction));
+    let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
+    if !settings.extensible && settings.iterations > 0 {
+        match settings.ordering {
+            Ordering::GaussSeidel => {
+                for _ in 0..settings.iterations {
+                    gauss_seidel_sweep(
+                        r,
+                        [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                        &p.inv_masses,
+                        &p.rest_lengths,
+                        h,
+                        track,
+                        &mut distance,
+                    );
+                    if let Some((set, friction)) = contacts.as_mut() {
+                        set.sweep_soa(
+                            h,
+                            friction,
+                            &p.inv_masses,
+                            [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                        );
+                    }
+                }
+            }
+            Ordering::RedBlack => {
+                let solver = red_black_of(&mut rod.red_black, p, rod.reaction.as_deref());
+                solver.solve_soa_with_contacts(
+                    r,
+                    [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                    h,
+                    settings.iterations,
+                    contacts,
+                );
+                if track[0] || track[1] {
+                    distance = solver.take_end_impulses();
+                }
+            }
+        }
+    } else if let Some((set, friction)) = contacts.as_mut() {
+        // Extensible rods have no distance constraints; their contacts still get solved.
+        for _ in 0..settings.iterations.max(1) {
+            set.sweep_soa(
+                h,
+                friction,
+                &p.inv_masses,
+                [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+            );
+        }
+    }
+    distance
+}
+
+/// Completes the reaction at held ends, integrates positions and frames, and checks for
+/// divergence. Returns the smallest and largest length ratio.
+#[inline(always)]
+pub(crate) fn after_constraints<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    consts: &BatchConsts<T>,
+    distance: [Vec3<T>; 2],
+) -> Result<(f64, f64), (usize, DivergedQuantity)> {
+    if let Some(rx) = rod.reaction.as_deref_mut() {
+        rx.finish(distance, rod.kinematic, settings.dt);
+        rod.kinematic = [Vec3::zeros(); 2];
+    }
+    soa::integrate_positions(&mut rod.work, &rod.work_params, settings.dt);
+    check(&rod.work, consts.lo2, consts.hi2)
+}
+
+/// One Gauss–Seidel sweep; with an end tracked, its constraint is projected here (the same
+/// arithmetic as [`solve_distance_gauss_seidel_soa`]) so that its impulse on the free neighbour
+/// can be added to `distance`.
+#[inline]
+pub(crate) fn gauss_seidel_sweep<T: Real>(
+    r: [&[T]; 3],
+    v: [&mut [T]; 3],
+    inv_masses: &[T],
+    rest_lengths: &[T],
+    h: T,
+    track: [bool; 2],
+    distance: &mut [Vec3<T>; 2],
+) {
+    if !(track[0] || track[1]) {
+        solve_distance_gauss_seidel_soa(r, v, inv_masses, rest_lengths, h);
+        return;
+    }
+    let n = rest_lengths.len();
+    let [vx, vy, vz] = v;
+    let lo = usize::from(track[0] && n > 0);
+    let hi = if track[1] { n.saturating_sub(1) } else { n };
+    if lo == 1 {
+        distance[0] += project_gs(r, [vx, vy, vz], inv_masses, rest_lengths[0], h, 0);
+    }
+    if hi > lo {
+        solve_distance_gauss_seidel_soa(
+            [&r[0][lo..=hi], &r[1][lo..=hi], &r[2][lo..=hi]],
+            [&mut vx[lo..=hi], &mut vy[lo..=hi], &mut vz[lo..=hi]],
+            &inv_masses[lo..=hi],
+            &rest_lengths[lo..hi],
+            h,
+        );
+    }
+    if track[1] && n > 0 && hi >= lo {
+        // The impulse on point n − 1 is minus the one on the held point n.
+        distance[1] -= project_gs(r, [vx, vy, vz], inv_masses, rest_lengths[n - 1], h, n - 1);
+    }
+}
+
+/// The distance constraint between points `a`, `a + 1` (Gauss–Seidel arithmetic); returns the
+/// impulse [N s] given to point `a + 1`.
+#[inline]
+fn project_gs<T: Real>(
+    r: [&[T]; 3],
+    v: [&mut [T]; 3],
+    inv_masses: &[T],
+    l0: T,
+    h: T,
+    a: usize,
+) -> Vec3<T> {
+    let [rx, ry, rz] = r;
+    let [vx, vy, vz] = v;
+    let b = a + 1;
+    let (wa, wb) = (inv_masses[a], inv_masses[b]);
+    let w = wa + wb;
+    if w <= T::zero() {
+        return Vec3::zeros();
+    }
+    let dx = (rx[b] - rx[a]) + (vx[b] - vx[a]) * h;
+    let dy = (ry[b] - ry[a]) + (vy[b] - vy[a]) * h;
+    let dz = (rz[b] - rz[a]) + (vz[b] - vz[a]) * h;
+    let len = (dx * dx + dy * dy + dz * dz).sqrt();
+    let s = (l0 - len) / (h * w * len);
+    let (sa, sb) = (s * wa, s * wb);
+    vx[a] -= dx * sa;
+    vy[a] -= dy * sa;
+    vz[a] -= dz * sa;
+    vx[b] += dx * sb;
+    vy[b] += dy * sb;
+    vz[b] += dz * sb;
+    Vec3::new(dx, dy, dz) * s
 }
 
 /// The divergence check after a step: every frame finite, every length ratio inside the band.
 /// Returns the smallest and largest length ratio.
-fn check<T: Real>(
+pub(crate) fn check<T: Real>(
     w: &SoaState<T>,
     lo2: T,
     hi2: T,

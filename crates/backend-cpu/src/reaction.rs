@@ -1,0 +1,172 @@
+//! Reaction force and torque at held ends: what a haptic device renders.
+//!
+//! A held end is kinematic (zero inverse mass, prescribed velocity; see [`crate::ends`]). The
+//! paper's interactive setting (section 2.1: "after a force is applied to the rod by a user
+//! manipulating it, for example with a haptic device") needs the force the user's hand
+//! exerts through that end, at every step. It follows from the momentum balance of the held
+//! point over one step `h`: the hand supplies whatever the point's prescribed motion needs
+//! beyond the forces and impulses it receives from the rod,
+//!
+//! `F = m_k (v_prescribed − v_before) / h − f_k − Σ_c J_{c,k} / h`,
+//!
+//! where `f_k` is the force computed on point `k` (elasticity, gravity, drag, damping, loads)
+//! and `J_{c,k}` is the impulse constraint `c` would have given the point had it been free: for
+//! the end's distance constraint that is minus the impulse it gave its other point (measured
+//! inside the red–black or Gauss–Seidel sweeps), for a binding or rod–rod contact it is the
+//! kinematic point's share, recorded by [`constraints::PointVelocities`]. A clamped end also
+//! holds its frame; its torque is the Euler balance of the held frame,
+//! `M = R I (ω_prescribed − ω_integrated) / h` in world coordinates, with `ω_integrated` the
+//! body angular velocity the torques alone would have given it.
+//!
+//! [`EndReaction`] is the wrench the holder applies *to the rod* (the support reaction of
+//! statics: a clamped cantilever under gravity gets `+W` upwards); a haptic device renders its
+//! negative. The torque is about the held point.
+//!
+//! A haptic device takes the force through its own control loop, which cannot follow the
+//! step-to-step noise of an explicit integrator with iterative constraints; the reported value
+//! is therefore low-pass filtered with a first-order filter `y ← y + α (x − y)`,
+//! `α = 1 − exp(−2π f_c h)`, at a configurable cut-off `f_c` ([`DEFAULT_CUTOFF_HZ`]). The raw
+//! per-step value is available too.
+
+use constraints::KinematicImpulses;
+use cosserat_model::quat::rotate;
+use cosserat_model::{Quat, Real, Vec3};
+
+/// Default cut-off of the reaction low-pass filter [Hz]: well below a haptic loop's 1 kHz and
+/// above the few hertz of deliberate hand motion.
+pub const DEFAULT_CUTOFF_HZ: f64 = 50.0;
+
+/// Force and torque applied by the holder of an end to the rod.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EndReaction {
+    /// Force [N], world frame.
+    pub force: [f64; 3],
+    /// Torque about the held point [N m], world frame (zero for a pinned end).
+    pub torque: [f64; 3],
+}
+
+impl EndReaction {
+    /// `|force|` [N].
+    pub fn force_norm(&self) -> f64 {
+        self.force.iter().map(|x| x * x).sum::<f64>().sqrt()
+    }
+    /// `|torque|` [N m].
+    pub fn torque_norm(&self) -> f64 {
+        self.torque.iter().map(|x| x * x).sum::<f64>().sqrt()
+    }
+}
+
+fn to_f64<T: Real>(v: Vec3<T>) -> [f64; 3] {
+    [v.x.to_f64(), v.y.to_f64(), v.z.to_f64()]
+}
+
+/// Per-rod reaction bookkeeping; present only on rods with a held end.
+#[derive(Clone, Debug)]
+pub(crate) struct Reactions<T: Real> {
+    /// Which ends hold their point / their frame.
+    pub(crate) held: [bool; 2],
+    pub(crate) clamped: [bool; 2],
+    cutoff_hz: f64,
+    /// The part of the force known before the constraints: `m (v_p − v) / h − f_k`.
+    force_pre: [Vec3<T>; 2],
+    /// World torque of a clamped end.
+    torque: [Vec3<T>; 2],
+    raw: [EndReaction; 2],
+    filtered: [EndReaction; 2],
+    max_filtered: f64,
+}
+
+impl<T: Real> Reactions<T> {
+    pub(crate) fn new(held: [bool; 2], clamped: [bool; 2]) -> Self {
+        Self {
+            held,
+            clamped,
+            cutoff_hz: DEFAULT_CUTOFF_HZ,
+            force_pre: [Vec3::zeros(); 2],
+            torque: [Vec3::zeros(); 2],
+            raw: [EndReaction::default(); 2],
+            filtered: [EndReaction::default(); 2],
+            max_filtered: 0.0,
+        }
+    }
+
+    pub(crate) fn set_cutoff(&mut self, hz: f64) {
+        self.cutoff_hz = hz;
+    }
+
+    /// Before the end conditions overwrite the velocities: the force on the held point, its
+    /// mass and velocity, and the prescribed velocity.
+    #[inline]
+    pub(crate) fn record_point(
+        &mut self,
+        end: usize,
+        mass: T,
+        force: Vec3<T>,
+        v_before: Vec3<T>,
+        v_prescribed: Vec3<T>,
+        h: T,
+    ) {
+        self.force_pre[end] = (v_prescribed - v_before) * (mass / h) - force;
+    }
+
+    /// A clamped end's frame `q`, its body inertia, the integrated and the prescribed body
+    /// angular velocities.
+    #[inline]
+    pub(crate) fn record_frame(
+        &mut self,
+        end: usize,
+        q: &Quat<T>,
+        inertia: Vec3<T>,
+        w_integrated: Vec3<T>,
+        w_prescribed: Vec3<T>,
+        h: T,
+    ) {
+        let body = (w_prescribed - w_integrated).component_mul(&inertia) / h;
+        self.torque[end] = rotate(q, &body);
+    }
+
+    /// After the constraints: `distance[e]` is the impulse the end's distance constraint gave
+    /// its other point, `kinematic[e]` what coupling constraints gave the held point itself.
+    /// Completes the step's reaction and filters it.
+    pub(crate) fn finish(&mut self, distance: [Vec3<T>; 2], kinematic: KinematicImpulses<T>, h: T) {
+        let alpha = if self.cutoff_hz.is_finite() && self.cutoff_hz > 0.0 {
+            1.0 - (-2.0 * std::f64::consts::PI * self.cutoff_hz * h.to_f64()).exp()
+        } else {
+            1.0
+        };
+        for e in 0..2 {
+            if !self.held[e] {
+                continue;
+            }
+            let f = self.force_pre[e] + (distance[e] - kinematic[e]) / h;
+            let raw = EndReaction {
+                force: to_f64(f),
+                torque: if self.clamped[e] {
+                    to_f64(self.torque[e])
+                } else {
+                    [0.0; 3]
+                },
+            };
+            self.raw[e] = raw;
+            // The device starts at rest with no force: the filter starts at zero.
+            let y = &mut self.filtered[e];
+            for k in 0..3 {
+                y.force[k] += alpha * (raw.force[k] - y.force[k]);
+                y.torque[k] += alpha * (raw.torque[k] - y.torque[k]);
+            }
+            self.max_filtered = self.max_filtered.max(y.force_norm());
+        }
+    }
+
+    pub(crate) fn filtered(&self, end: usize) -> Option<EndReaction> {
+        self.held[end].then_some(self.filtered[end])
+    }
+
+    pub(crate) fn raw(&self, end: usize) -> Option<EndReaction> {
+        self.held[end].then_some(self.raw[end])
+    }
+
+    pub(crate) fn max_filtered(&self) -> f64 {
+        self.max_filtered
+    }
+}
