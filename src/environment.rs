@@ -18,8 +18,8 @@ pub struct VesselGeometry {
     pub entry_point: [f64; 3],
     /// Unit direction into the vessel at the entry.
     pub entry_direction: [f64; 3],
-    /// The trunk's centreline.
-    pub trunk: Centreline,
+    /// The trunk's centreline (known for generated vessels only).
+    pub trunk: Option<Centreline>,
 }
 
 /// A static mesh with friction.
@@ -58,17 +58,29 @@ impl Environment {
         let geometry = VesselGeometry {
             entry_point: v.entry_point,
             entry_direction: v.entry_direction,
-            trunk: v.trunk.clone(),
+            trunk: Some(v.trunk.clone()),
         };
         Ok(Self::with_mesh(v.mesh, Some(geometry)))
     }
 
     /// A mesh file (OBJ or STL) with coordinates multiplied by `scale` (0.001 for millimetres),
     /// oriented so that its normals point into the enclosed lumen.
-    pub fn from_file(path: &Path, scale: f64) -> Result<Self, MeshError> {
+    ///
+    /// `entry`, if given, is where and in which direction a wire enters the lumen (for
+    /// insertion scenes).
+    pub fn from_file(
+        path: &Path,
+        scale: f64,
+        entry: Option<([f64; 3], [f64; 3])>,
+    ) -> Result<Self, MeshError> {
         let (mut mesh, _report) = collide::load_mesh(path, scale)?;
         mesh.orient_into_lumen();
-        Ok(Self::with_mesh(mesh, None))
+        let vessel = entry.map(|(point, dir)| VesselGeometry {
+            entry_point: point,
+            entry_direction: nalgebra::Vector3::from(dir).normalize().into(),
+            trunk: None,
+        });
+        Ok(Self::with_mesh(mesh, vessel))
     }
 
     /// A square floor of side `size` through `point`, facing `normal`.

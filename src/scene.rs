@@ -102,6 +102,8 @@ pub enum MeshSection {
         path: PathBuf,
         /// Factor from file units to metres (0.001 for millimetres).
         scale: f64,
+        /// Where a wire enters the lumen, in file units: `{ point = [..], direction = [..] }`.
+        entry: Option<EntrySection>,
     },
     /// A square floor.
     Plane {
@@ -112,6 +114,16 @@ pub enum MeshSection {
         /// Side length [m].
         size: f64,
     },
+}
+
+/// `environment.mesh.entry`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EntrySection {
+    /// The entry point (file units).
+    pub point: [f64; 3],
+    /// The direction into the lumen.
+    pub direction: [f64; 3],
 }
 
 /// `environment.friction`.
@@ -529,13 +541,28 @@ impl Checker<'_> {
                 }
                 Environment::vessel(t).map_err(|err| mesh_err("environment.mesh", err))?
             }
-            MeshSection::File { path, scale } => {
+            MeshSection::File { path, scale, entry } => {
                 let scale = self.positive("environment.mesh.scale", *scale)?;
+                let entry = match entry {
+                    None => None,
+                    Some(e) => {
+                        let p = self.finite3("environment.mesh.entry.point", e.point)?;
+                        let d = self.finite3("environment.mesh.entry.direction", e.direction)?;
+                        if !(d.iter().map(|x| x * x).sum::<f64>() > 0.0) {
+                            return Err(self.invalid(
+                                "environment.mesh.entry.direction",
+                                d,
+                                "expected a non-zero vector",
+                            ));
+                        }
+                        Some(([p[0] * scale, p[1] * scale, p[2] * scale], d))
+                    }
+                };
                 let full = self
                     .path
                     .parent()
                     .map_or_else(|| path.clone(), |dir| dir.join(path));
-                Environment::from_file(&full, scale)
+                Environment::from_file(&full, scale, entry)
                     .map_err(|err| mesh_err("environment.mesh.path", err))?
             }
             MeshSection::Plane {
@@ -678,11 +705,17 @@ impl Checker<'_> {
                 if !(to > from) {
                     return Err(self.invalid(f("shape.to"), *to, "expected to > from"));
                 }
+                let trunk = vessel.trunk.as_ref().ok_or_else(|| {
+                    self.invalid(
+                        f("shape.kind"),
+                        "vessel-trunk",
+                        "needs a generated vessel (mesh files have no known centreline)",
+                    )
+                })?;
                 let samples = 400;
                 let pts = (0..=samples)
                     .map(|k| {
-                        vessel
-                            .trunk
+                        trunk
                             .sample(from + (to - from) * k as f64 / samples as f64)
                             .0
                     })
