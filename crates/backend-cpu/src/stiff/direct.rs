@@ -247,6 +247,7 @@ impl BlockTridiagonal {
     }
 
     /// Dense `J M⁻¹ Jᵀ + α̃` (order `6n`), for tests of the assembly.
+    #[cfg(test)]
     pub(crate) fn dense(
         ss: &[StretchShear<f64>],
         bt: &[BendTwist<f64>],

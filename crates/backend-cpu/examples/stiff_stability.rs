@@ -1,0 +1,455 @@
+//! Long runs of the stiff scheme against the explicit one: stability, statics, frequencies,
+//! and the explicit scheme's stable step by bisection. Writes the tables of
+//! `docs/stiff-solver.md`.
+//!
+//! `cargo run --release -p cosserat-backend-cpu --example stiff_stability -- [what]`
+//! with `what` one of `cantilever`, `stability`, `bisect`, `frequency`, `gs` (default: all).
+
+use backend_cpu::{
+    CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
+    StiffScheme, StiffScratch, StiffSettings, step_rod_batch, step_rod_stiff,
+};
+use cosserat_model::presets::{PRESETS, Preset};
+use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
+use cosserat_model::{Material, Vec3};
+use std::time::Instant;
+
+fn settings(dt: f64) -> SolverSettings<f64> {
+    SolverSettings {
+        dt,
+        iterations: 10,
+        ordering: Ordering::RedBlack,
+        extensible: false,
+        gravity: Vec3::new(0.0, 0.0, -9.81),
+        divergence_strain: 0.1,
+    }
+}
+
+fn rod(
+    m: Material,
+    length: f64,
+    n: usize,
+    drag: f64,
+    ends: [EndCondition<f64>; 2],
+    loads: Vec<PointLoad<f64>>,
+) -> CpuRod<f64> {
+    let mut spec = RodSpec::new(m);
+    spec.drag = drag;
+    let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], length, n);
+    let (s, p) = build_rod::<f64>(&pts, &spec).unwrap();
+    CpuRod::new(s, p, ends, loads)
+}
+
+/// Length of a cantilever whose gravity sag is `ratio` of its length (small deflection).
+fn cantilever_length(m: &Material, ratio: f64) -> f64 {
+    let w = m.linear_density() * 9.81;
+    let ei = m.bend_twist_stiffness()[0];
+    // δ/L = w L³ / (8 E I)
+    (ratio * 8.0 * ei / w).cbrt()
+}
+
+fn cantilever(p: &Preset, dt: f64, n: usize, stiff: &StiffSettings, tip_load: bool) {
+    let m = p.material();
+    let length = cantilever_length(&m, 0.01).min(1.0);
+    let ei = m.bend_twist_stiffness()[0];
+    let w = m.linear_density() * 9.81;
+    let omega1 = 1.87510407_f64.powi(2) * (ei / (m.linear_density() * length.powi(4))).sqrt();
+    let (expected, loads, g) = if tip_load {
+        let f = 0.01 * 3.0 * ei / length.powi(2);
+        (
+            f * length.powi(3) / (3.0 * ei),
+            vec![PointLoad {
+                point: n,
+                force: Vec3::new(0.0, 0.0, -f),
+            }],
+            Vec3::zeros(),
+        )
+    } else {
+        (
+            w * length.powi(4) / (8.0 * ei),
+            vec![],
+            settings(dt).gravity,
+        )
+    };
+    let mut r = rod(
+        m,
+        length,
+        n,
+        2.0 * omega1,
+        [EndCondition::clamped(), EndCondition::free()],
+        loads,
+    );
+    let mut s = settings(dt);
+    s.gravity = g;
+    let mut scratch = StiffScratch::new();
+    let t_end = 12.0 / omega1 * 2.0 * std::f64::consts::PI / 6.0;
+    let steps = (t_end / dt).ceil() as u64;
+    let t0 = Instant::now();
+    let res = step_rod_stiff(&mut r, &s, stiff, &mut scratch, 0.0, 0, 0, steps);
+    let el = t0.elapsed().as_secs_f64();
+    let tip = -r.state.positions[n].z;
+    println!(
+        "{:18} {} L={length:.4} dt={dt:e} n={n} steps={steps} tip={tip:.6e} expected={expected:.6e} rel={:+.3e} iters={} res={:.2e} facts={} {res:?} time/step={:.1}us",
+        p.name,
+        if tip_load { "tipload" } else { "gravity" },
+        tip / expected - 1.0,
+        scratch.report().iterations,
+        scratch.report().residual,
+        scratch.report().factorisations,
+        el / steps as f64 * 1e6,
+    );
+}
+
+fn stiff_default() -> StiffSettings {
+    StiffSettings::default()
+}
+
+/// The two dynamic scenarios of issue 4: a pendulum (pinned at one end, released horizontally)
+/// and an end pushed and twisted (start clamped and driven along and about the rod's axis, far
+/// end free, under gravity: a wire advanced and spun while it sags).
+fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
+    let m = p.material();
+    if pushed {
+        let motion = PrescribedMotion {
+            velocity: Vec3::new(0.02, 0.0, 0.0),
+            angular_velocity: Vec3::new(2.0 * std::f64::consts::PI, 0.0, 0.0),
+            start_time: 0.0,
+            end_time: f64::INFINITY,
+        };
+        rod(
+            m,
+            length,
+            n,
+            0.0,
+            [
+                EndCondition::clamped().driven(motion),
+                EndCondition::pinned(),
+            ],
+            vec![],
+        )
+    } else {
+        rod(
+            m,
+            length,
+            n,
+            0.0,
+            [EndCondition::pinned(), EndCondition::free()],
+            vec![],
+        )
+    }
+}
+
+fn stability() {
+    println!("| preset | scenario | dt [s] | steps | result | max strain | us/step |");
+    println!("|---|---|---|---|---|---|---|");
+    for p in &PRESETS {
+        for pushed in [false, true] {
+            for dt in [1e-3, 1e-4] {
+                let n = 500;
+                let mut r = scenario(p, 1.0, n, pushed);
+                let mut s = settings(dt);
+                s.divergence_strain = 1e-3;
+                let mut scratch = StiffScratch::new();
+                let steps = (10.0 / dt).round() as u64;
+                let t0 = Instant::now();
+                let res =
+                    step_rod_stiff(&mut r, &s, &stiff_default(), &mut scratch, 0.0, 0, 0, steps);
+                let el = t0.elapsed().as_secs_f64();
+                let (result, strain) = match &res {
+                    Ok(st) => ("stable".to_string(), st.max_strain()),
+                    Err(e) => (format!("diverged at step {}", e.step), f64::NAN),
+                };
+                println!(
+                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.0} |",
+                    p.name,
+                    if pushed { "pushed+twisted" } else { "pendulum" },
+                    el / steps as f64 * 1e6
+                );
+            }
+        }
+    }
+}
+
+/// Whether the explicit scheme survives `steps` steps of `dt` on the pendulum.
+fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
+    let mut r = scenario(p, 1.0, 500, false);
+    let mut s = settings(dt);
+    s.divergence_strain = 0.05;
+    step_rod_batch(&mut r, &s, 0.0, 0, 0, steps).is_ok()
+        && r.state
+            .frames
+            .iter()
+            .all(|q| q.coords.iter().all(|c| c.is_finite()))
+}
+
+fn bisect() {
+    println!(
+        "| preset | explicit stable dt [s] | explicit unstable dt [s] | stiff scheme at 1e-2 s |"
+    );
+    println!("|---|---|---|---|");
+    for p in &PRESETS {
+        let steps = 4000;
+        let (mut lo, mut hi) = (1e-10_f64, 1e-4_f64);
+        assert!(explicit_stable(p, lo, steps));
+        for _ in 0..14 {
+            let mid = (lo * hi).sqrt();
+            if explicit_stable(p, mid, steps) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let mut r = scenario(p, 1.0, 500, false);
+        let mut s = settings(1e-2);
+        s.divergence_strain = 1e-3;
+        let ok = step_rod_stiff(
+            &mut r,
+            &s,
+            &stiff_default(),
+            &mut StiffScratch::new(),
+            0.0,
+            0,
+            0,
+            1000,
+        )
+        .is_ok();
+        println!(
+            "| {} | {lo:.3e} | {hi:.3e} | {} |",
+            p.name,
+            if ok { "stable (10 s)" } else { "diverged" }
+        );
+    }
+}
+
+/// First bending frequency of a cantilever 0.5 m long, released from the static shape under a
+/// tip load, from the zero crossings of its tip over the first periods.
+fn frequency() {
+    println!(
+        "| preset | dt [s] | analytic f1 [Hz] | measured f1 [Hz] | error | amplitude ratio per period |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for p in &PRESETS {
+        for dt in [1e-3, 1e-4] {
+            let m = p.material();
+            let length: f64 = 0.5;
+            let n = 500;
+            let ei = m.bend_twist_stiffness()[0];
+            let omega1 =
+                1.87510407_f64.powi(2) * (ei / (m.linear_density() * length.powi(4))).sqrt();
+            let f = 1e-3 * 3.0 * ei / length.powi(2);
+            let mut r = rod(
+                m,
+                length,
+                n,
+                4.0 * omega1,
+                [EndCondition::clamped(), EndCondition::free()],
+                vec![PointLoad {
+                    point: n,
+                    force: Vec3::new(0.0, 0.0, -f),
+                }],
+            );
+            let mut s = settings(dt);
+            s.gravity = Vec3::zeros();
+            let mut scratch = StiffScratch::new();
+            let settle = (20.0 / omega1 / dt).ceil() as u64;
+            step_rod_stiff(
+                &mut r,
+                &s,
+                &stiff_default(),
+                &mut scratch,
+                0.0,
+                0,
+                0,
+                settle,
+            )
+            .unwrap();
+            // Release: no load, no drag.
+            let (state, mut params) = (r.state.clone(), r.params.clone());
+            params.drag = 0.0;
+            let mut r = CpuRod::new(state, params, r.ends, vec![]);
+            let mut scratch = StiffScratch::new();
+            let period = 2.0 * std::f64::consts::PI / omega1;
+            let steps = (4.0 * period / dt).ceil() as u64;
+            let mut zs = Vec::with_capacity(steps as usize);
+            for k in 0..steps {
+                step_rod_stiff(&mut r, &s, &stiff_default(), &mut scratch, 0.0, 0, k, 1).unwrap();
+                zs.push(r.state.positions[n].z);
+            }
+            // Upward zero crossings, interpolated.
+            let mut crossings = Vec::new();
+            for k in 1..zs.len() {
+                if zs[k - 1] < 0.0 && zs[k] >= 0.0 {
+                    crossings.push((k as f64 - zs[k] / (zs[k] - zs[k - 1])) * dt);
+                }
+            }
+            let measured = if crossings.len() >= 2 {
+                (crossings.len() - 1) as f64 / (crossings[crossings.len() - 1] - crossings[0])
+            } else {
+                f64::NAN
+            };
+            let analytic = omega1 / (2.0 * std::f64::consts::PI);
+            // Amplitude decay: minima of successive periods.
+            let per = (period / dt).round() as usize;
+            let min_in = |a: usize| {
+                zs[a.min(zs.len())..(a + per).min(zs.len())]
+                    .iter()
+                    .cloned()
+                    .fold(f64::MAX, f64::min)
+            };
+            let ratio = min_in(per) / min_in(0);
+            println!(
+                "| {} | {dt:e} | {analytic:.4} | {measured:.4} | {:+.2e} | {ratio:.4} |",
+                p.name,
+                measured / analytic - 1.0
+            );
+        }
+    }
+}
+
+fn main() {
+    let what = std::env::args().nth(1).unwrap_or_default();
+    if what == "cantilever" || what.is_empty() {
+        for refactor in [Refactor::Lagged, Refactor::EveryStep] {
+            let st = StiffSettings {
+                refactor,
+                ..StiffSettings::default()
+            };
+            println!("{refactor:?}");
+            for p in &PRESETS {
+                for dt in [1e-3, 1e-4] {
+                    cantilever(p, dt, 500, &st, false);
+                    cantilever(p, dt, 500, &st, true);
+                }
+            }
+        }
+    }
+    if what == "stability" || what.is_empty() {
+        stability();
+    }
+    if what == "bisect" || what.is_empty() {
+        bisect();
+    }
+    if what == "frequency" || what.is_empty() {
+        frequency();
+    }
+    if what == "debug" {
+        for (vel, om) in [(0.02, 0.0), (0.0, 6.0), (0.02, 6.0)] {
+            let m = PRESETS[0].material();
+            let motion = PrescribedMotion {
+                velocity: Vec3::new(vel, 0.0, 0.0),
+                angular_velocity: Vec3::new(om, 0.0, 0.0),
+                start_time: 0.0,
+                end_time: f64::INFINITY,
+            };
+            let mut r = rod(
+                m,
+                0.5,
+                100,
+                0.0,
+                [EndCondition::clamped().driven(motion), EndCondition::free()],
+                vec![],
+            );
+            let mut sc = StiffScratch::new();
+            let st = StiffSettings {
+                iterations: 10,
+                tolerance: 1e-12,
+                ..stiff_default()
+            };
+            for k in 0..5 {
+                let res = step_rod_stiff(
+                    &mut r,
+                    &settings(1e-3),
+                    &st,
+                    &mut sc,
+                    k as f64 * 1e-3,
+                    0,
+                    k,
+                    1,
+                );
+                println!(
+                    "v={vel} om={om} step {k}: {:?} {:?}",
+                    res.map(|s| s.max_strain()),
+                    sc.report()
+                );
+            }
+        }
+    }
+    if what == "timing" {
+        let m = PRESETS[0].material();
+        for n in [1000] {
+            let mut r = rod(
+                m,
+                1.0,
+                n,
+                0.0,
+                [EndCondition::pinned(), EndCondition::free()],
+                vec![],
+            );
+            let s = settings(5e-8);
+            let t0 = Instant::now();
+            let steps = 2000;
+            step_rod_batch(&mut r, &s, 0.0, 0, 0, steps).unwrap();
+            println!(
+                "explicit n={n}: {:.1} us/step",
+                t0.elapsed().as_secs_f64() / steps as f64 * 1e6
+            );
+            for (iters, refactor) in [
+                (1, Refactor::EveryStep),
+                (2, Refactor::EveryStep),
+                (3, Refactor::Lagged),
+                (2, Refactor::EveryIteration),
+            ] {
+                let mut r = rod(
+                    m,
+                    1.0,
+                    n,
+                    0.0,
+                    [EndCondition::pinned(), EndCondition::free()],
+                    vec![],
+                );
+                let st = StiffSettings {
+                    iterations: iters,
+                    tolerance: 0.0,
+                    refactor,
+                    ..StiffSettings::default()
+                };
+                let mut scratch = StiffScratch::new();
+                let s = settings(1e-3);
+                let steps = 200;
+                let t0 = Instant::now();
+                let mut res = Ok(());
+                for k in 0..steps {
+                    if let Err(e) =
+                        step_rod_stiff(&mut r, &s, &st, &mut scratch, k as f64 * 1e-3, 0, k, 1)
+                    {
+                        res = Err(e);
+                        break;
+                    }
+                }
+                println!(
+                    "{res:?} tip z {:.4} res {:.2e}",
+                    r.state.positions[n].z,
+                    scratch.report().residual
+                );
+                println!(
+                    "stiff n={n} iters={iters} {refactor:?}: {:.1} us/step, facts {}",
+                    t0.elapsed().as_secs_f64() / steps as f64 * 1e6,
+                    scratch.report().factorisations
+                );
+            }
+        }
+    }
+    if what == "gs" {
+        for iters in [10, 100, 1000] {
+            let st = StiffSettings {
+                scheme: StiffScheme::GaussSeidel,
+                iterations: iters,
+                tolerance: 0.0,
+                ..StiffSettings::default()
+            };
+            for p in &PRESETS[..1] {
+                cantilever(p, 1e-3, 500, &st, false);
+            }
+        }
+    }
+}
