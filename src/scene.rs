@@ -9,7 +9,7 @@
 //! which is how one scene file serves several resolutions.
 
 use crate::environment::Environment;
-use crate::sim::{RodBuilder, SimulationBuilder};
+use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
 use backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
 use cosserat_model::Material;
 use cosserat_model::rod::RestShape;
@@ -73,6 +73,50 @@ pub struct SceneFile {
     pub rods: Vec<RodSection>,
     /// The static mesh the rods collide with, if any.
     pub environment: Option<EnvironmentSection>,
+    /// Instruments bound inside each other (paper section 3.4): `[[binding]]`.
+    #[serde(default, rename = "binding")]
+    pub bindings: Vec<BindingSection>,
+    /// Rod–rod and self-contact (paper section "Collisions and self-collisions").
+    pub rod_contact: Option<RodContactSection>,
+    /// Filtering of the reaction force reported at held ends.
+    pub haptics: Option<HapticsSection>,
+}
+
+/// `[[binding]]`: rod `inner` slides inside rod `outer`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BindingSection {
+    /// Index of the inner rod (the guidewire).
+    pub inner: usize,
+    /// Index of the outer rod (the catheter).
+    pub outer: usize,
+    /// `"none"` (v0), `"one-way"` (v1) or `"two-way"` (v2, default).
+    pub variant: Option<String>,
+    /// Inner points farther than this from the outer centreline are free [m] (default: the
+    /// outer rod's radius).
+    pub capture: Option<f64>,
+}
+
+/// `[rod_contact]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RodContactSection {
+    /// Whether each rod collides with itself (default true).
+    pub self_collisions: Option<bool>,
+    /// Coulomb friction between rods (default static 0.3, kinetic 0.2).
+    pub friction: Option<FrictionSection>,
+    /// Speculative contact margin [m] (default 1e-4).
+    pub margin: Option<f64>,
+    /// Segments per broad-phase bounding sphere (default 4).
+    pub segments_per_sphere: Option<usize>,
+}
+
+/// `[haptics]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HapticsSection {
+    /// Cut-off of the first-order low-pass filter on end reactions [Hz] (default 50).
+    pub cutoff_hz: f64,
 }
 
 /// `[environment]`.
@@ -159,6 +203,23 @@ pub struct SolverSection {
     pub gravity: [f64; 3],
     /// Strain beyond which the run is declared diverged.
     pub divergence_strain: f64,
+    /// `"explicit"` (the paper's scheme, default) or `"stiff"` (implicit bending and twisting:
+    /// stable at haptic time steps for real instruments; `docs/stiff-solver.md`).
+    pub scheme: String,
+    /// Settings of the stiff scheme.
+    pub stiff: Option<StiffSection>,
+}
+
+/// `[solver.stiff]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StiffSection {
+    /// Newton iterations per step (default 2).
+    pub iterations: Option<usize>,
+    /// Residual at which iterations stop early (default 0: always run `iterations`).
+    pub tolerance: Option<f64>,
+    /// Floor on frame inertia as a multiple of `m l² / 12` (default 1).
+    pub inertia_floor: Option<f64>,
 }
 
 impl Default for SolverSection {
@@ -173,6 +234,8 @@ impl Default for SolverSection {
             precision: "f32".into(),
             gravity: [0.0, 0.0, -9.81],
             divergence_strain: 0.5,
+            scheme: "explicit".into(),
+            stiff: None,
         }
     }
 }
@@ -245,22 +308,34 @@ pub enum ShapeSection {
         /// Length already inside the vessel [m].
         inserted: f64,
     },
+    /// One strand (0 or 1) of a loosely formed double fisherman's knot (paper section 3.5),
+    /// sized by the rod's radius: each strand's standing part is fixed at its first point,
+    /// `standing` metres from the knot's centre, and its tail is its last point.
+    FishermansKnot {
+        /// Which strand: 0 (fixed on the −x side) or 1 (the same turned half a turn about z).
+        strand: u8,
+        /// Distance of the first point from the knot's centre [m] (default 80 radii).
+        standing: Option<f64>,
+    },
 }
 
 /// `rod.material`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSection {
+    /// A named material (`nitinol`, `steel`, `catheter-polymer`, `suture`;
+    /// `cosserat_model::presets`); the fields below override it.
+    pub preset: Option<String>,
     /// Young's modulus [Pa].
-    pub young_modulus: f64,
+    pub young_modulus: Option<f64>,
     /// Shear modulus [Pa]; default `E / (2 (1 + ν))` with `poisson_ratio`.
     pub shear_modulus: Option<f64>,
     /// Poisson's ratio, used only when `shear_modulus` is absent (default 0.5: incompressible).
     pub poisson_ratio: Option<f64>,
     /// Density [kg/m³].
-    pub density: f64,
+    pub density: Option<f64>,
     /// Radius [m].
-    pub radius: f64,
+    pub radius: Option<f64>,
 }
 
 /// `rod.damping`.
@@ -515,14 +590,142 @@ impl Checker<'_> {
             .ordering(ordering)
             .gravity(gravity)
             .double_precision(f64_precision)
-            .divergence_strain(divergence_strain);
+            .divergence_strain(divergence_strain)
+            .stiff_solver(self.stiff(s)?);
         for (i, rod) in scene.rods.iter().enumerate() {
             b.add_rod(self.rod(i, rod, environment.as_ref())?);
         }
+        b = self.interactions(scene, b)?;
         if let Some(env) = environment {
             b = b.environment(env);
         }
         Ok((b, RunLength { steps }))
+    }
+
+    /// `[[binding]]`, `[rod_contact]` and `[haptics]`.
+    fn interactions(
+        &self,
+        scene: &SceneFile,
+        mut b: SimulationBuilder,
+    ) -> Result<SimulationBuilder, SceneError> {
+        let n = scene.rods.len();
+        for (k, bs) in scene.bindings.iter().enumerate() {
+            let f = |name: &str| format!("binding[{k}].{name}");
+            for (name, v) in [("inner", bs.inner), ("outer", bs.outer)] {
+                if v >= n {
+                    return Err(self.invalid(
+                        f(name),
+                        v,
+                        &format!("expected a rod index in 0 ..= {}", n - 1),
+                    ));
+                }
+            }
+            if bs.inner == bs.outer {
+                return Err(self.invalid(f("outer"), bs.outer, "expected a rod other than inner"));
+            }
+            let variant = match bs.variant.as_deref() {
+                Some("none" | "v0") => BindingVariant::None,
+                Some("one-way" | "v1") => BindingVariant::OneWay,
+                None | Some("two-way" | "v2") => BindingVariant::TwoWay,
+                Some(other) => {
+                    return Err(self.invalid(
+                        f("variant"),
+                        other,
+                        "expected \"none\", \"one-way\" or \"two-way\"",
+                    ));
+                }
+            };
+            let capture = bs
+                .capture
+                .map(|c| self.positive(&f("capture"), c))
+                .transpose()?;
+            b = b.bind_with(BindingSpec {
+                inner: bs.inner,
+                outer: bs.outer,
+                variant,
+                capture,
+            });
+        }
+        if let Some(rc) = &scene.rod_contact {
+            let mut spec = RodContactSpec::default();
+            if let Some(x) = rc.self_collisions {
+                spec.self_collisions = x;
+            }
+            if let Some(fr) = &rc.friction {
+                let mu_s =
+                    self.non_negative("rod_contact.friction.static", fr.static_coefficient)?;
+                let mu_k = self.non_negative("rod_contact.friction.kinetic", fr.kinetic)?;
+                if mu_k > mu_s {
+                    return Err(self.invalid(
+                        "rod_contact.friction.kinetic",
+                        mu_k,
+                        "expected kinetic <= static",
+                    ));
+                }
+                spec.friction = constraints::Friction {
+                    static_coefficient: mu_s,
+                    kinetic_coefficient: mu_k,
+                };
+            }
+            if let Some(m) = rc.margin {
+                spec.margin = self.non_negative("rod_contact.margin", m)?;
+            }
+            if let Some(k) = rc.segments_per_sphere {
+                if k == 0 {
+                    return Err(self.invalid(
+                        "rod_contact.segments_per_sphere",
+                        k,
+                        "expected at least 1",
+                    ));
+                }
+                spec.segments_per_sphere = k;
+            }
+            b = b.rod_contacts(spec);
+        }
+        if let Some(h) = &scene.haptics {
+            b = b.reaction_cutoff_hz(self.positive("haptics.cutoff_hz", h.cutoff_hz)?);
+        }
+        Ok(b)
+    }
+
+    fn stiff(&self, s: &SolverSection) -> Result<Option<backend_cpu::StiffSettings>, SceneError> {
+        match s.scheme.as_str() {
+            "explicit" => {
+                if s.stiff.is_some() {
+                    return Err(self.invalid(
+                        "solver.stiff",
+                        "[solver.stiff]",
+                        "only used with solver.scheme = \"stiff\"",
+                    ));
+                }
+                Ok(None)
+            }
+            "stiff" => {
+                let mut st = backend_cpu::StiffSettings::default();
+                if let Some(x) = &s.stiff {
+                    if let Some(n) = x.iterations {
+                        if !(1..=100).contains(&n) {
+                            return Err(self.invalid(
+                                "solver.stiff.iterations",
+                                n,
+                                "expected 1 ..= 100",
+                            ));
+                        }
+                        st.iterations = n;
+                    }
+                    if let Some(t) = x.tolerance {
+                        st.tolerance = self.non_negative("solver.stiff.tolerance", t)?;
+                    }
+                    if let Some(f) = x.inertia_floor {
+                        st.inertia_floor = self.non_negative("solver.stiff.inertia_floor", f)?;
+                    }
+                }
+                Ok(Some(st))
+            }
+            other => {
+                Err(self.invalid("solver.scheme", other, "expected \"explicit\" or \"stiff\""))
+            }
+        }
     }
 
     fn environment(&self, e: &EnvironmentSection) -> Result<Environment, SceneError> {
@@ -620,8 +823,41 @@ impl Checker<'_> {
             other => other,
         };
         let m = &r.material;
-        let young = self.positive(&f("material.young_modulus"), m.young_modulus)?;
-        let shear = match (m.shear_modulus, m.poisson_ratio) {
+        let preset = match &m.preset {
+            None => None,
+            Some(name) => Some(cosserat_model::presets::preset(name).ok_or_else(|| {
+                let names: Vec<_> = cosserat_model::presets::PRESETS
+                    .iter()
+                    .map(|p| p.name)
+                    .collect();
+                self.invalid(
+                    f("material.preset"),
+                    name,
+                    &format!("expected one of {}", names.join(", ")),
+                )
+            })?),
+        };
+        let required = |field: &str, value: Option<f64>, from_preset: Option<f64>| {
+            value.or(from_preset).ok_or_else(|| {
+                self.invalid(f(field), "missing", "required unless a preset gives it")
+            })
+        };
+        let young = self.positive(
+            &f("material.young_modulus"),
+            required(
+                "material.young_modulus",
+                m.young_modulus,
+                preset.map(|p| p.young_modulus),
+            )?,
+        )?;
+        let density = required("material.density", m.density, preset.map(|p| p.density))?;
+        let radius = required("material.radius", m.radius, preset.map(|p| p.radius))?;
+        let poisson = m.poisson_ratio.or(if m.shear_modulus.is_none() {
+            preset.map(|p| p.poisson_ratio)
+        } else {
+            None
+        });
+        let shear = match (m.shear_modulus, poisson) {
             (Some(g), None) => self.positive(&f("material.shear_modulus"), g)?,
             (Some(_), Some(_)) => {
                 return Err(self.invalid(
@@ -645,8 +881,8 @@ impl Checker<'_> {
         let material = Material::new(
             young,
             shear,
-            self.positive(&f("material.density"), m.density)?,
-            self.positive(&f("material.radius"), m.radius)?,
+            self.positive(&f("material.density"), density)?,
+            self.positive(&f("material.radius"), radius)?,
         );
         let mut rb = match &r.shape {
             ShapeSection::Straight {
@@ -747,6 +983,27 @@ impl Checker<'_> {
                 let back = length - inserted;
                 let start = [p[0] - d[0] * back, p[1] - d[1] * back, p[2] - d[2] * back];
                 RodBuilder::straight(start, d, length, elements.unwrap_or(100), material)
+            }
+            ShapeSection::FishermansKnot { strand, standing } => {
+                if *strand > 1 {
+                    return Err(self.invalid(f("shape.strand"), strand, "expected 0 or 1"));
+                }
+                let r = material.radius;
+                let standing = match standing {
+                    Some(l) => self.positive(&f("shape.standing"), *l)?,
+                    None => 80.0 * r,
+                };
+                if standing < 20.0 * r {
+                    return Err(self.invalid(
+                        f("shape.standing"),
+                        standing,
+                        "expected at least 20 rod radii (the knot's own extent)",
+                    ));
+                }
+                let pts = fishermans_knot_strand(*strand, r, standing);
+                RodBuilder::polyline(pts, material)
+                    .resampled(elements.unwrap_or(256))
+                    .map_err(|k| self.invalid(f("shape"), k, "a degenerate knot polyline"))?
             }
         };
         rb = match &r.rest_shape {
@@ -906,4 +1163,79 @@ impl Checker<'_> {
         }
         Ok(cond)
     }
+}
+
+/// One strand of a loosely formed double fisherman's knot (paper section 3.5), for a rod of
+/// radius `r`, as a dense polyline.
+///
+/// The knot's axis is x. Strand 0 is fixed at `(−standing, δ, 0)` and runs along `y = δ` to
+/// beyond its knot at `x ∈ [c, c + w]`, turns back outwards (a hairpin in the plane `z = 0`),
+/// wraps twice around the axis at radius `R` towards −x (a double overhand around both
+/// standing parts), and is tucked back through its own turns at `(y, z) = (0, ρ)` towards +x,
+/// ending in its tail. Strand 1 is strand 0 turned half a turn about z, so its knot grips
+/// strand 0's standing part and the two tucks never meet. All distances are multiples of `r`,
+/// chosen so that no two parts are closer than `2r` at the start (δ = ρ = 3r, R = 7r, two
+/// turns over w = 8r).
+fn fishermans_knot_strand(strand: u8, r: f64, standing: f64) -> Vec<[f64; 3]> {
+    use std::f64::consts::PI;
+    let (delta, rho, big_r, w, g, c, tail) = (
+        3.0 * r,
+        3.0 * r,
+        7.0 * r,
+        8.0 * r,
+        4.0 * r,
+        10.0 * r,
+        25.0 * r,
+    );
+    let step = 0.25 * r;
+    let mut pts: Vec<[f64; 3]> = Vec::new();
+    let line = |pts: &mut Vec<[f64; 3]>, a: [f64; 3], b: [f64; 3]| {
+        let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+        let k = (len / step).ceil().max(1.0) as usize;
+        for i in 1..=k {
+            let t = i as f64 / k as f64;
+            pts.push([
+                a[0] + (b[0] - a[0]) * t,
+                a[1] + (b[1] - a[1]) * t,
+                a[2] + (b[2] - a[2]) * t,
+            ]);
+        }
+    };
+    pts.push([-standing, delta, 0.0]);
+    // Standing part, through the other strand's knot and its own.
+    line(&mut pts, [-standing, delta, 0.0], [c + w + g, delta, 0.0]);
+    // Hairpin outwards to the radius of the turns.
+    let (hc, hr) = ((delta + big_r) / 2.0, (big_r - delta) / 2.0);
+    let k = 24;
+    for i in 1..=k {
+        let a = -PI / 2.0 + PI * i as f64 / k as f64;
+        pts.push([c + w + g + hr * a.cos(), hc + hr * a.sin(), 0.0]);
+    }
+    line(&mut pts, [c + w + g, big_r, 0.0], [c + w, big_r, 0.0]);
+    // Two turns towards −x.
+    let k = 160;
+    for i in 1..=k {
+        let phi = 4.0 * PI * i as f64 / k as f64;
+        pts.push([
+            c + w - w * phi / (4.0 * PI),
+            big_r * phi.cos(),
+            big_r * phi.sin(),
+        ]);
+    }
+    // Inwards, a quarter turn further, to the tuck.
+    let k = 24;
+    for i in 1..=k {
+        let t = i as f64 / k as f64;
+        let phi = 4.0 * PI + 0.5 * PI * t;
+        let rad = big_r + (rho - big_r) * t;
+        pts.push([c - g * t, rad * phi.cos(), rad * phi.sin()]);
+    }
+    // Back through the turns, and the tail.
+    line(&mut pts, [c - g, 0.0, rho], [c + w + g + tail, 0.0, rho]);
+    if strand == 1 {
+        for p in &mut pts {
+            *p = [-p[0], -p[1], p[2]];
+        }
+    }
+    pts
 }

@@ -6,10 +6,12 @@
 //! scene file or a command-line flag can choose them.
 
 use crate::environment::Environment;
+pub use backend_cpu::{BindingSpec, CouplingStats, EndReaction, RodContactSpec};
 use backend_cpu::{
     CpuRod, Divergence, EndCondition, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
     StepStats,
 };
+pub use constraints::BindingVariant;
 use cosserat_model::energy::{Energies, ForceModel, energies};
 use cosserat_model::quat::directors;
 use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
@@ -265,6 +267,15 @@ pub struct SimulationBuilder {
     double_precision: bool,
     backend: Backend,
     environment: Option<Environment>,
+    /// Instruments bound inside each other (paper section 3.4).
+    bindings: Vec<BindingSpec>,
+    /// Rod–rod and self-contact, if on.
+    rod_contact: Option<RodContactSpec>,
+    /// The stiff solver (implicit bending, twisting and coupling), instead of the paper's
+    /// explicit scheme.
+    stiff: Option<backend_cpu::StiffSettings>,
+    /// Cut-off of the low-pass filter on end reactions [Hz]; `None`: the backend's default.
+    reaction_cutoff_hz: Option<f64>,
 }
 
 impl Default for SimulationBuilder {
@@ -289,7 +300,50 @@ impl SimulationBuilder {
             double_precision: false,
             backend: Backend::Cpu,
             environment: None,
+            bindings: Vec::new(),
+            rod_contact: None,
+            reaction_cutoff_hz: None,
+            stiff: None,
         }
+    }
+
+    /// Uses the stiff solver (`docs/stiff-solver.md`) with these settings, or the paper's
+    /// explicit scheme with `None` (the default). The stiff solver's stable time step does not
+    /// depend on the material, so real guidewires run at haptic rates (1e-3 s).
+    pub fn stiff_solver(mut self, settings: Option<backend_cpu::StiffSettings>) -> Self {
+        self.stiff = settings;
+        self
+    }
+
+    /// Binds rod `inner` inside rod `outer` (a guidewire in a catheter) with the given variant:
+    /// the inner rod's points inside the outer rod are held on its centreline while they slide
+    /// along it (see `constraints::binding`).
+    pub fn bind(mut self, inner: RodHandle, outer: RodHandle, variant: BindingVariant) -> Self {
+        self.bindings.push(BindingSpec {
+            inner: inner.0,
+            outer: outer.0,
+            variant,
+            capture: None,
+        });
+        self
+    }
+
+    /// Adds a binding described in full (indices of the rods, variant, capture distance).
+    pub fn bind_with(mut self, spec: BindingSpec) -> Self {
+        self.bindings.push(spec);
+        self
+    }
+
+    /// Turns on rod–rod and self-contact with these settings.
+    pub fn rod_contacts(mut self, spec: RodContactSpec) -> Self {
+        self.rod_contact = Some(spec);
+        self
+    }
+
+    /// Cut-off frequency [Hz] of the low-pass filter on the reported end reactions.
+    pub fn reaction_cutoff_hz(mut self, hz: f64) -> Self {
+        self.reaction_cutoff_hz = Some(hz);
+        self
     }
 
     /// The static mesh the rods collide with.
@@ -384,6 +438,24 @@ impl SimulationBuilder {
             }
         }
         let env = self.environment.as_ref();
+        if let Some(hz) = self.reaction_cutoff_hz
+            && !(hz > 0.0)
+        {
+            return Err(BuildError::Setting(format!(
+                "reaction cut-off {hz} Hz is invalid: expected a number > 0"
+            )));
+        }
+        let coupled = self.rod_contact.is_some() || !self.bindings.is_empty();
+        if coupled && self.backend == Backend::Gpu {
+            return Err(BuildError::Setting(
+                "bindings and rod contacts run on the CPU backends only".into(),
+            ));
+        }
+        if self.backend == Backend::Gpu && self.stiff.is_some() {
+            return Err(BuildError::Setting(
+                "the GPU backend runs the explicit scheme only: use --backend cpu for solver.scheme = \"stiff\"".into(),
+            ));
+        }
         let world = if self.backend == Backend::Gpu {
             gpu_world(
                 Rods::build(&self.rods, &cast_settings(s), env)?,
@@ -391,9 +463,17 @@ impl SimulationBuilder {
                 env.is_some(),
             )?
         } else if self.double_precision {
-            World::F64(Rods::build(&self.rods, s, env)?)
+            World::F64(
+                Rods::build(&self.rods, s, env)?
+                    .couple(&self)?
+                    .stiffen(&self)?,
+            )
         } else {
-            World::F32(Rods::build(&self.rods, &cast_settings(s), env)?)
+            World::F32(
+                Rods::build(&self.rods, &cast_settings(s), env)?
+                    .couple(&self)?
+                    .stiffen(&self)?,
+            )
         };
         Ok(Simulation {
             world,
@@ -430,6 +510,10 @@ struct Rods<T: Real> {
     rods: Vec<CpuRod<T>>,
     settings: SolverSettings<T>,
     stats: Vec<StepStats>,
+    /// Bindings and rod contacts; `None` steps the rods independently.
+    coupling: Option<backend_cpu::Coupling<T>>,
+    /// The stiff solver's settings and one scratch per rod, when it is used.
+    stiff: Option<(backend_cpu::StiffSettings, Vec<backend_cpu::StiffScratch>)>,
 }
 
 impl<T: Real> Rods<T> {
@@ -450,11 +534,77 @@ impl<T: Real> Rods<T> {
             rods,
             settings: *settings,
             stats: Vec::new(),
+            coupling: None,
+            stiff: None,
         })
+    }
+
+    /// Switches to the stiff solver if the builder asks for it.
+    fn stiffen(mut self, b: &SimulationBuilder) -> Result<Self, BuildError> {
+        if let Some(st) = b.stiff {
+            if self.coupling.is_some() || b.environment.is_some() {
+                return Err(BuildError::Setting(
+                    "the stiff solver does not handle contacts or bindings yet: use solver.scheme = \"explicit\"".into(),
+                ));
+            }
+            let scratch = self
+                .rods
+                .iter()
+                .map(|_| backend_cpu::StiffScratch::new())
+                .collect();
+            self.stiff = Some((st, scratch));
+        }
+        Ok(self)
+    }
+
+    /// Applies the builder's bindings, rod contacts and reaction filter.
+    fn couple(mut self, b: &SimulationBuilder) -> Result<Self, BuildError> {
+        if let Some(hz) = b.reaction_cutoff_hz {
+            self.rods = std::mem::take(&mut self.rods)
+                .into_iter()
+                .map(|r| r.with_reaction_cutoff(hz))
+                .collect();
+        }
+        if b.rod_contact.is_some() || !b.bindings.is_empty() {
+            let c = backend_cpu::Coupling::new(&self.rods, &b.bindings, b.rod_contact)
+                .map_err(BuildError::Setting)?;
+            self.coupling = c.is_active().then_some(c);
+        }
+        Ok(self)
     }
 
     /// Steps every rod `n` times on the CPU; returns the largest strain seen.
     fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
+        if let Some((st, scratch)) = self.stiff.as_mut() {
+            self.stats.clear();
+            for (i, (rod, sc)) in self.rods.iter_mut().zip(scratch.iter_mut()).enumerate() {
+                let stats =
+                    backend_cpu::step_rod_stiff(rod, &self.settings, st, sc, time, i, step, n)?;
+                self.stats.push(stats);
+            }
+            return Ok(self
+                .stats
+                .iter()
+                .map(StepStats::max_strain)
+                .fold(0.0, f64::max));
+        }
+        if let Some(c) = self.coupling.as_mut() {
+            // Coupled rods are stepped together, serially.
+            backend_cpu::step_coupled_batch(
+                &mut self.rods,
+                c,
+                &self.settings,
+                time,
+                step,
+                n,
+                &mut self.stats,
+            )?;
+            return Ok(self
+                .stats
+                .iter()
+                .map(StepStats::max_strain)
+                .fold(0.0, f64::max));
+        }
         backend_cpu::step_rods_batch(
             &mut self.rods,
             &self.settings,
@@ -656,6 +806,24 @@ impl Simulation {
         }
         self.time = self.steps as f64 * self.dt;
         result.map(|_| ())
+    }
+
+    /// The filtered reaction at end `end` (0: first point, 1: last point) of a rod after the
+    /// last step: the force and torque the holder applies to the rod (a haptic device renders
+    /// its negative); `None` for a free end. See `backend_cpu::reaction`.
+    pub fn end_reaction(&self, h: RodHandle, end: usize) -> Option<EndReaction> {
+        with_rods!(&self.world, w => w.rods[h.0].end_reaction(end))
+    }
+
+    /// Largest filtered reaction force at any held end of any rod so far [N]; `None` when no
+    /// end is held.
+    pub fn max_reaction_force(&self) -> Option<f64> {
+        with_rods!(&self.world, w => w.rods.iter().filter_map(|r| r.max_reaction_force()).reduce(f64::max))
+    }
+
+    /// Measurements of bindings and rod contacts; `None` when the rods do not interact.
+    pub fn coupling_stats(&self) -> Option<CouplingStats> {
+        with_rods!(&self.world, w => w.coupling.as_ref().map(|c| c.stats()))
     }
 
     /// Simulated time [s].
