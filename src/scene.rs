@@ -203,6 +203,8 @@ pub struct SolverSection {
     pub gravity: [f64; 3],
     /// Strain beyond which the run is declared diverged.
     pub divergence_strain: f64,
+    /// Speed [m/s] beyond which the run is declared diverged.
+    pub divergence_speed: f64,
     /// `"explicit"` (the paper's scheme, default) or `"stiff"` (implicit bending and twisting:
     /// stable at haptic time steps for real instruments; `docs/stiff-solver.md`).
     pub scheme: String,
@@ -234,6 +236,7 @@ impl Default for SolverSection {
             precision: "f32".into(),
             gravity: [0.0, 0.0, -9.81],
             divergence_strain: 0.5,
+            divergence_speed: 1e3,
             scheme: "explicit".into(),
             stiff: None,
         }
@@ -591,6 +594,7 @@ impl Checker<'_> {
             .gravity(gravity)
             .double_precision(f64_precision)
             .divergence_strain(divergence_strain)
+            .divergence_speed(self.positive("solver.divergence_speed", s.divergence_speed)?)
             .stiff_solver(self.stiff(s)?);
         for (i, rod) in scene.rods.iter().enumerate() {
             b.add_rod(self.rod(i, rod, environment.as_ref())?);

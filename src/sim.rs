@@ -274,6 +274,8 @@ pub struct SimulationBuilder {
     /// The stiff solver (implicit bending, twisting and coupling), instead of the paper's
     /// explicit scheme.
     stiff: Option<backend_cpu::StiffSettings>,
+    /// Speed at which a run is declared diverged [m/s].
+    divergence_speed: f64,
     /// Cut-off of the low-pass filter on end reactions [Hz]; `None`: the backend's default.
     reaction_cutoff_hz: Option<f64>,
 }
@@ -304,6 +306,7 @@ impl SimulationBuilder {
             rod_contact: None,
             reaction_cutoff_hz: None,
             stiff: None,
+            divergence_speed: 1e3,
         }
     }
 
@@ -390,6 +393,13 @@ impl SimulationBuilder {
     /// Strain at which a run is declared diverged.
     pub fn divergence_strain(mut self, s: f64) -> Self {
         self.settings.divergence_strain = s;
+        self
+    }
+    /// Speed [m/s] at which a run is declared diverged (default 1000 m/s), checked after every
+    /// call to [`Simulation::run`]: an explicit step past its stability limit can pump energy
+    /// into a rod while its segment lengths still hold.
+    pub fn divergence_speed(mut self, v: f64) -> Self {
+        self.divergence_speed = v;
         self
     }
     /// The backend that steps the rods.
@@ -491,6 +501,7 @@ impl SimulationBuilder {
             max_strain: 0.0,
             extensible: s.extensible,
             environment: self.environment,
+            divergence_speed: self.divergence_speed,
         })
     }
 }
@@ -750,6 +761,7 @@ pub struct Simulation {
     max_strain: f64,
     extensible: bool,
     environment: Option<Environment>,
+    divergence_speed: f64,
 }
 
 /// Contact measurements of a whole simulation.
@@ -797,6 +809,8 @@ impl Simulation {
             Ok(worst) => {
                 self.max_strain = self.max_strain.max(*worst);
                 self.steps += n;
+                self.time = self.steps as f64 * self.dt;
+                return self.check_speed();
             }
             Err(e) => {
                 if let Some(d) = e.divergence() {
@@ -824,6 +838,34 @@ impl Simulation {
     /// Measurements of bindings and rod contacts; `None` when the rods do not interact.
     pub fn coupling_stats(&self) -> Option<CouplingStats> {
         with_rods!(&self.world, w => w.coupling.as_ref().map(|c| c.stats()))
+    }
+
+    /// The runaway-energy check: the first point of any rod faster than the divergence speed,
+    /// or the first frame whose surface (at the rod's radius) spins faster than it. Twisting is
+    /// usually the fastest mode, so a frame can spin away while the centreline still looks fine.
+    fn check_speed(&self) -> Result<(), StepError> {
+        let limit = self.divergence_speed;
+        let step = self.steps;
+        with_rods!(&self.world, w => {
+            for (rod, r) in w.rods.iter().enumerate() {
+                let radius = r.params.radius;
+                let points = r.state.velocities.iter().map(|v| v.norm());
+                let frames = r.state.angular_velocities.iter().map(|w| w.norm() * radius);
+                for (element, speed) in points.chain(frames).enumerate() {
+                    let element = element % r.state.velocities.len();
+                    let speed = speed.to_f64();
+                    if !(speed <= limit) {
+                        let quantity = if speed.is_finite() {
+                            backend_cpu::DivergedQuantity::Speed(speed)
+                        } else {
+                            backend_cpu::DivergedQuantity::NonFinitePosition
+                        };
+                        return Err(StepError::Diverged(Divergence { rod, element, step, quantity }));
+                    }
+                }
+            }
+            Ok(())
+        })
     }
 
     /// Simulated time [s].

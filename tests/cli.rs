@@ -193,3 +193,27 @@ fn the_gpu_backend_agrees_with_the_cpu() {
         );
     }
 }
+
+/// A time step past the torsional stability limit spins the frames up while the segment
+/// lengths still hold; the speed check stops that run instead of reporting garbage.
+#[test]
+fn runaway_energy_is_caught_even_when_lengths_hold() {
+    let out = cosserat()
+        .args([
+            "run",
+            "scenes/pendulum.toml",
+            "--elements",
+            "1000",
+            "--steps",
+            "4000",
+            "--set",
+            "solver.dt=1.2e-4",
+            "--json",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["diverged"], true, "{v}");
+    assert!(v["divergence"].as_str().unwrap().contains("speed"), "{v}");
+}

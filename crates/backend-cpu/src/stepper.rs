@@ -172,6 +172,9 @@ pub enum DivergedQuantity {
     NonFiniteFrame,
     /// A segment's length ratio `l / l0` left the allowed band.
     Strain(f64),
+    /// A point moved faster than the allowed speed [m/s]: energy is running away while the
+    /// lengths still hold (an explicit scheme past its stable step).
+    Speed(f64),
 }
 
 /// A rod that diverged: which one, where, when, and what.
@@ -194,6 +197,9 @@ impl std::fmt::Display for Divergence {
             DivergedQuantity::NonFiniteFrame => "frame is not finite".to_string(),
             DivergedQuantity::Strain(s) => {
                 format!("strain |l/l0 - 1| = {s:.3e} exceeds the divergence limit")
+            }
+            DivergedQuantity::Speed(v) => {
+                format!("speed {v:.3e} m/s exceeds the divergence limit")
             }
         };
         write!(
