@@ -12,9 +12,14 @@
 //! - host-visible time per step: `step(k)` plus `read_positions()`, wall clock, divided by `k`
 //!   (for `k = 1` that is one step including the readback of all positions);
 //! - the largest GPU–CPU point discrepancy after 100 steps relative to the largest displacement.
+//!
+//! A first section measures kernel variants side by side (unrolled per-thread loops against
+//! WGSL loops, constraint constants in registers against storage loads, subgroup against
+//! workgroup layout, threads per workgroup, rods per workgroup), so that one run on the device
+//! says where the time goes.
 
 use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod};
-use backend_gpu::{GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath};
+use backend_gpu::{GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 use serde_json::{Value, json};
@@ -130,20 +135,25 @@ struct Measured {
 }
 
 /// One configuration: agreement after 100 steps, then GPU and host-visible timing.
+#[allow(clippy::too_many_arguments)]
 fn measure(
     rods: &[GpuRodInput],
     cpu: &[Vec<Vec3<f32>>],
     path: KernelPath,
     k: u32,
     budget_steps: u32,
+    max_threads: u32,
+    variant: &KernelVariant,
+    host: bool,
 ) -> Result<Measured, GpuError> {
     let opts = GpuOptions {
         path,
         timestamps: true,
-        max_threads: 256,
+        max_threads,
         ..GpuOptions::default()
     };
-    let mut sim = GpuSimulation::new(rods.to_vec(), &settings(), opts.clone())?;
+    let mut sim =
+        GpuSimulation::with_variant(rods.to_vec(), &settings(), opts.clone(), variant.clone())?;
     let kernel = sim.kernel_description();
     let mut done = 0;
     while done < CHECK_STEPS {
@@ -162,14 +172,24 @@ fn measure(
     let gpu = sim.take_gpu_time()?.map(|t| t * 1e6 / (batches * k) as f64);
     sim.check()?;
     drop(sim);
+    if !host {
+        return Ok(Measured {
+            kernel,
+            gpu_us_per_step: gpu,
+            host_us_per_step: f64::NAN,
+            agreement,
+            pass,
+        });
+    }
     // Host-visible: a simulation without timestamp queries, step(k) + read_positions().
-    let mut sim = GpuSimulation::new(
+    let mut sim = GpuSimulation::with_variant(
         rods.to_vec(),
         &settings(),
         GpuOptions {
             timestamps: false,
             ..opts
         },
+        variant.clone(),
     )?;
     sim.step(k)?;
     sim.read_positions()?;
@@ -202,8 +222,8 @@ fn main() {
             (vec![128, 1000], vec![1, 10], vec![1, 10], vec![64])
         } else {
             (
-                vec![128, 256, 512, 1000, 2048, 3072, 4096, 8192, 16384],
-                vec![1, 10, 20, 100],
+                vec![128, 256, 512, 1000, 2048, 4096, 8192, 16384],
+                vec![1, 10, 100],
                 vec![1, 10, 100, 1000, 10_000],
                 vec![64, 128, 512],
             )
@@ -230,6 +250,8 @@ fn main() {
         adapter.name, adapter.driver, adapter.timestamps
     );
 
+    let variants = variant_section(quick);
+
     let mut free_space = Vec::new();
     println!(
         "| elements | path | steps/dispatch | GPU µs/step | host µs/step (incl. readback) | GPU–CPU discrepancy / displacement |"
@@ -250,7 +272,16 @@ fn main() {
             }
             for &k in &ks {
                 let budget = if quick { 20 } else { 2000 };
-                let row = match measure(&rods, &cpu, path, k, budget) {
+                let row = match measure(
+                    &rods,
+                    &cpu,
+                    path,
+                    k,
+                    budget,
+                    256,
+                    &KernelVariant::default(),
+                    true,
+                ) {
                     Ok(m) => {
                         println!(
                             "| {n} | {path} | {k} | {} | {:.1} | {:.1e}{} |",
@@ -300,6 +331,9 @@ fn main() {
                 KernelPath::SingleWorkgroup,
                 k,
                 if quick { 20 } else { 1000 },
+                256,
+                &KernelVariant::default(),
+                true,
             ) {
                 Ok(m) => {
                     let sps = m.gpu_us_per_step.map(|g| 1e6 / g);
@@ -329,9 +363,267 @@ fn main() {
         "command": args.join(" "),
         "scene": "free-space pendulum: 1 cm elements, pinned end, released swinging at 1 rad/s, gravity, dt 20 us, 10 red-black iterations, f32",
         "agreement": format!("max |r_gpu - r_cpu| / max CPU displacement after {CHECK_STEPS} steps; pass: <= {REL_TOL} + {FLOOR_ULPS} f32 ulp of the extent"),
-        "free_space": free_space, "many_rods": many,
+        "subgroup_size": adapter.subgroup_size,
+        "variants": variants, "free_space": free_space, "many_rods": many,
     });
     std::fs::write(&out_path, serde_json::to_string_pretty(&doc).expect("json"))
         .expect("write output");
     eprintln!("wrote {out_path}");
+}
+
+/// Kernel variants side by side, GPU time at 100 steps per dispatch (10 in quick mode).
+fn variant_section(quick: bool) -> Vec<Value> {
+    let k = if quick { 10 } else { 100 };
+    let budget = if quick { 20 } else { 1000 };
+    let base = KernelVariant::default();
+    let workgroup = KernelVariant {
+        subgroups: false,
+        ..base.clone()
+    };
+    // The subgroup layout even for a single rod.
+    let sub1 = KernelVariant {
+        subgroup_min_rods: 1,
+        ..base.clone()
+    };
+    let named = |name: &str, v: &KernelVariant| (name.to_string(), v.clone());
+    let structure = [
+        named(
+            "loops, constants loaded per sweep",
+            &KernelVariant {
+                unroll: false,
+                sweep_loads: true,
+                ..workgroup.clone()
+            },
+        ),
+        named(
+            "loops",
+            &KernelVariant {
+                unroll: false,
+                ..workgroup.clone()
+            },
+        ),
+        named(
+            "unrolled, constants loaded per sweep",
+            &KernelVariant {
+                sweep_loads: true,
+                ..workgroup.clone()
+            },
+        ),
+        named("unrolled (workgroup layout)", &workgroup),
+        named(
+            "unrolled, inverseSqrt impulse",
+            &KernelVariant {
+                rsqrt: true,
+                ..workgroup.clone()
+            },
+        ),
+        named("unrolled, subgroup layout", &sub1),
+    ];
+    // (label, elements, rods, path, max threads, variant)
+    type Case = (String, usize, usize, KernelPath, u32, KernelVariant);
+    let mut cases: Vec<Case> = Vec::new();
+    for n in [128usize, 1000] {
+        for (name, v) in &structure {
+            cases.push((
+                name.clone(),
+                n,
+                1,
+                KernelPath::SingleWorkgroup,
+                256,
+                v.clone(),
+            ));
+        }
+    }
+    for threads in [128u32, 256, 512] {
+        cases.push((
+            format!("unrolled, {threads} threads max"),
+            1000,
+            1,
+            KernelPath::SingleWorkgroup,
+            threads,
+            workgroup.clone(),
+        ));
+    }
+    for threads in [64u32, 128] {
+        cases.push((
+            format!("multi-workgroup, unrolled, {threads} threads"),
+            1000,
+            1,
+            KernelPath::MultiWorkgroup,
+            threads,
+            base.clone(),
+        ));
+        cases.push((
+            format!("multi-workgroup, unrolled, {threads} threads, inverseSqrt impulse"),
+            1000,
+            1,
+            KernelPath::MultiWorkgroup,
+            threads,
+            KernelVariant {
+                rsqrt: true,
+                ..base.clone()
+            },
+        ));
+    }
+    for n in [512usize, 4096] {
+        cases.push((
+            "multi-workgroup, loops".into(),
+            n,
+            1,
+            KernelPath::MultiWorkgroup,
+            256,
+            KernelVariant {
+                unroll: false,
+                ..base.clone()
+            },
+        ));
+        cases.push((
+            "multi-workgroup, unrolled".into(),
+            n,
+            1,
+            KernelPath::MultiWorkgroup,
+            256,
+            base.clone(),
+        ));
+    }
+    cases.push((
+        "single workgroup, 1024 threads".into(),
+        4096,
+        1,
+        KernelPath::SingleWorkgroup,
+        1024,
+        workgroup.clone(),
+    ));
+    for ept in [2u32, 4, 6, 8] {
+        // Subgroup layout at the largest rod that fits with `ept` points per lane on 32 lanes.
+        let n = 32 * ept as usize - 1;
+        cases.push((
+            format!("subgroup layout, {ept} points/lane"),
+            n,
+            1,
+            KernelPath::SingleWorkgroup,
+            256,
+            sub1.clone(),
+        ));
+        cases.push((
+            format!("workgroup layout, same rod ({ept} points/lane case)"),
+            n,
+            1,
+            KernelPath::SingleWorkgroup,
+            256,
+            workgroup.clone(),
+        ));
+    }
+    for count in [100usize, 1000] {
+        for (name, v) in [("subgroup layout", &sub1), ("workgroup layout", &workgroup)] {
+            cases.push((
+                name.to_string(),
+                128,
+                count,
+                KernelPath::SingleWorkgroup,
+                256,
+                v.clone(),
+            ));
+        }
+    }
+    let many = if quick { 100 } else { 10_000 };
+    for per_wg in [1u32, 2, 4, 8] {
+        cases.push((
+            format!("subgroup layout, {per_wg} rods/workgroup"),
+            128,
+            many,
+            KernelPath::SingleWorkgroup,
+            256,
+            KernelVariant {
+                rods_per_workgroup: per_wg,
+                ..base.clone()
+            },
+        ));
+    }
+    for ept in [6u32, 8] {
+        cases.push((
+            format!("subgroup layout, 4 rods/workgroup, {ept} points/lane cap (rods of 128)"),
+            128,
+            many,
+            KernelPath::SingleWorkgroup,
+            256,
+            KernelVariant {
+                subgroup_points_per_thread: ept,
+                ..base.clone()
+            },
+        ));
+    }
+    cases.push((
+        "subgroup layout, inverseSqrt impulse".into(),
+        128,
+        many,
+        KernelPath::SingleWorkgroup,
+        256,
+        KernelVariant {
+            rsqrt: true,
+            ..base.clone()
+        },
+    ));
+    cases.push((
+        "workgroup layout, one rod per workgroup".into(),
+        128,
+        many,
+        KernelPath::SingleWorkgroup,
+        256,
+        workgroup.clone(),
+    ));
+    cases.push((
+        "workgroup layout, loops (the old kernel's structure)".into(),
+        128,
+        many,
+        KernelPath::SingleWorkgroup,
+        256,
+        KernelVariant {
+            unroll: false,
+            ..workgroup.clone()
+        },
+    ));
+
+    println!("| variant | elements | rods | GPU µs/step | kernel | discrepancy |");
+    println!("|---|---|---|---|---|---|");
+    let mut out = Vec::new();
+    type CpuRun = ((usize, usize), Vec<Vec<Vec3<f32>>>);
+    let mut cpu_cache: Vec<CpuRun> = Vec::new();
+    for (name, n, count, path, threads, variant) in cases {
+        let rods: Vec<GpuRodInput> = (0..count)
+            .map(|i| pendulum(n, i as f64 * 2.399963))
+            .collect();
+        if !cpu_cache.iter().any(|(key, _)| *key == (n, count)) {
+            cpu_cache.push(((n, count), cpu_positions(&rods, CHECK_STEPS)));
+        }
+        let cpu = &cpu_cache
+            .iter()
+            .find(|(key, _)| *key == (n, count))
+            .expect("cached")
+            .1;
+        let row = match measure(&rods, cpu, path, k, budget, threads, &variant, false) {
+            Ok(m) => {
+                println!(
+                    "| {name} | {n} | {count} | {} | {} | {:.1e}{} |",
+                    m.gpu_us_per_step.map_or("-".into(), |g| format!("{g:.2}")),
+                    m.kernel,
+                    m.agreement,
+                    if m.pass { "" } else { " FAIL" }
+                );
+                json!({"variant": name, "elements": n, "rods": count, "steps_per_dispatch": k,
+                       "kernel": m.kernel, "gpu_us_per_step": m.gpu_us_per_step,
+                       "cpu_discrepancy_rel": m.agreement, "cpu_agreement_pass": m.pass})
+            }
+            Err(e) => {
+                println!("| {name} | {n} | {count} | error: {e} | | |");
+                json!({"variant": name, "elements": n, "rods": count, "error": e.to_string()})
+            }
+        };
+        out.push(row);
+        // Keep only the CPU results of the current size (10 000-rod runs are large).
+        if cpu_cache.len() > 2 {
+            cpu_cache.remove(0);
+        }
+    }
+    out
 }

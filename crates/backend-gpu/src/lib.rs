@@ -11,7 +11,13 @@
 //!
 //! - **single workgroup**: one rod per workgroup, its points in registers (several per thread),
 //!   neighbours exchanged through workgroup memory, `k` steps per dispatch. Many rods fill the
-//!   GPU with no inter-workgroup synchronisation at all.
+//!   GPU with no inter-workgroup synchronisation at all; from 256 short rods on, where the
+//!   adapter has a fixed subgroup size, each rod runs on one subgroup instead (several per
+//!   workgroup, neighbours exchanged by shuffles, no barrier at all).
+//!
+//! Every kernel is composed as text with the per-thread loops unrolled (`shader.rs`), so a
+//! thread's points stay in registers: dynamically indexed private arrays go to local memory,
+//! and that, not synchronisation, was what made the earlier kernel slow.
 //! - **multi-workgroup (grid)**: a rod too long for one workgroup is cut into chunks, each
 //!   stepped by a co-resident workgroup on a window that overlaps its neighbours by a halo wider
 //!   than the information travels in one step. One grid barrier per step (spin on a storage
@@ -104,6 +110,47 @@ impl Default for GpuOptions {
             spin_cap: 1 << 20,
             max_threads: 256,
             max_steps_per_dispatch: 10_000,
+        }
+    }
+}
+
+/// Kernel variants the benchmark compares (see `examples/gpu_bench.rs`); not part of the stable
+/// API. [`KernelVariant::default`] is what [`GpuSimulation::new`] uses.
+#[doc(hidden)]
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct KernelVariant {
+    /// Unroll the per-thread loops at composition time, so that a thread's points live in
+    /// registers (default). `false` emits WGSL loops over dynamically indexed private arrays.
+    pub unroll: bool,
+    /// Allow the subgroup layout for short rods (one rod per subgroup, no workgroup barriers)
+    /// where the adapter has `SUBGROUP` and a fixed subgroup size (default).
+    pub subgroups: bool,
+    /// Fewest rods for which the subgroup layout is used (default 256): it has more points per
+    /// invocation and so more latency per step than the workgroup layout, which wins while the
+    /// rods leave the GPU idle; with many rods its fuller subgroups give more throughput.
+    pub subgroup_min_rods: u32,
+    /// Compute the constraint impulse with one `inverseSqrt` instead of the CPU's `sqrt` and
+    /// division (a measurement variant; default off).
+    pub rsqrt: bool,
+    /// Read rest lengths and inverse masses from storage in every constraint sweep instead of
+    /// keeping them in registers for the dispatch (a measurement variant; default off).
+    pub sweep_loads: bool,
+    /// Rods per workgroup in the subgroup layout (default 4: 128 invocations on NVIDIA).
+    pub rods_per_workgroup: u32,
+    /// Most points per invocation for which the subgroup layout is used (default 8).
+    pub subgroup_points_per_thread: u32,
+}
+
+impl Default for KernelVariant {
+    fn default() -> Self {
+        Self {
+            unroll: true,
+            subgroups: true,
+            subgroup_min_rods: 256,
+            rsqrt: false,
+            sweep_loads: false,
+            rods_per_workgroup: 4,
+            subgroup_points_per_thread: 8,
         }
     }
 }

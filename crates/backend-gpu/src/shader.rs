@@ -4,9 +4,16 @@
 //! constants (threads per workgroup, points per thread, constraint iterations, halo width) is
 //! prepended, the shared helpers of `common.wgsl` follow, and `//#if FLAG` / `//#else` /
 //! `//#endif` lines select the terms the scene uses. A scene without extensibility or damping
-//! therefore compiles none of that code, and the register arrays have compile-time sizes so the
-//! driver can keep them in registers. `override` constants cannot size function-scope arrays in
-//! WGSL, which is why text composition is used.
+//! therefore compiles none of that code. `override` constants cannot size function-scope arrays
+//! in WGSL, which is why text composition is used.
+//!
+//! Per-thread loops over a thread's points (`//#for V A B [S]` … `//#endfor`, bounds in terms of
+//! `EPT` and `XP = EPT + 2`) are **unrolled** here: every `{V}` / `{V+k}` / `{V-k}` in the block
+//! becomes a literal, so each per-thread array is indexed only by constants and the driver can
+//! keep it in registers. Dynamically indexed private arrays (what a WGSL loop over them
+//! produces) go to local memory on NVIDIA's compiler unless it happens to unroll the loop
+//! itself, and the constraint sweeps then become chains of dependent local-memory accesses; the
+//! benchmark's `loop` variant ([`KernelConfig::unroll`] off) measures exactly that difference.
 
 /// The shared quaternion / Darboux / energy helpers.
 pub(crate) const COMMON_WGSL: &str = include_str!("shaders/common.wgsl");
@@ -15,7 +22,7 @@ pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 7] = [
+pub(crate) const FLAGS: [&str; 8] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -23,7 +30,12 @@ pub(crate) const FLAGS: [&str; 7] = [
     "LOADS",
     "GRID",
     "PERSTEP",
+    "SUBGROUP",
 ];
+
+/// Measurement-only flags of `rod_step.wgsl` (see [`crate::KernelVariant`]); inextensible only.
+#[cfg(test)]
+pub(crate) const VARIANT_FLAGS: [&str; 2] = ["SWEEP_LOADS", "RSQRT"];
 
 /// Compile-time shape and feature set of one step kernel.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -38,6 +50,10 @@ pub(crate) struct KernelConfig {
     pub(crate) halo: u32,
     /// Iteration cap of the grid barrier's spin loop.
     pub(crate) spin_cap: u32,
+    /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
+    pub(crate) group: u32,
+    /// Unroll the per-thread `//#for` loops (the default); `false` emits them as WGSL loops.
+    pub(crate) unroll: bool,
     /// Enabled flags (members of [`FLAGS`]).
     pub(crate) flags: Vec<&'static str>,
 }
@@ -45,11 +61,24 @@ pub(crate) struct KernelConfig {
 impl KernelConfig {
     /// The complete WGSL source of this kernel.
     pub(crate) fn source(&self) -> String {
+        self.source_of(ROD_STEP_WGSL)
+    }
+
+    /// The complete WGSL source of `kernel` (a kernel file's text) in this configuration.
+    pub(crate) fn source_of(&self, kernel: &str) -> String {
+        // naga 30 takes subgroup built-ins without (and rejects) `enable subgroups;`; the device
+        // must have been created with `Features::SUBGROUP`.
         let prelude = format!(
-            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\n",
-            self.threads, self.per_thread, self.iterations, self.halo, self.spin_cap
+            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\n",
+            self.threads,
+            self.per_thread,
+            self.iterations,
+            self.halo,
+            self.spin_cap,
+            self.group.max(1)
         );
-        let body = preprocess(ROD_STEP_WGSL, &self.flags);
+        let body = preprocess(kernel, &self.flags);
+        let body = expand_loops(&body, self.per_thread, self.unroll);
         format!("{prelude}{COMMON_WGSL}\n{body}")
     }
 }
@@ -85,6 +114,151 @@ pub(crate) fn preprocess(src: &str, flags: &[&str]) -> String {
     out
 }
 
+/// Evaluates a loop bound: integers, `EPT`, `XP` (= `EPT + 2`) joined by `+` / `-`.
+fn bound(expr: &str, ept: u32) -> i64 {
+    let mut total = 0i64;
+    let mut sign = 1i64;
+    let mut term = String::new();
+    let mut flush = |term: &mut String, sign: i64| {
+        let t = term.trim();
+        if !t.is_empty() {
+            let v = match t {
+                "EPT" => i64::from(ept),
+                "XP" => i64::from(ept) + 2,
+                n => n
+                    .parse::<i64>()
+                    .unwrap_or_else(|_| panic!("bad loop bound term `{n}`")),
+            };
+            total += sign * v;
+        }
+        term.clear();
+    };
+    for c in expr.chars() {
+        match c {
+            '+' | '-' => {
+                flush(&mut term, sign);
+                sign = if c == '-' { -1 } else { 1 };
+            }
+            c => term.push(c),
+        }
+    }
+    flush(&mut term, sign);
+    total
+}
+
+/// Replaces `{var}`, `{var+k}` and `{var-k}` in `line` by `value(offset)`.
+fn substitute(line: &str, var: &str, value: &dyn Fn(i64) -> String) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut rest = line;
+    let open = format!("{{{var}");
+    while let Some(at) = rest.find(&open) {
+        let after = &rest[at + open.len()..];
+        let Some(close) = after.find('}') else { break };
+        let inner = after[..close].trim();
+        let offset = if inner.is_empty() {
+            Some(0)
+        } else if let Some(k) = inner.strip_prefix('+') {
+            k.trim().parse::<i64>().ok()
+        } else if let Some(k) = inner.strip_prefix('-') {
+            k.trim().parse::<i64>().ok().map(|k| -k)
+        } else {
+            None
+        };
+        match offset {
+            Some(o) => {
+                out.push_str(&rest[..at]);
+                out.push_str(&value(o));
+                rest = &after[close + 1..];
+            }
+            None => {
+                out.push_str(&rest[..at + open.len()]);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// Expands `//#for VAR FROM TO [STEP]` … `//#endfor` blocks (nestable): unrolled into one
+/// `{ … }` copy per index with literal indices, or emitted as a WGSL `for` loop.
+pub(crate) fn expand_loops(src: &str, ept: u32, unroll: bool) -> String {
+    let lines: Vec<&str> = src.lines().collect();
+    let mut out = String::with_capacity(src.len() * 2);
+    expand_block(&lines, ept, unroll, &mut out);
+    out
+}
+
+fn expand_block(lines: &[&str], ept: u32, unroll: bool, out: &mut String) {
+    let mut i = 0;
+    while i < lines.len() {
+        let t = lines[i].trim();
+        let Some(spec) = t.strip_prefix("//#for ") else {
+            out.push_str(lines[i]);
+            out.push('\n');
+            i += 1;
+            continue;
+        };
+        // Find the matching //#endfor.
+        let mut depth = 1;
+        let mut j = i + 1;
+        while j < lines.len() {
+            let u = lines[j].trim();
+            if u.starts_with("//#for ") {
+                depth += 1;
+            } else if u == "//#endfor" {
+                depth -= 1;
+                if depth == 0 {
+                    break;
+                }
+            }
+            j += 1;
+        }
+        assert!(j < lines.len(), "unterminated //#for {spec}");
+        let parts: Vec<&str> = spec.split_whitespace().collect();
+        assert!(
+            parts.len() == 3 || parts.len() == 4,
+            "//#for VAR FROM TO [STEP], got `{spec}`"
+        );
+        let var = parts[0];
+        let (from, to) = (bound(parts[1], ept), bound(parts[2], ept));
+        let step = parts.get(3).map_or(1, |s| bound(s, ept)).max(1);
+        let body = &lines[i + 1..j];
+        if unroll {
+            let mut k = from;
+            while k < to {
+                let copy: Vec<String> = body
+                    .iter()
+                    .map(|l| substitute(l, var, &|o| format!("{}u", k + o)))
+                    .collect();
+                let copy: Vec<&str> = copy.iter().map(String::as_str).collect();
+                out.push_str("{\n");
+                expand_block(&copy, ept, unroll, out);
+                out.push_str("}\n");
+                k += step;
+            }
+        } else if from < to {
+            out.push_str(&format!(
+                "for (var {var} = {from}u; {var} < {to}u; {var} += {step}u) {{\n"
+            ));
+            let copy: Vec<String> = body
+                .iter()
+                .map(|l| {
+                    substitute(l, var, &|o| match o {
+                        0 => var.to_string(),
+                        o if o > 0 => format!("({var} + {o}u)"),
+                        o => format!("({var} - {}u)", -o),
+                    })
+                })
+                .collect();
+            let copy: Vec<&str> = copy.iter().map(String::as_str).collect();
+            expand_block(&copy, ept, unroll, out);
+            out.push_str("}\n");
+        }
+        i = j + 1;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -98,6 +272,48 @@ mod tests {
     }
 
     #[test]
+    fn loops_unroll_to_literal_indices() {
+        let src = "a\n//#for e 0 EPT-1\nr[{e}] = s[{e+1}] + t[{e-0}];\n//#endfor\nb\n";
+        assert_eq!(
+            expand_loops(src, 3, true),
+            "a\n{\nr[0u] = s[1u] + t[0u];\n}\n{\nr[1u] = s[2u] + t[1u];\n}\nb\n"
+        );
+        assert_eq!(
+            expand_loops(src, 3, false),
+            "a\nfor (var e = 0u; e < 2u; e += 1u) {\nr[e] = s[(e + 1u)] + t[e];\n}\nb\n"
+        );
+        // Strided and nested loops, bounds in XP.
+        let src = "//#for x 1 XP 2\n//#for y 0 2\nq[{x}][{y}]\n//#endfor\n//#endfor\n";
+        let out = expand_loops(src, 2, true);
+        assert_eq!(out.matches("q[").count(), 4, "{out}");
+        assert!(
+            out.contains("q[1u][0u]") && out.contains("q[3u][1u]"),
+            "{out}"
+        );
+        // The kernel itself: no loop over a per-thread array survives unrolling.
+        let cfg = KernelConfig {
+            threads: 64,
+            per_thread: 4,
+            iterations: 10,
+            halo: 0,
+            spin_cap: 1,
+            group: 1,
+            unroll: true,
+            flags: vec![],
+        };
+        let src = cfg.source();
+        assert!(!src.lines().any(|l| l.trim_start().starts_with("//#")));
+        assert!(!src.contains("[{e") && !src.contains("[{x"));
+        assert!(src.contains("vx[4u]") && !src.contains("vx[x]"));
+        let looped = KernelConfig {
+            unroll: false,
+            ..cfg
+        }
+        .source();
+        assert!(looped.contains("vx[x]") && looped.contains("for (var x = 1u; x < 5u; x += 2u)"));
+    }
+
+    #[test]
     fn disabled_terms_are_absent_from_the_source() {
         let cfg = KernelConfig {
             threads: 64,
@@ -105,6 +321,8 @@ mod tests {
             iterations: 10,
             halo: 0,
             spin_cap: 1,
+            group: 1,
+            unroll: true,
             flags: vec![],
         };
         let src = cfg.source();
@@ -114,6 +332,7 @@ mod tests {
         );
         assert!(!src.contains("bend_damping_node(qx"));
         assert!(!src.contains("atomicAdd(&sync"));
+        assert!(!src.contains("subgroupShuffle"));
         let cfg = KernelConfig {
             flags: vec!["EXTENSIBLE", "BEND_DAMP", "GRID"],
             ..cfg
@@ -124,6 +343,16 @@ mod tests {
                 && src.contains("bend_damping_node(qx")
                 && src.contains("atomicAdd(&sync")
         );
+        // The subgroup kernel has no workgroup barrier and no workgroup memory at all.
+        let cfg = KernelConfig {
+            group: 32,
+            flags: vec!["BEND_DAMP", "SUBGROUP"],
+            ..cfg
+        };
+        let src = cfg.source();
+        assert!(src.contains("subgroupShuffleUp"));
+        assert!(!src.contains("workgroupBarrier") && !src.contains("workgroupUniformLoad"));
+        assert!(!src.contains("var<workgroup>"));
     }
 
     fn validate(name: &str, src: &str) {
@@ -149,7 +378,7 @@ mod tests {
     }
 
     /// Every `.wgsl` file under `src/` parses and validates with naga; kernels are validated in
-    /// every flag combination the host can compose. Needs no GPU.
+    /// every flag combination the host can compose, unrolled and as loops. Needs no GPU.
     #[test]
     fn every_shader_file_validates() {
         let mut files = Vec::new();
@@ -171,6 +400,12 @@ mod tests {
                 continue;
             }
             kernels += 1;
+            if file.file_name().is_some_and(|f| f == "rod_step.wgsl") {
+                assert_eq!(
+                    text, ROD_STEP_WGSL,
+                    "rod_step.wgsl on disk differs from the compiled-in copy"
+                );
+            }
             for mask in 0u32..(1 << FLAGS.len()) {
                 let flags: Vec<&'static str> = FLAGS
                     .iter()
@@ -180,33 +415,44 @@ mod tests {
                     .collect();
                 let has = |f: &str| flags.contains(&f);
                 // Combinations the host never composes.
-                if (has("STRETCH_DAMP") && !has("EXTENSIBLE")) || (has("GRID") && has("PERSTEP")) {
+                if (has("STRETCH_DAMP") && !has("EXTENSIBLE"))
+                    || (has("GRID") && has("PERSTEP"))
+                    || (has("SUBGROUP") && (has("GRID") || has("PERSTEP")))
+                {
                     continue;
                 }
-                for (threads, per_thread) in [(32, 2), (256, 4)] {
-                    let cfg = KernelConfig {
-                        threads,
-                        per_thread,
-                        iterations: 10,
-                        halo: 24,
-                        spin_cap: 1024,
-                        flags: flags.clone(),
-                    };
-                    let composed = format!(
-                        "const WG: u32 = {threads}u;\nconst EPT: u32 = {per_thread}u;\nconst ITER: u32 = 10u;\nconst HALO: u32 = 24u;\nconst SPIN_CAP: u32 = 1024u;\n{COMMON_WGSL}\n{}",
-                        preprocess(&text, &flags)
-                    );
-                    if file.file_name().is_some_and(|f| f == "rod_step.wgsl") {
-                        assert_eq!(
-                            composed,
-                            cfg.source(),
-                            "rod_step.wgsl on disk differs from the compiled-in copy"
+                // The measurement variants, with every inextensible scene/path combination.
+                let mut variants = vec![flags.clone()];
+                if !has("EXTENSIBLE") {
+                    for v in VARIANT_FLAGS {
+                        let mut f = flags.clone();
+                        f.push(v);
+                        variants.push(f);
+                    }
+                }
+                for flags in variants {
+                    let group = if has("SUBGROUP") { 32 } else { 1 };
+                    for (threads, per_thread, unroll) in
+                        [(32, 2, true), (256, 4, true), (64, 6, false)]
+                    {
+                        let cfg = KernelConfig {
+                            threads,
+                            per_thread,
+                            iterations: 10,
+                            halo: 24,
+                            spin_cap: 1024,
+                            group,
+                            unroll,
+                            flags: flags.clone(),
+                        };
+                        let composed = cfg.source_of(&text);
+                        validate(
+                            &format!(
+                                "{name} {flags:?} WG={threads} EPT={per_thread} unroll={unroll}"
+                            ),
+                            &composed,
                         );
                     }
-                    validate(
-                        &format!("{name} {flags:?} WG={threads} EPT={per_thread}"),
-                        &composed,
-                    );
                 }
             }
         }

@@ -10,8 +10,8 @@
 
 use crate::shader::KernelConfig;
 use crate::{
-    DivergedQuantity, Divergence, GpuError, GpuOptions, GpuRodInput, KernelPath, PrescribedMotion,
-    SolverSettings,
+    DivergedQuantity, Divergence, GpuError, GpuOptions, GpuRodInput, KernelPath, KernelVariant,
+    PrescribedMotion, SolverSettings,
 };
 use bytemuck::{Pod, Zeroable};
 use std::collections::VecDeque;
@@ -87,6 +87,9 @@ pub struct AdapterSummary {
     pub co_resident_workgroups: Option<u32>,
     /// Largest workgroup memory in bytes.
     pub max_workgroup_storage: u32,
+    /// The subgroup size, when the adapter has subgroup operations and one fixed size (the
+    /// subgroup layout for short rods needs both).
+    pub subgroup_size: Option<u32>,
 }
 
 /// The plan a simulation runs: path, kernel shape and the work items (one per workgroup).
@@ -95,6 +98,8 @@ struct Plan {
     path: KernelPath,
     cfg: KernelConfig,
     items: Vec<ItemG>,
+    /// Workgroups per dispatch (the items, or fewer with several rods per workgroup).
+    workgroups: u32,
     steps_per_dispatch: u32,
 }
 
@@ -204,7 +209,9 @@ impl GpuSimulation {
     /// Uploads `rods` and prepares the kernel.
     ///
     /// The path is `options.path`, or with [`KernelPath::Auto`]: one workgroup per rod when the
-    /// longest rod fits with at most four points per thread; otherwise the multi-workgroup path
+    /// longest rod fits with at most four points per thread (or, from 256 rods on, one subgroup
+    /// per rod when the adapter has a fixed subgroup size and the rod fits it with at most eight
+    /// points per invocation); otherwise the multi-workgroup path
     /// where co-residency is known for the adapter; otherwise one workgroup per rod up to 16
     /// points per thread; otherwise one dispatch per step.
     ///
@@ -215,6 +222,17 @@ impl GpuSimulation {
         rods: Vec<GpuRodInput>,
         settings: &SolverSettings<f32>,
         options: GpuOptions,
+    ) -> Result<Self, GpuError> {
+        Self::with_variant(rods, settings, options, KernelVariant::default())
+    }
+
+    /// [`Self::new`] with a kernel variant; for the benchmark's side-by-side measurements.
+    #[doc(hidden)]
+    pub fn with_variant(
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: GpuOptions,
+        variant: KernelVariant,
     ) -> Result<Self, GpuError> {
         validate(&rods, settings)?;
         let instance =
@@ -228,13 +246,17 @@ impl GpuSimulation {
         let features = adapter.features();
         let limits = adapter.limits();
         let want_ts = options.timestamps && features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        let has_subgroups = features.contains(wgpu::Features::SUBGROUP);
+        let mut required_features = wgpu::Features::empty();
+        if want_ts {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        if has_subgroups {
+            required_features |= wgpu::Features::SUBGROUP;
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("cosserat-backend-gpu"),
-            required_features: if want_ts {
-                wgpu::Features::TIMESTAMP_QUERY
-            } else {
-                wgpu::Features::empty()
-            },
+            required_features,
             required_limits: limits.clone(),
             ..Default::default()
         }))
@@ -263,9 +285,22 @@ impl GpuSimulation {
                 known_co_residency(&info)
             }),
             max_workgroup_storage: limits.max_compute_workgroup_storage_size,
+            // The layout puts one rod on SG consecutive invocations and relies on them forming
+            // one subgroup, so the size must be fixed (NVIDIA: 32, lavapipe: 8).
+            subgroup_size: (has_subgroups
+                && info.subgroup_min_size == info.subgroup_max_size
+                && info.subgroup_min_size >= 4)
+                .then_some(info.subgroup_min_size),
         };
 
-        let plan = make_plan(&rods, settings, &options, &adapter_summary, &limits)?;
+        let plan = make_plan(
+            &rods,
+            settings,
+            &options,
+            &variant,
+            &adapter_summary,
+            &limits,
+        )?;
         Self::build(
             device,
             queue,
@@ -682,12 +717,22 @@ impl GpuSimulation {
     /// steps per dispatch and the compiled-in terms.
     pub fn kernel_description(&self) -> String {
         let c = &self.plan.cfg;
+        let layout = if c.flags.contains(&"SUBGROUP") {
+            format!(
+                " ({} rods/workgroup, one per subgroup of {})",
+                c.threads / c.group,
+                c.group
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "{} kernel: {} workgroups x {} threads x {} points/thread, halo {}, <= {} steps/dispatch, terms [{}]",
+            "{} kernel: {} workgroups x {} threads{layout} x {} points/thread{}, halo {}, <= {} steps/dispatch, terms [{}]",
             self.plan.path,
-            self.plan.items.len(),
+            self.plan.workgroups,
             c.threads,
             c.per_thread,
+            if c.unroll { "" } else { " (loops)" },
             c.halo,
             self.plan.steps_per_dispatch,
             c.flags.join(", ")
@@ -840,7 +885,7 @@ impl GpuSimulation {
                         &self.bind_groups[self.current.min(self.bind_groups.len() - 1)],
                         &[offset],
                     );
-                    pass.dispatch_workgroups(self.plan.items.len() as u32, 1, 1);
+                    pass.dispatch_workgroups(self.plan.workgroups, 1, 1);
                     if self.plan.path == KernelPath::DispatchPerStep {
                         self.current ^= 1;
                     }
@@ -1144,6 +1189,7 @@ fn make_plan(
     rods: &[GpuRodInput],
     settings: &SolverSettings<f32>,
     options: &GpuOptions,
+    variant: &KernelVariant,
     adapter: &AdapterSummary,
     limits: &wgpu::Limits,
 ) -> Result<Plan, GpuError> {
@@ -1195,6 +1241,12 @@ fn make_plan(
         .unwrap_or(2);
     let single_threads = max_threads.min(round_up(points.div_ceil(2), 32));
     let single_ept = round_up(points.div_ceil(single_threads), 2).max(2);
+    // The subgroup layout: every rod on one subgroup, a few rods per workgroup, no barriers.
+    let subgroup = adapter
+        .subgroup_size
+        .filter(|_| variant.subgroups && rods.len() as u32 >= variant.subgroup_min_rods)
+        .map(|sg| (sg, round_up(points.div_ceil(sg), 2).max(2)))
+        .filter(|&(_, ept)| ept <= variant.subgroup_points_per_thread.max(2));
     let halo = round_up(2 * iterations + 4, 2);
     // Chunks for the two multi-workgroup paths: owned points per workgroup at least 2 halos.
     let multi_ept = (1..=8)
@@ -1248,7 +1300,7 @@ fn make_plan(
     };
     let path = match options.path {
         KernelPath::Auto => {
-            if single_ept <= 4 {
+            if single_ept <= 4 || subgroup.is_some() {
                 KernelPath::SingleWorkgroup
             } else if grid_ok.is_ok() {
                 KernelPath::MultiWorkgroup
@@ -1273,6 +1325,8 @@ fn make_plan(
     {
         return Err(GpuError::PathUnavailable { path, reason });
     }
+    let mut group = 1;
+    let mut workgroups = None;
     let (threads, ept, items, halo_used) = match path {
         KernelPath::SingleWorkgroup => {
             let mut base = 0u32;
@@ -1298,8 +1352,18 @@ fn make_plan(
                     base += n + 1;
                     it
                 })
-                .collect();
-            (single_threads, single_ept, items, 0)
+                .collect::<Vec<_>>();
+            match subgroup {
+                Some((sg, ept)) => {
+                    let cap = limits.max_compute_invocations_per_workgroup.min(1024) / sg;
+                    let per_wg = variant.rods_per_workgroup.clamp(1, cap.max(1));
+                    flags.push("SUBGROUP");
+                    group = sg;
+                    workgroups = Some((items.len() as u32).div_ceil(per_wg));
+                    (sg * per_wg, ept, items, 0)
+                }
+                None => (single_threads, single_ept, items, 0),
+            }
         }
         _ => (max_threads, multi_ept, grid_items, halo),
     };
@@ -1309,12 +1373,20 @@ fn make_plan(
     if path == KernelPath::DispatchPerStep {
         flags.push("PERSTEP");
     }
+    if variant.sweep_loads && !extensible {
+        flags.push("SWEEP_LOADS");
+    }
+    if variant.rsqrt && !extensible {
+        flags.push("RSQRT");
+    }
     let cfg = KernelConfig {
         threads,
         per_thread: ept,
         iterations,
         halo: halo_used,
         spin_cap: options.spin_cap.max(1),
+        group,
+        unroll: variant.unroll,
         flags,
     };
     // Loop iterations per step and invocation, generously counted, for software adapters.
@@ -1333,6 +1405,7 @@ fn make_plan(
     Ok(Plan {
         path,
         cfg,
+        workgroups: workgroups.unwrap_or(items.len() as u32),
         items,
         steps_per_dispatch: spd,
     })

@@ -1,6 +1,7 @@
-// The CoRdE time-step (paper Fig. 5 without collisions) for one window of one rod per workgroup.
+// The CoRdE time-step (paper Fig. 5 without collisions) for one window of one rod per workgroup,
+// or (SUBGROUP) for one rod per subgroup, several rods per workgroup.
 //
-// Composed by src/shader.rs as: a prelude of constants (WG, EPT, ITER, HALO, SPIN_CAP), then
+// Composed by src/shader.rs as: a prelude of constants (WG, EPT, ITER, HALO, SPIN_CAP, SG), then
 // common.wgsl, then this file, with the `//#if FLAG` / `//#else` / `//#endif` lines resolved
 // on the host so that a scene compiles only the terms it uses. Flags:
 //   EXTENSIBLE    stretch energy instead of distance constraints
@@ -10,16 +11,29 @@
 //   LOADS         constant point loads
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
+//   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
+//                 through subgroup shuffles and the kernel has no workgroup barrier at all
+//   SWEEP_LOADS   (measurement variant) read l0 and the inverse masses from storage in every
+//                 constraint sweep instead of keeping them in registers
+//   RSQRT         (measurement variant) the impulse from one inverseSqrt, (l0/|d| - 1), instead
+//                 of the CPU's sqrt and division, (l0 - |d|)/|d|
 //
-// Layout: thread `lid` owns the EPT consecutive window points (and elements) with local index
-// lid*EPT .. lid*EPT+EPT-1 and keeps them in registers for the whole dispatch. Element j is the
-// segment from point j to point j+1 and carries frame j. Neighbouring threads exchange only
-// their first and last point through workgroup memory. EPT and the window start are even, so a
-// thread's boundary constraints (its left element lid*EPT-1 and its right element lid*EPT+EPT-1)
-// are both odd: the red (even) half-sweep touches only a thread's own points and needs no
-// barrier; only the black half-sweep does. Boundary constraints are evaluated by both threads
-// from the same values, each applying its own half of the impulse, so the result equals the
-// CPU's red–black sweep.
+// `//#for V A B [S]` … `//#endfor` blocks are per-thread loops over a thread's points or
+// elements with compile-time bounds. The host unrolls them (every `{V}`, `{V+k}` becomes a
+// literal index), so that the per-thread arrays below are only ever indexed by constants and
+// the driver keeps them in registers; dynamically indexed private arrays are placed in local
+// memory, which made every half-sweep a chain of dependent local-memory loads and stores. The
+// host can also emit them as plain loops (a measurement variant).
+//
+// Layout: thread `lid` (SUBGROUP: lane) owns the EPT consecutive window points (and elements)
+// with local index lid*EPT .. lid*EPT+EPT-1 and keeps them in registers for the whole dispatch.
+// Element j is the segment from point j to point j+1 and carries frame j. Neighbouring threads
+// exchange only their first and last point. EPT and the window start are even, so a thread's
+// boundary constraints (its left element lid*EPT-1 and its right element lid*EPT+EPT-1) are
+// both odd: the red (even) half-sweep touches only a thread's own points and needs no exchange;
+// only the black half-sweep does. Boundary constraints are evaluated by both threads from the
+// same values, each applying its own half of the impulse, so the result equals the CPU's
+// red–black sweep.
 
 struct Params {
     // xyz gravity, w time step h.
@@ -29,7 +43,7 @@ struct Params {
     hi2: f32,
     // Index of the first step of this submission.
     base_step: u32,
-    // Number of work items (workgroups) in this dispatch.
+    // Number of work items in this dispatch.
     num_items: u32,
 }
 
@@ -56,7 +70,7 @@ struct Slot {
     e: vec4<f32>,
 }
 
-// One workgroup's share of a rod: the window of points it steps and the part it owns.
+// One work item's share of a rod: the window of points it steps and the part it owns.
 struct Item {
     rod: u32,
     // Slot of the rod's point 0.
@@ -113,6 +127,7 @@ struct Drive {
 @group(0) @binding(16) var<storage, read_write> xch: array<atomic<u32>>;
 //#endif
 
+//#if !SUBGROUP
 // Neighbour exchange: 2*lid holds a thread's first point, 2*lid+1 its last.
 var<workgroup> sh_r: array<vec4<f32>, 2 * WG>;
 var<workgroup> sh_q: array<vec4<f32>, 2 * WG>;
@@ -131,6 +146,7 @@ var<workgroup> sh_v: array<vec4<f32>, 4 * WG>;
 var<workgroup> wg_key: atomic<u32>;
 // Nonzero once the workgroup must stop (divergence here or, with GRID, anywhere).
 var<workgroup> wg_stop: u32;
+//#endif
 
 const NONE: u32 = 0xffffffffu;
 const XP: u32 = EPT + 2u;
@@ -162,10 +178,26 @@ fn xch_load4(i: u32) -> vec4<f32> {
 //#endif
 
 @compute @workgroup_size(WG)
-fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+//#if SUBGROUP
+    // SG consecutive invocations (one subgroup) per rod, WG / SG rods per workgroup. A group
+    // without a rod leaves as a whole: no barrier waits for it.
+    let lid = lid_wg % SG;
+    let item_index = wid.x * (WG / SG) + lid_wg / SG;
+    if item_index >= params.num_items {
+        return;
+    }
+    let has_right = lid + 1u < SG;
+    var stop = false;
+//#else
+    let lid = lid_wg;
     let item_index = wid.x;
+    let has_right = lid + 1u < WG;
+//#endif
+    let has_left = lid > 0u;
     let it = items[item_index];
     let h = params.gravity.w;
+    let inv_h = 1.0 / h;
     let g = params.gravity.xyz;
     let b0 = lid * EPT;
     let end_elem = it.w1 - 1u;  // window elements are [w0, w1 - 1)
@@ -175,36 +207,77 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
     var v: array<vec3<f32>, EPT>;
     var q: array<vec4<f32>, EPT>;
     var w: array<vec3<f32>, EPT>;
-    for (var e = 0u; e < EPT; e++) {
-        let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+    {
+        let gp = it.w0 + b0 + {e};
         if gp < it.w1 {
             let s = it.base + gp;
 //#if PERSTEP
-            r[e] = src_pos[s].xyz;
-            v[e] = src_vel[s].xyz;
-            q[e] = src_frm[s];
-            w[e] = src_omg[s].xyz;
+            r[{e}] = src_pos[s].xyz;
+            v[{e}] = src_vel[s].xyz;
+            q[{e}] = src_frm[s];
+            w[{e}] = src_omg[s].xyz;
 //#else
-            r[e] = pos[s].xyz;
-            v[e] = vel[s].xyz;
-            q[e] = frm[s];
-            w[e] = omg[s].xyz;
+            r[{e}] = pos[s].xyz;
+            v[{e}] = vel[s].xyz;
+            q[{e}] = frm[s];
+            w[{e}] = omg[s].xyz;
 //#endif
         } else {
-            q[e] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+            q[{e}] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         }
     }
+//#endfor
+
+//#if !EXTENSIBLE
+    // Constraint constants for the whole dispatch: constraint x joins extended points x and
+    // x + 1 (local element b0 - 1 + x). wm: inverse masses of the extended points; cl0 / cinv:
+    // rest length and 1 / (w_a + w_b) as the CPU's red–black solver keeps them; cok: the
+    // constraint exists in this window.
+    var wm: array<f32, XP>;
+    var cl0: array<f32, XP>;
+    var cinv: array<f32, XP>;
+    var cok: array<bool, XP>;
+//#for x 0 XP
+    {
+        let lp = b0 + {x};  // local point + 1
+        let gp = it.w0 + lp - 1u;
+        wm[{x}] = 0.0;
+        if lp >= 1u && gp < it.w1 {
+            wm[{x}] = slots[it.base + gp].a.y;
+        }
+    }
+//#endfor
+//#for x 0 EPT+1
+    {
+        let le = b0 + {x};  // local element + 1
+        let ge = it.w0 + le - 1u;
+        cok[{x}] = le >= 1u && it.w0 + le - 1u < end_elem;
+        cl0[{x}] = 1.0;
+        cinv[{x}] = 0.0;
+        if cok[{x}] {
+            cl0[{x}] = slots[it.base + ge].a.x;
+            let ws = wm[{x}] + wm[{x+1}];
+            cinv[{x}] = select(0.0, 1.0 / ws, ws > 0.0);
+        }
+    }
+//#endfor
+//#endif
+
+//#if !SUBGROUP
     if lid == 0u {
         atomicStore(&wg_key, NONE);
         // A rod that has diverged stays where it stopped.
         wg_stop = select(0u, 1u, atomicLoad(&status[item_index * 4u]) != 0u);
     }
+//#else
+    // A rod that has diverged stays where it stopped.
+    stop = atomicLoad(&status[item_index * 4u]) != 0u;
+//#endif
     var my_key = NONE;
     var my_val = 0.0;
     var xpar = 0u;
     var steps_done = 0u;
-    let has_left = lid > 0u;
-    let has_right = lid + 1u < WG;
 
     for (var s = 0u; s < chunk.count; s++) {
         let step_rel = chunk.offset + s;
@@ -213,8 +286,9 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
         // Grid barrier: publish owned boundary slabs, wait for every workgroup, read halos.
         if s > 0u {
             let par = s & 1u;
-            for (var e = 0u; e < EPT; e++) {
-                let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+            {
+                let gp = it.w0 + b0 + {e};
                 var side = NONE;
                 var k = 0u;
                 if it.left != NONE && gp >= it.o0 && gp < it.o0 + HALO {
@@ -227,12 +301,13 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                 }
                 if side != NONE {
                     let i = xch_index(par, item_index, side, k);
-                    xch_store4(i, vec4<f32>(r[e], 0.0));
-                    xch_store4(i + 4u, vec4<f32>(v[e], 0.0));
-                    xch_store4(i + 8u, q[e]);
-                    xch_store4(i + 12u, vec4<f32>(w[e], 0.0));
+                    xch_store4(i, vec4<f32>(r[{e}], 0.0));
+                    xch_store4(i + 4u, vec4<f32>(v[{e}], 0.0));
+                    xch_store4(i + 8u, q[{e}]);
+                    xch_store4(i + 12u, vec4<f32>(w[{e}], 0.0));
                 }
             }
+//#endfor
         }
         storageBarrier();
         if lid == 0u {
@@ -261,8 +336,9 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
         storageBarrier();
         if s > 0u {
             let par = s & 1u;
-            for (var e = 0u; e < EPT; e++) {
-                let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+            {
+                let gp = it.w0 + b0 + {e};
                 var i = NONE;
                 if gp < it.o0 && it.left != NONE {
                     i = xch_index(par, it.left, 1u, gp + HALO - it.o0);
@@ -271,14 +347,64 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                     i = xch_index(par, it.right, 0u, gp - it.o1);
                 }
                 if i != NONE {
-                    r[e] = xch_load4(i).xyz;
-                    v[e] = xch_load4(i + 4u).xyz;
-                    q[e] = xch_load4(i + 8u);
-                    w[e] = xch_load4(i + 12u).xyz;
+                    r[{e}] = xch_load4(i).xyz;
+                    v[{e}] = xch_load4(i + 4u).xyz;
+                    q[{e}] = xch_load4(i + 8u);
+                    w[{e}] = xch_load4(i + 12u).xyz;
                 }
             }
+//#endfor
         }
 //#endif
+        // Extended arrays: index x is local point b0 - 1 + x (0: left neighbour's last,
+        // EPT + 1: right neighbour's first).
+        var rx: array<vec3<f32>, XP>;
+        var qx: array<vec4<f32>, XP>;
+        var vx: array<vec3<f32>, XP>;
+//#if BEND_DAMP
+        var wx: array<vec3<f32>, XP>;
+//#endif
+//#if SUBGROUP
+        if subgroupAny(stop) {
+            break;
+        }
+        // Neighbours' boundary points by subgroup shuffles (lane 0 / SG - 1 get nothing useful
+        // and keep zeros: no constraint or force of theirs reads those entries).
+        {
+            let rl = subgroupShuffleUp(r[EPT - 1u], 1u);
+            let rr = subgroupShuffleDown(r[0], 1u);
+            let ql = subgroupShuffleUp(q[EPT - 1u], 1u);
+            let qr = subgroupShuffleDown(q[0], 1u);
+//#if BEND_DAMP
+            let wl = subgroupShuffleUp(w[EPT - 1u], 1u);
+            let wr = subgroupShuffleDown(w[0], 1u);
+//#endif
+//#if STRETCH_DAMP
+            let vl = subgroupShuffleUp(v[EPT - 1u], 1u);
+            let vr = subgroupShuffleDown(v[0], 1u);
+//#endif
+            if has_left {
+                rx[0] = rl;
+                qx[0] = ql;
+//#if BEND_DAMP
+                wx[0] = wl;
+//#endif
+//#if STRETCH_DAMP
+                vx[0] = vl;
+//#endif
+            }
+            if has_right {
+                rx[EPT + 1u] = rr;
+                qx[EPT + 1u] = qr;
+//#if BEND_DAMP
+                wx[EPT + 1u] = wr;
+//#endif
+//#if STRETCH_DAMP
+                vx[EPT + 1u] = vr;
+//#endif
+            }
+        }
+//#else
         // Publish this thread's first and last point for its neighbours.
         sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
         sh_r[2u * lid + 1u] = vec4<f32>(r[EPT - 1u], 0.0);
@@ -295,15 +421,6 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
         if workgroupUniformLoad(&wg_stop) != 0u {
             break;
         }
-
-        // Extended arrays: index x is local point b0 - 1 + x (0: left neighbour's last,
-        // EPT + 1: right neighbour's first).
-        var rx: array<vec3<f32>, XP>;
-        var qx: array<vec4<f32>, XP>;
-        var vx: array<vec3<f32>, XP>;
-//#if BEND_DAMP
-        var wx: array<vec3<f32>, XP>;
-//#endif
         if has_left {
             rx[0] = sh_r[2u * lid - 1u].xyz;
             qx[0] = sh_q[2u * lid - 1u];
@@ -332,23 +449,25 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
         // step's writes of sh_r / sh_q / sh_w.
         workgroupBarrier();
 //#endif
-        for (var e = 0u; e < EPT; e++) {
-            rx[e + 1u] = r[e];
-            qx[e + 1u] = q[e];
-            vx[e + 1u] = v[e];
-//#if BEND_DAMP
-            wx[e + 1u] = w[e];
 //#endif
-        }
+//#for e 0 EPT
+        rx[{e+1}] = r[{e}];
+        qx[{e+1}] = q[{e}];
+        vx[{e+1}] = v[{e}];
+//#if BEND_DAMP
+        wx[{e+1}] = w[{e}];
+//#endif
+//#endfor
 
         // Deferred length check of the previous step's result, for owned elements whose two
         // points this thread now sees.
         if s > 0u {
-            for (var e = 0u; e < EPT; e++) {
-                let ge = it.w0 + b0 + e;
+//#for e 0 EPT
+            {
+                let ge = it.w0 + b0 + {e};
                 if ge < end_elem && ge >= it.o0 && ge < it.o1 {
                     let l0 = slots[it.base + ge].a.x;
-                    let d = rx[e + 2u] - rx[e + 1u];
+                    let d = rx[{e+2}] - rx[{e+1}];
                     let ratio = dot(d, d) / (l0 * l0);
                     if !(ratio >= params.lo2 && ratio <= params.hi2) {
                         let code = select(3u, 2u, not_finite(ratio));
@@ -357,11 +476,16 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                             my_key = key;
                             my_val = ratio;
                         }
+//#if SUBGROUP
+                        stop = true;
+//#else
                         atomicMin(&wg_key, key);
                         wg_stop = 1u;
+//#endif
                     }
                 }
             }
+//#endfor
         }
 
         // Forces on the thread's points and torques on its frames. Element / node x covers local
@@ -370,61 +494,60 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
         var te: array<vec3<f32>, XP>;
         var ta: array<vec3<f32>, XP>;
         var tb: array<vec3<f32>, XP>;
-        for (var x = 0u; x <= EPT; x++) {
-            fb[x] = vec3<f32>(0.0);
-            te[x] = vec3<f32>(0.0);
-            ta[x] = vec3<f32>(0.0);
-            tb[x] = vec3<f32>(0.0);
-            let le = b0 + x;  // local element index + 1
+//#for x 0 EPT+1
+        {
+            let le = b0 + {x};  // local element index + 1
             if le >= 1u && it.w0 + le - 1u < end_elem {
                 let ge = it.w0 + le - 1u;
                 let sl = slots[it.base + ge];
-                let pe = parallel_element(rx[x], rx[x + 1u], qx[x], sl.a.w, sl.a.x);
+                let pe = parallel_element(rx[{x}], rx[{x+1}], qx[{x}], sl.a.w, sl.a.x);
                 var f = pe.fb;
 //#if EXTENSIBLE
-                f += stretch_element(rx[x], rx[x + 1u], sl.b.w, sl.a.x);
+                f += stretch_element(rx[{x}], rx[{x+1}], sl.b.w, sl.a.x);
 //#if STRETCH_DAMP
                 if sl.c.w > 0.0 {
-                    f += stretch_damping_element(rx[x], rx[x + 1u], vx[x], vx[x + 1u], sl.c.w, sl.a.x);
+                    f += stretch_damping_element(rx[{x}], rx[{x+1}], vx[{x}], vx[{x+1}], sl.c.w, sl.a.x);
                 }
 //#endif
 //#endif
-                fb[x] = f;
-                te[x] = pe.torque;
+                fb[{x}] = f;
+                te[{x}] = pe.torque;
                 // Node ge between frames ge and ge + 1.
                 if ge + 1u < end_elem {
-                    let nt = bend_twist_node(qx[x], qx[x + 1u], sl.d.xyz, sl.e.xyz, sl.d.w);
-                    ta[x] = nt.ta;
-                    tb[x] = nt.tb;
+                    let nt = bend_twist_node(qx[{x}], qx[{x+1}], sl.d.xyz, sl.e.xyz, sl.d.w);
+                    ta[{x}] = nt.ta;
+                    tb[{x}] = nt.tb;
 //#if BEND_DAMP
-                    let nd = bend_damping_node(qx[x], qx[x + 1u], wx[x], wx[x + 1u], sl.e.w, sl.d.w);
-                    ta[x] += nd.ta;
-                    tb[x] += nd.tb;
+                    let nd = bend_damping_node(qx[{x}], qx[{x+1}], wx[{x}], wx[{x+1}], sl.e.w, sl.d.w);
+                    ta[{x}] += nd.ta;
+                    tb[{x}] += nd.tb;
 //#endif
                 }
             }
         }
+//#endfor
 
         // Integrate velocities: v += h f / m and Euler's equations with the gyroscopic term.
-        for (var e = 0u; e < EPT; e++) {
-            let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+        {
+            let gp = it.w0 + b0 + {e};
             if gp < it.w1 {
                 let sl = slots[it.base + gp];
 //#if DRAG
-                var f = (g - vx[e + 1u] * it.drag) * sl.a.z;
+                var f = (g - vx[{e+1}] * it.drag) * sl.a.z;
 //#else
                 var f = g * sl.a.z;
 //#endif
-                f += fb[e];
-                f -= fb[e + 1u];
+                f += fb[{e}];
+                f -= fb[{e+1}];
 //#if LOADS
                 f += loads[it.base + gp].xyz;
 //#endif
-                var vn = vx[e + 1u] + f * (h * sl.a.y);
-                var wn = w[e];
+                var vn = vx[{e+1}] + f * (h * sl.a.y);
+                var wn = w[{e}];
                 if gp < end_elem {
                     // Torque order as on the CPU: parallel, node j-1 (as its b), node j (as its a).
-                    let tq = ((te[e + 1u] + tb[e]) + ta[e + 1u]);
+                    let tq = ((te[{e+1}] + tb[{e}]) + ta[{e+1}]);
                     let gyro = cross(wn, sl.b.xyz * wn);
                     wn += (tq - gyro) * sl.c.xyz * h;
                 }
@@ -442,76 +565,123 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                 if gp == 0u && (it.flags & 2u) != 0u {
                     let dr = drives[it.rod * 2u];
                     let on = step >= dr.window.x && step < dr.window.y;
-                    wn = quat_rotate_inv(q[e], select(vec3<f32>(0.0), dr.w.xyz, on));
+                    wn = quat_rotate_inv(q[{e}], select(vec3<f32>(0.0), dr.w.xyz, on));
                 }
                 if gp + 1u == it.n && (it.flags & 8u) != 0u {
                     let dr = drives[it.rod * 2u + 1u];
                     let on = step >= dr.window.x && step < dr.window.y;
-                    wn = quat_rotate_inv(q[e], select(vec3<f32>(0.0), dr.w.xyz, on));
+                    wn = quat_rotate_inv(q[{e}], select(vec3<f32>(0.0), dr.w.xyz, on));
                 }
-                vx[e + 1u] = vn;
-                w[e] = wn;
+                vx[{e+1}] = vn;
+                w[{e}] = wn;
             }
         }
+//#endfor
 
 //#if !EXTENSIBLE
-        // Distance constraints, red–black. Inverse masses of the extended points.
-        var wm: array<f32, XP>;
-        for (var x = 0u; x < XP; x++) {
-            let lp = b0 + x;  // local point + 1
-            let gp = it.w0 + lp - 1u;
-            if lp >= 1u && gp < it.w1 {
-                wm[x] = slots[it.base + gp].a.y;
-            } else {
-                wm[x] = 0.0;
-            }
-        }
+        // Distance constraints, red–black, as the CPU's solver: d = e + h (v_b - v_a) with e the
+        // element vector at the start of the step, s = (l0 - |d|) / (w_a + w_b) / h / |d|.
+        var ed: array<vec3<f32>, XP>;
+//#for x 0 EPT+1
+        ed[{x}] = rx[{x+1}] - rx[{x}];
+//#endfor
         for (var iter = 0u; iter < ITER; iter++) {
-            for (var colour = 0u; colour < 2u; colour++) {
-                if colour == 1u {
-                    sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(vx[1], 0.0);
-                    sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(vx[EPT], 0.0);
-                    workgroupBarrier();
-                    if has_left {
-                        vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
-                    }
-                    if has_right {
-                        vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
-                    }
-                    xpar ^= 1u;
+            // Red: x odd, the thread's own points only.
+//#for x 1 EPT+1 2
+            {
+//#if SWEEP_LOADS
+                let le = b0 + {x};
+                var l0 = 1.0;
+                var wa = 0.0;
+                var wb = 0.0;
+                if cok[{x}] {
+                    l0 = slots[it.base + it.w0 + le - 1u].a.x;
+                    wa = slots[it.base + it.w0 + le - 1u].a.y;
+                    wb = slots[it.base + it.w0 + le].a.y;
                 }
-                // x is local element b0 - 1 + x, whose global parity is that of x - 1 (w0, b0 even).
-                for (var x = 1u - colour; x <= EPT; x += 2u) {
-                    let le = b0 + x;
-                    if le >= 1u && it.w0 + le - 1u < end_elem {
-                        let ge = it.w0 + le - 1u;
-                        let wa = wm[x];
-                        let wb = wm[x + 1u];
-                        let ws = wa + wb;
-                        if ws > 0.0 {
-                            let l0 = slots[it.base + ge].a.x;
-                            let d = (rx[x + 1u] + vx[x + 1u] * h) - (rx[x] + vx[x] * h);
-                            let len = sqrt(dot(d, d));
-                            let sc = (l0 - len) / (h * ws * len);
-                            vx[x] -= d * (sc * wa);
-                            vx[x + 1u] += d * (sc * wb);
-                        }
-                    }
-                }
+                let ci = select(0.0, 1.0 / (wa + wb), wa + wb > 0.0);
+//#else
+                let l0 = cl0[{x}];
+                let wa = wm[{x}];
+                let wb = wm[{x+1}];
+                let ci = cinv[{x}];
+//#endif
+                let d = ed[{x}] + (vx[{x+1}] - vx[{x}]) * h;
+//#if RSQRT
+                let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
+//#else
+                let len = sqrt(dot(d, d));
+                let sc = select(0.0, (l0 - len) * ci * inv_h / len, cok[{x}]);
+//#endif
+                vx[{x}] -= d * (sc * wa);
+                vx[{x+1}] += d * (sc * wb);
             }
+//#endfor
+            // Exchange the boundary velocities the red half-sweep changed.
+//#if SUBGROUP
+            {
+                let vl = subgroupShuffleUp(vx[EPT], 1u);
+                let vr = subgroupShuffleDown(vx[1], 1u);
+                vx[0] = select(vx[0], vl, has_left);
+                vx[EPT + 1u] = select(vx[EPT + 1u], vr, has_right);
+            }
+//#else
+            sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(vx[1], 0.0);
+            sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(vx[EPT], 0.0);
+            workgroupBarrier();
+            if has_left {
+                vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
+            }
+            if has_right {
+                vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
+            }
+            xpar ^= 1u;
+//#endif
+            // Black: x even, including both boundary constraints.
+//#for x 0 EPT+1 2
+            {
+//#if SWEEP_LOADS
+                let le = b0 + {x};
+                var l0 = 1.0;
+                var wa = 0.0;
+                var wb = 0.0;
+                if cok[{x}] {
+                    l0 = slots[it.base + it.w0 + le - 1u].a.x;
+                    wa = slots[it.base + it.w0 + le - 1u].a.y;
+                    wb = slots[it.base + it.w0 + le].a.y;
+                }
+                let ci = select(0.0, 1.0 / (wa + wb), wa + wb > 0.0);
+//#else
+                let l0 = cl0[{x}];
+                let wa = wm[{x}];
+                let wb = wm[{x+1}];
+                let ci = cinv[{x}];
+//#endif
+                let d = ed[{x}] + (vx[{x+1}] - vx[{x}]) * h;
+//#if RSQRT
+                let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
+//#else
+                let len = sqrt(dot(d, d));
+                let sc = select(0.0, (l0 - len) * ci * inv_h / len, cok[{x}]);
+//#endif
+                vx[{x}] -= d * (sc * wa);
+                vx[{x+1}] += d * (sc * wb);
+            }
+//#endfor
         }
 //#endif
 
         // Integrate positions and frames: r += h v, q <- normalise(q + q ⊗ (0, h ω / 2)).
-        for (var e = 0u; e < EPT; e++) {
-            let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+        {
+            let gp = it.w0 + b0 + {e};
             if gp < it.w1 {
-                v[e] = vx[e + 1u];
-                r[e] = r[e] + v[e] * h;
+                v[{e}] = vx[{e+1}];
+                r[{e}] = r[{e}] + v[{e}] * h;
                 if gp < end_elem {
-                    let qn = q[e] + quat_mul(q[e], vec4<f32>(w[e] * (h * 0.5), 0.0));
+                    let qn = q[{e}] + quat_mul(q[{e}], vec4<f32>(w[{e}] * (h * 0.5), 0.0));
                     let n2 = dot(qn, qn);
-                    q[e] = qn / sqrt(n2);
+                    q[{e}] = qn / sqrt(n2);
                     if !(n2 > 0.0) || not_finite(n2) {
                         if gp >= it.o0 && gp < it.o1 {
                             let key = key_of(step_rel, gp - it.w0, 1u);
@@ -519,26 +689,35 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                                 my_key = key;
                                 my_val = n2;
                             }
+//#if SUBGROUP
+                            stop = true;
+//#else
                             atomicMin(&wg_key, key);
                             wg_stop = 1u;
+//#endif
                         }
                     }
                 }
             }
         }
+//#endfor
         steps_done = s + 1u;
     }
 
     // Length check of the last step, then write the owned points back.
+//#if SUBGROUP
+    let rn = subgroupShuffleDown(r[0], 1u);
+    let stopped = subgroupAny(stop);
+//#else
     sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
-    let stopped = workgroupUniformLoad(&wg_stop);
-    if steps_done > 0u && stopped == 0u && has_right {
-        let e = EPT - 1u;
-        let ge = it.w0 + b0 + e;
-        let rn = sh_r[2u * lid + 2u].xyz;
+    let stopped = workgroupUniformLoad(&wg_stop) != 0u;
+    let rn = sh_r[2u * lid + 2u].xyz;
+//#endif
+    if steps_done > 0u && !stopped && has_right {
+        let ge = it.w0 + b0 + EPT - 1u;
         if ge < end_elem && ge >= it.o0 && ge < it.o1 {
             let l0 = slots[it.base + ge].a.x;
-            let d = rn - r[e];
+            let d = rn - r[EPT - 1u];
             let ratio = dot(d, d) / (l0 * l0);
             if !(ratio >= params.lo2 && ratio <= params.hi2) {
                 let key = key_of(chunk.offset + steps_done - 1u, ge - it.w0, select(3u, 2u, not_finite(ratio)));
@@ -546,16 +725,19 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                     my_key = key;
                     my_val = ratio;
                 }
+//#if !SUBGROUP
                 atomicMin(&wg_key, key);
+//#endif
             }
         }
     }
-    if steps_done > 0u && stopped == 0u {
-        for (var e = 0u; e + 1u < EPT; e++) {
-            let ge = it.w0 + b0 + e;
+    if steps_done > 0u && !stopped {
+//#for e 0 EPT-1
+        {
+            let ge = it.w0 + b0 + {e};
             if ge < end_elem && ge >= it.o0 && ge < it.o1 {
                 let l0 = slots[it.base + ge].a.x;
-                let d = r[e + 1u] - r[e];
+                let d = r[{e+1}] - r[{e}];
                 let ratio = dot(d, d) / (l0 * l0);
                 if !(ratio >= params.lo2 && ratio <= params.hi2) {
                     let key = key_of(chunk.offset + steps_done - 1u, ge - it.w0, select(3u, 2u, not_finite(ratio)));
@@ -563,27 +745,36 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
                         my_key = key;
                         my_val = ratio;
                     }
+//#if !SUBGROUP
                     atomicMin(&wg_key, key);
+//#endif
                 }
             }
         }
+//#endfor
     }
+//#if SUBGROUP
+    let first = subgroupMin(my_key);
+//#else
     workgroupBarrier();
     let first = atomicLoad(&wg_key);
+//#endif
     if my_key != NONE && my_key == first {
         atomicStore(&status[item_index * 4u + 1u], it.w0 + ((first >> 2u) & 0x3fffu));
         atomicStore(&status[item_index * 4u + 2u], params.base_step + (first >> 16u));
         atomicStore(&status[item_index * 4u + 3u], bitcast<u32>(my_val));
         atomicOr(&status[item_index * 4u], first & 3u);
     }
-    for (var e = 0u; e < EPT; e++) {
-        let gp = it.w0 + b0 + e;
+//#for e 0 EPT
+    {
+        let gp = it.w0 + b0 + {e};
         if gp >= it.o0 && gp < it.o1 {
             let s = it.base + gp;
-            pos[s] = vec4<f32>(r[e], 0.0);
-            vel[s] = vec4<f32>(v[e], 0.0);
-            frm[s] = q[e];
-            omg[s] = vec4<f32>(w[e], 0.0);
+            pos[s] = vec4<f32>(r[{e}], 0.0);
+            vel[s] = vec4<f32>(v[{e}], 0.0);
+            frm[s] = q[{e}];
+            omg[s] = vec4<f32>(w[{e}], 0.0);
         }
     }
+//#endfor
 }
