@@ -5,6 +5,7 @@
 //! Seeded and small (CI sizes); `cargo xtask validate` measures the real stability boundary
 //! (`docs/stability.md`).
 
+#[allow(unreachable_pub)]
 mod support;
 
 use cosserat::cosserat_model::Material;

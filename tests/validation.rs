@@ -5,6 +5,7 @@
 //! Each test fails if its measured quantity is further from the independent reference than the
 //! tolerance derived from the discretisation (see `support/cases.rs` for how).
 
+#[allow(unreachable_pub)]
 mod support;
 
 use support::cases::{self, Row, Size};

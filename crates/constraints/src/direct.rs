@@ -453,7 +453,10 @@ mod tests {
     use crate::{Ordering, solve_distance_iteration};
 
     /// A wavy rod with varied masses and a velocity field far from the constraint manifold.
-    fn wobbly(n: usize) -> (Vec<Vec3<f64>>, Vec<Vec3<f64>>, Vec<f64>, Vec<f64>) {
+    /// Positions, velocities, inverse masses, rest lengths.
+    type Chain = (Vec<Vec3<f64>>, Vec<Vec3<f64>>, Vec<f64>, Vec<f64>);
+
+    fn wobbly(n: usize) -> Chain {
         let l0: Vec<f64> = (0..n)
             .map(|j| 0.01 * (1.0 + 0.2 * (j as f64 * 0.9).sin()))
             .collect();
