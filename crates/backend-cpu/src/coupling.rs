@@ -344,21 +344,21 @@ fn view<T: Real>(rod: &mut CpuRod<T>, red_black: bool) -> RodVelocities<'_, T> {
 }
 
 impl<T: Real> PointVelocities<T> for RodVelocities<'_, T> {
-    #[inline]
+    #[inline(always)]
     fn velocity(&self, i: usize) -> Vec3<T> {
         match self {
             Self::Split(v) => v.velocity(i),
             Self::Soa(v) => v.velocity(i),
         }
     }
-    #[inline]
+    #[inline(always)]
     fn inv_mass(&self, i: usize) -> T {
         match self {
             Self::Split(v) => v.inv_mass(i),
             Self::Soa(v) => v.inv_mass(i),
         }
     }
-    #[inline]
+    #[inline(always)]
     fn apply_impulse(&mut self, i: usize, j: Vec3<T>) {
         match self {
             Self::Split(v) => v.apply_impulse(i, j),

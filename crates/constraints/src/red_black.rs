@@ -354,7 +354,7 @@ pub struct SplitVelocities<'a, T: Real> {
 }
 
 impl<T: Real> PointVelocities<T> for SplitVelocities<'_, T> {
-    #[inline]
+    #[inline(always)]
     fn velocity(&self, i: usize) -> Vec3<T> {
         let (b, k) = if i.is_multiple_of(2) {
             (&*self.even, i / 2)
@@ -363,7 +363,7 @@ impl<T: Real> PointVelocities<T> for SplitVelocities<'_, T> {
         };
         Vec3::new(b[0][k], b[1][k], b[2][k])
     }
-    #[inline]
+    #[inline(always)]
     fn inv_mass(&self, i: usize) -> T {
         if i.is_multiple_of(2) {
             self.even_w[i / 2]
@@ -371,7 +371,7 @@ impl<T: Real> PointVelocities<T> for SplitVelocities<'_, T> {
             self.odd_w[i / 2]
         }
     }
-    #[inline]
+    #[inline(always)]
     fn apply_impulse(&mut self, i: usize, j: Vec3<T>) {
         let (b, w, k) = if i.is_multiple_of(2) {
             (&mut *self.even, self.even_w, i / 2)

@@ -61,15 +61,15 @@ pub struct SoaVelocities<'a, T: Real> {
 }
 
 impl<T: Real> PointVelocities<T> for SoaVelocities<'_, T> {
-    #[inline]
+    #[inline(always)]
     fn velocity(&self, i: usize) -> Vec3<T> {
         Vec3::new(self.v[0][i], self.v[1][i], self.v[2][i])
     }
-    #[inline]
+    #[inline(always)]
     fn inv_mass(&self, i: usize) -> T {
         self.inv_masses[i]
     }
-    #[inline]
+    #[inline(always)]
     fn apply_impulse(&mut self, i: usize, j: Vec3<T>) {
         let w = self.inv_masses[i];
         if w > T::zero() {
