@@ -291,6 +291,23 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             v["contacts"] = serde_json::json!(c.contacts);
             v["collision_us_per_step"] = serde_json::json!(c.detection_us_per_step);
         }
+        if let Some(f) = sim.max_reaction_force() {
+            v["max_reaction_force"] = serde_json::json!(f);
+        }
+        if let Some(c) = sim.coupling_stats() {
+            v["bound_points"] = serde_json::json!(c.bound_points);
+            v["rod_contacts"] = serde_json::json!(c.contacts);
+            v["max_rod_contacts"] = serde_json::json!(c.max_contacts);
+            let finite = |x: f64| x.is_finite().then_some(x);
+            v["min_separation"] = serde_json::json!(finite(c.min_separation));
+            v["min_separation_radii"] = serde_json::json!(c.min_separation_radii);
+            v["min_separation_ratio"] = serde_json::json!(finite(c.min_separation_ratio));
+            v["coupling_detection_us_per_step"] = serde_json::json!(if c.steps > 0 {
+                c.detection_seconds * 1e6 / c.steps as f64
+            } else {
+                0.0
+            });
+        }
         println!("{v}");
     } else {
         println!(

@@ -1226,16 +1226,16 @@ fn fishermans_knot_strand(strand: u8, r: f64, standing: f64) -> Vec<[f64; 3]> {
             big_r * phi.sin(),
         ]);
     }
-    // Inwards, a quarter turn further, to the tuck.
+    // Inwards, a quarter turn further, out of the turns and back (a smooth U in x), to the tuck.
     let k = 24;
     for i in 1..=k {
         let t = i as f64 / k as f64;
         let phi = 4.0 * PI + 0.5 * PI * t;
         let rad = big_r + (rho - big_r) * t;
-        pts.push([c - g * t, rad * phi.cos(), rad * phi.sin()]);
+        pts.push([c - g * (PI * t).sin(), rad * phi.cos(), rad * phi.sin()]);
     }
     // Back through the turns, and the tail.
-    line(&mut pts, [c - g, 0.0, rho], [c + w + g + tail, 0.0, rho]);
+    line(&mut pts, [c, 0.0, rho], [c + w + g + tail, 0.0, rho]);
     if strand == 1 {
         for p in &mut pts {
             *p = [-p[0], -p[1], p[2]];
