@@ -253,6 +253,11 @@ fn write_output(dir: &Path, rec: &Recorder) -> Result<(), String> {
 }
 
 fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
+    if !json {
+        for w in sim.warnings() {
+            eprintln!("warning: {w}");
+        }
+    }
     let e = sim.energies();
     let tip = sim
         .positions(RodHandle(0))
@@ -282,6 +287,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "tip": tip,
             "diverged": o.divergence.is_some(),
             "divergence": o.divergence,
+            "warnings": sim.warnings(),
         });
         let mut v = v;
         if let Some(c) = sim.contact_report() {

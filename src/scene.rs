@@ -205,6 +205,9 @@ pub struct SolverSection {
     pub divergence_strain: f64,
     /// Speed [m/s] beyond which the run is declared diverged.
     pub divergence_speed: f64,
+    /// Refuse a time step beyond the estimated stable step of the explicit scheme (default
+    /// true).
+    pub check_stability: bool,
     /// `"explicit"` (the paper's scheme, default) or `"stiff"` (implicit bending and twisting:
     /// stable at haptic time steps for real instruments; `docs/stiff-solver.md`).
     pub scheme: String,
@@ -237,6 +240,7 @@ impl Default for SolverSection {
             gravity: [0.0, 0.0, -9.81],
             divergence_strain: 0.5,
             divergence_speed: 1e3,
+            check_stability: true,
             scheme: "explicit".into(),
             stiff: None,
         }
@@ -595,6 +599,7 @@ impl Checker<'_> {
             .double_precision(f64_precision)
             .divergence_strain(divergence_strain)
             .divergence_speed(self.positive("solver.divergence_speed", s.divergence_speed)?)
+            .check_stability(s.check_stability)
             .stiff_solver(self.stiff(s)?);
         for (i, rod) in scene.rods.iter().enumerate() {
             b.add_rod(self.rod(i, rod, environment.as_ref())?);

@@ -120,6 +120,7 @@ impl TrialRod {
                     / length;
         }
         let mut sim = SimulationBuilder::new()
+            .check_stability(false)
             .dt(dt)
             .iterations(10)
             .extensible(self.extensible)
