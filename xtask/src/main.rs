@@ -8,7 +8,9 @@
 //!   next to the published timings.
 //! - `cargo xtask bench --pareto` — run time against error, work-precision diagrams in
 //!   `docs/benchmarks/`.
-//! - `cargo xtask bench` / `cargo xtask bench --gpu` — hooks for the criterion and GPU benches.
+//! - `cargo xtask bench` — the criterion CPU benches with accuracy beside them, into
+//!   `docs/benchmarks/cpu.md`, and the insertion benchmark into `docs/benchmarks/insertion.md`.
+//! - `cargo xtask bench --gpu` — the GPU backend's benchmark on this machine's adapter.
 //!
 //! The flag parser is deliberately small: a handful of commands and flags, no dependency.
 
@@ -16,6 +18,7 @@
 #[allow(unreachable_pub)]
 mod support;
 
+mod bench;
 mod literature;
 mod pareto;
 mod stability_map;
@@ -116,15 +119,14 @@ fn run() -> Result<bool, String> {
     }
 }
 
-/// Hook: `cargo xtask bench` without flags — the criterion benches (to be filled in by the
-/// integrator, e.g. by running `cargo bench` with the right features).
+/// `cargo xtask bench` without flags: the criterion benches into `docs/benchmarks/`.
 fn bench_criterion() -> Result<bool, String> {
-    Err("`cargo xtask bench` (criterion benches) is not wired yet: run `cargo bench`, or `cargo xtask bench --pareto`".into())
+    bench::criterion()
 }
 
-/// Hook: `cargo xtask bench --gpu` — the GPU benchmark (to be filled in with the GPU backend).
+/// `cargo xtask bench --gpu`: the GPU backend's benchmark on this machine's adapter.
 fn bench_gpu() -> Result<bool, String> {
-    Err("`cargo xtask bench --gpu` is not wired yet".into())
+    bench::gpu()
 }
 
 fn main() -> ExitCode {

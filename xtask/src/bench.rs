@@ -1,0 +1,199 @@
+//! `cargo xtask bench` (criterion, CPU) and `cargo xtask bench --gpu`.
+//!
+//! The CPU part runs the criterion benchmark `benches/step.rs`, reads the medians criterion
+//! stored under `target/criterion/`, measures beside each configuration what it costs in
+//! accuracy (the pendulum's largest strain and its energy drift over 0.2 s of simulated time,
+//! with the same settings), and writes both into `docs/benchmarks/cpu.md` together with the
+//! machine it ran on. It then runs the insertion benchmark (`benches/insertion.rs`, time per
+//! step against insertion depth) into `docs/benchmarks/insertion.md`.
+//!
+//! The GPU part builds and runs the GPU backend's benchmark example on whatever adapter this
+//! machine has and writes `docs/benchmarks/gpu-local.json`; the committed H100/H200 tables in
+//! `docs/benchmarks/gpu.md` come from the same program run on the device machine.
+
+use cosserat::{Backend, Material, RodBuilder, SimulationBuilder};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn cargo(args: &[&str]) -> Result<String, String> {
+    let out = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("cannot run cargo {}: {e}", args.join(" ")))?;
+    if !out.status.success() {
+        return Err(format!(
+            "cargo {} failed:\n{}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// One line naming the machine: CPU model and core count.
+fn machine() -> String {
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!("{model}, {cores} cores available")
+}
+
+/// The median of a criterion benchmark in µs, from `target/criterion/<group>/<id>/<param>`.
+fn median_us(group: &str, id: &str, param: &str) -> Option<f64> {
+    let dir = std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root().join("target"));
+    let path = dir
+        .join("criterion")
+        .join(group)
+        .join(id)
+        .join(param)
+        .join("new/estimates.json");
+    let text = std::fs::read_to_string(path).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    Some(v["median"]["point_estimate"].as_f64()? / 1e3)
+}
+
+/// Largest strain and energy drift (relative to the largest kinetic energy seen) of the
+/// benchmark's pendulum over 0.2 s.
+fn accuracy(elements: usize, double: bool) -> Result<(f64, f64), String> {
+    let material = Material::new(1.0e6, 1.0e6 / 3.0, 1100.0, 0.005);
+    let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], 1.0, elements, material).pin_start();
+    let mut sim = SimulationBuilder::new()
+        .dt(2e-5)
+        .iterations(10)
+        .double_precision(double)
+        .backend(Backend::Cpu)
+        .gravity([0.0, 0.0, -9.81])
+        .with_rod(rod)
+        .build()
+        .map_err(|e| e.to_string())?;
+    let (mut drift, mut kmax) = (0.0f64, 0.0f64);
+    for _ in 0..20 {
+        sim.run(500).map_err(|e| e.to_string())?;
+        let e = sim.energies();
+        kmax = kmax.max(e.kinetic());
+        drift = drift.max((e.kinetic() + e.potential()).abs());
+    }
+    Ok((sim.max_strain(), drift / kmax.max(f64::MIN_POSITIVE)))
+}
+
+/// `cargo xtask bench`.
+pub(crate) fn criterion() -> Result<bool, String> {
+    println!("running the criterion benchmark (benches/step.rs)…");
+    cargo(&["bench", "--bench", "step", "--", "--noplot"])?;
+    let mut md = String::new();
+    let _ = writeln!(md, "# CPU benchmark: one step of the free-space pendulum\n");
+    let _ = writeln!(
+        md,
+        "Machine: {}. Command: `cargo xtask bench` (criterion, `benches/step.rs`; medians).\n",
+        machine()
+    );
+    let _ = writeln!(
+        md,
+        "The paper's free-space test (section 3.1): a 1 m rod pinned at one end swinging under gravity, 10 red–black constraint sweeps per step, dt = 2e-5 s. \
+`single` is one `Simulation::step` (what a haptic loop calls every tick, including the copy into and out of the working layout); `batch` is the cost per step inside `Simulation::run(100)`. \
+The accuracy columns come from the same configuration run for 0.2 s: the largest segment strain `|l/l0 − 1|` and the largest total-energy error relative to the largest kinetic energy (the pendulum starts with zero total energy and has no damping).\n"
+    );
+    let _ = writeln!(
+        md,
+        "| elements | precision | single, serial [µs] | single, rayon [µs] | batch, serial [µs/step] | batch, rayon [µs/step] | max strain | energy error |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    let mut json = Vec::new();
+    for n in [128usize, 512, 1000, 3072] {
+        for (prec, double) in [("f32", false), ("f64", true)] {
+            let p = n.to_string();
+            let get = |kind: &str, backend: &str| {
+                median_us("pendulum_step", &format!("{kind}_{prec}_{backend}"), &p)
+            };
+            let cells = [
+                get("single", "cpu"),
+                get("single", "cpu-rayon"),
+                get("batch100", "cpu"),
+                get("batch100", "cpu-rayon").map(|x| x),
+            ];
+            let batch = |x: Option<f64>| x.map(|v| v / 100.0);
+            let cells = [cells[0], cells[1], batch(cells[2]), batch(cells[3])];
+            let (strain, drift) = accuracy(n, double)?;
+            let fmt = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.1}"));
+            let _ = writeln!(
+                md,
+                "| {n} | {prec} | {} | {} | {} | {} | {strain:.1e} | {drift:.1e} |",
+                fmt(cells[0]),
+                fmt(cells[1]),
+                fmt(cells[2]),
+                fmt(cells[3])
+            );
+            json.push(serde_json::json!({"elements": n, "precision": prec, "single_serial_us": cells[0], "single_rayon_us": cells[1], "batch_serial_us_per_step": cells[2], "batch_rayon_us_per_step": cells[3], "max_strain": strain, "energy_error": drift}));
+        }
+    }
+    let many = |b: &str| {
+        median_us("pendulum_many_rods", &format!("16x256_f32_{b}"), "16").map(|v| v / 10.0)
+    };
+    let _ = writeln!(
+        md,
+        "\nMany rods (16 rods × 256 elements, f32, per step): serial {:.1} µs, rayon {:.1} µs.",
+        many("cpu").unwrap_or(f64::NAN),
+        many("cpu-rayon").unwrap_or(f64::NAN)
+    );
+    let docs = root().join("docs/benchmarks");
+    std::fs::create_dir_all(&docs).map_err(|e| e.to_string())?;
+    std::fs::write(docs.join("cpu.md"), &md).map_err(|e| format!("docs/benchmarks/cpu.md: {e}"))?;
+    std::fs::write(
+        docs.join("cpu.json"),
+        serde_json::to_string_pretty(&json).unwrap_or_default(),
+    )
+    .map_err(|e| format!("docs/benchmarks/cpu.json: {e}"))?;
+    print!("{md}");
+    println!("\nrunning the insertion benchmark (benches/insertion.rs)…");
+    let table = cargo(&["bench", "--bench", "insertion"])?;
+    let mut ins = String::new();
+    let _ = writeln!(ins, "# Guidewire insertion: time per step against depth\n");
+    let _ = writeln!(
+        ins,
+        "Machine: {}. Command: `cargo xtask bench` (`benches/insertion.rs`). The paper's test 3.3: a 512-element wire pushed at 0.2 m/s into the vessel, 10 constraint iterations with friction per step, serial CPU, f32. Each row is a window of simulated time; `detection` is the share of the step spent finding contacts.",
+        machine()
+    );
+    ins.push_str(table.trim_start_matches(|c: char| c != '\n' && c != '#'));
+    std::fs::write(docs.join("insertion.md"), &ins)
+        .map_err(|e| format!("docs/benchmarks/insertion.md: {e}"))?;
+    print!("{ins}");
+    Ok(true)
+}
+
+/// `cargo xtask bench --gpu`.
+pub(crate) fn gpu() -> Result<bool, String> {
+    println!("building and running the GPU benchmark (crates/backend-gpu/examples/gpu_bench.rs)…");
+    let out = root().join("docs/benchmarks/gpu-local.json");
+    let out_s = out.to_string_lossy().into_owned();
+    let text = cargo(&[
+        "run",
+        "--release",
+        "-p",
+        "cosserat-backend-gpu",
+        "--example",
+        "gpu_bench",
+        "--",
+        &out_s,
+        "--quick",
+    ])?;
+    print!("{text}");
+    println!(
+        "\nwrote {} (this machine's adapter; the committed H100/H200 tables are in docs/benchmarks/gpu.md)",
+        out.display()
+    );
+    Ok(true)
+}
