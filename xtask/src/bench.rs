@@ -123,7 +123,7 @@ The accuracy columns come from the same configuration run for 0.2 s: the largest
                 get("single", "cpu"),
                 get("single", "cpu-rayon"),
                 get("batch100", "cpu"),
-                get("batch100", "cpu-rayon").map(|x| x),
+                get("batch100", "cpu-rayon"),
             ];
             let batch = |x: Option<f64>| x.map(|v| v / 100.0);
             let cells = [cells[0], cells[1], batch(cells[2]), batch(cells[3])];
