@@ -15,9 +15,23 @@ use std::time::Duration;
 /// The pendulum of `scenes/pendulum.toml`, built in code, with `rods` copies side by side.
 fn pendulum(elements: usize, rods: usize, double: bool, backend: Backend) -> Simulation {
     let material = Material::new(1.0e6, 1.0e6 / 3.0, 1100.0, 0.005);
-    let mut b = SimulationBuilder::new().dt(2e-5).iterations(10).double_precision(double).backend(backend).gravity([0.0, 0.0, -9.81]);
+    let mut b = SimulationBuilder::new()
+        .dt(2e-5)
+        .iterations(10)
+        .double_precision(double)
+        .backend(backend)
+        .gravity([0.0, 0.0, -9.81]);
     for r in 0..rods {
-        b.add_rod(RodBuilder::straight([0.0, 0.05 * r as f64, 0.0], [1.0, 0.0, 0.0], 1.0, elements, material).pin_start());
+        b.add_rod(
+            RodBuilder::straight(
+                [0.0, 0.05 * r as f64, 0.0],
+                [1.0, 0.0, 0.0],
+                1.0,
+                elements,
+                material,
+            )
+            .pin_start(),
+        );
     }
     let mut sim = b.build().expect("valid pendulum");
     // Start from a swinging state rather than the exactly straight initial one.
@@ -27,15 +41,21 @@ fn pendulum(elements: usize, rods: usize, double: bool, backend: Backend) -> Sim
 
 fn single_rod(c: &mut Criterion) {
     let mut g = c.benchmark_group("pendulum_step");
-    g.warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2)).sample_size(30);
+    g.warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .sample_size(30);
     for &n in &[128usize, 512, 1000, 3072] {
         for (precision, double) in [("f32", false), ("f64", true)] {
             for backend in [Backend::Cpu, Backend::CpuRayon] {
                 let id = format!("{precision}/{}", backend.name());
                 let mut sim = pendulum(n, 1, double, backend);
-                g.bench_with_input(BenchmarkId::new(format!("single/{id}"), n), &n, |b, _| b.iter(|| black_box(sim.step()).expect("stable")));
+                g.bench_with_input(BenchmarkId::new(format!("single/{id}"), n), &n, |b, _| {
+                    b.iter(|| black_box(sim.step()).expect("stable"))
+                });
                 let mut sim = pendulum(n, 1, double, backend);
-                g.bench_with_input(BenchmarkId::new(format!("batch100/{id}"), n), &n, |b, _| b.iter(|| black_box(sim.run(100)).expect("stable")));
+                g.bench_with_input(BenchmarkId::new(format!("batch100/{id}"), n), &n, |b, _| {
+                    b.iter(|| black_box(sim.run(100)).expect("stable"))
+                });
             }
         }
     }
@@ -44,10 +64,15 @@ fn single_rod(c: &mut Criterion) {
 
 fn many_rods(c: &mut Criterion) {
     let mut g = c.benchmark_group("pendulum_many_rods");
-    g.warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2)).sample_size(20);
+    g.warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .sample_size(20);
     for backend in [Backend::Cpu, Backend::CpuRayon] {
         let mut sim = pendulum(256, 16, false, backend);
-        g.bench_function(BenchmarkId::new(format!("16x256/f32/{}", backend.name()), 16), |b| b.iter(|| black_box(sim.run(10)).expect("stable")));
+        g.bench_function(
+            BenchmarkId::new(format!("16x256/f32/{}", backend.name()), 16),
+            |b| b.iter(|| black_box(sim.run(10)).expect("stable")),
+        );
     }
     g.finish();
 }

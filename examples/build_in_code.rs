@@ -4,7 +4,9 @@
 //! Run with `cargo run --release --example build_in_code`.
 
 use cosserat::cosserat_model::rod::RestShape;
-use cosserat::{EndCondition, Material, PrescribedMotion, RodBuilder, RodHandle, SimulationBuilder};
+use cosserat::{
+    EndCondition, Material, PrescribedMotion, RodBuilder, RodHandle, SimulationBuilder,
+};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     // A soft polymer wire, 0.3 m long, 1 mm thick, with an intrinsic bend of 1/(10 cm).
@@ -20,12 +22,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .rest_shape(RestShape::Uniform([10.0, 0.0, 0.0]))
         .damping(1e-10, 0.0, 5.0)
         .start(EndCondition::clamped().driven(push_and_twist));
-    let mut sim = SimulationBuilder::new().dt(1e-5).iterations(10).gravity([0.0, 0.0, -9.81]).with_rod(wire).build()?;
+    let mut sim = SimulationBuilder::new()
+        .dt(1e-5)
+        .iterations(10)
+        .gravity([0.0, 0.0, -9.81])
+        .with_rod(wire)
+        .build()?;
     let wire = RodHandle(0);
     for _ in 0..10 {
         sim.run(10_000)?;
         let tip = *sim.positions(wire).last().expect("a rod has points");
-        println!("t = {:.2} s  tip = [{:+.4}, {:+.4}, {:+.4}] m  max strain {:.1e}", sim.time(), tip[0], tip[1], tip[2], sim.max_strain());
+        println!(
+            "t = {:.2} s  tip = [{:+.4}, {:+.4}, {:+.4}] m  max strain {:.1e}",
+            sim.time(),
+            tip[0],
+            tip[1],
+            tip[2],
+            sim.max_strain()
+        );
     }
     Ok(())
 }

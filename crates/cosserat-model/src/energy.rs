@@ -24,7 +24,13 @@ use crate::{Quat, Real, RodParams, RodState, Vec3};
 ///
 /// Returns `(energy, torque on qa in qa's body frame, torque on qb in qb's body frame)`.
 #[inline(always)]
-pub fn bend_twist_node<T: Real>(qa: &Quat<T>, qb: &Quat<T>, rest: &Vec3<T>, k: &Vec3<T>, l: T) -> (T, Vec3<T>, Vec3<T>) {
+pub fn bend_twist_node<T: Real>(
+    qa: &Quat<T>,
+    qb: &Quat<T>,
+    rest: &Vec3<T>,
+    k: &Vec3<T>,
+    l: T,
+) -> (T, Vec3<T>, Vec3<T>) {
     let s = relative_rotation(qa, qb);
     let sv = s.imag();
     let delta = sv * (T::lit(2.0) / l) - rest;
@@ -40,7 +46,13 @@ pub fn bend_twist_node<T: Real>(qa: &Quat<T>, qb: &Quat<T>, rest: &Vec3<T>, k: &
 /// Returns `(energy, force on r_{j+1}, body-frame torque on q_j)`; the force on `r_j` is the
 /// negative of the one on `r_{j+1}`.
 #[inline(always)]
-pub fn parallel_element<T: Real>(ra: &Vec3<T>, rb: &Vec3<T>, q: &Quat<T>, kp: T, l0: T) -> (T, Vec3<T>, Vec3<T>) {
+pub fn parallel_element<T: Real>(
+    ra: &Vec3<T>,
+    rb: &Vec3<T>,
+    q: &Quat<T>,
+    kp: T,
+    l0: T,
+) -> (T, Vec3<T>, Vec3<T>) {
     let e = rb - ra;
     let len = e.norm();
     let t = e / len;
@@ -61,13 +73,23 @@ pub fn stretch_element<T: Real>(ra: &Vec3<T>, rb: &Vec3<T>, ks: T, l0: T) -> (T,
     let e = rb - ra;
     let len = e.norm();
     let strain = len / l0 - T::one();
-    (T::lit(0.5) * ks * l0 * strain * strain, e * (-ks * strain / len))
+    (
+        T::lit(0.5) * ks * l0 * strain * strain,
+        e * (-ks * strain / len),
+    )
 }
 
 /// Dissipation force on `r_{j+1}` from the stretching rate of one element (its negative acts on
 /// `r_j`). Only the component of the relative velocity along the element is resisted.
 #[inline(always)]
-pub fn stretch_damping_element<T: Real>(ra: &Vec3<T>, rb: &Vec3<T>, va: &Vec3<T>, vb: &Vec3<T>, c: T, l0: T) -> Vec3<T> {
+pub fn stretch_damping_element<T: Real>(
+    ra: &Vec3<T>,
+    rb: &Vec3<T>,
+    va: &Vec3<T>,
+    vb: &Vec3<T>,
+    c: T,
+    l0: T,
+) -> Vec3<T> {
     let e = rb - ra;
     let len2 = e.norm_squared();
     // Force −c ε̇ t with ε̇ = t·(v_b − v_a)/l0, written without a square root.
@@ -79,7 +101,14 @@ pub fn stretch_damping_element<T: Real>(ra: &Vec3<T>, rb: &Vec3<T>, va: &Vec3<T>
 /// `wa`, `wb` are body-frame angular velocities; returns the body-frame torques on `qa` and
 /// `qb`. Equal world-frame angular velocities (a rigid rotation) give no torque.
 #[inline(always)]
-pub fn bend_damping_node<T: Real>(qa: &Quat<T>, qb: &Quat<T>, wa: &Vec3<T>, wb: &Vec3<T>, c: T, l: T) -> (Vec3<T>, Vec3<T>) {
+pub fn bend_damping_node<T: Real>(
+    qa: &Quat<T>,
+    qb: &Quat<T>,
+    wa: &Vec3<T>,
+    wb: &Vec3<T>,
+    c: T,
+    l: T,
+) -> (Vec3<T>, Vec3<T>) {
     let rel = rotate(qb, wb) - rotate(qa, wa);
     let tw = rel * (c / l);
     (rotate_inv(qa, &tw), -rotate_inv(qb, &tw))
@@ -128,14 +157,30 @@ pub fn energies<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &ForceModel<T
     let n = s.elements();
     let mut e = Energies::default();
     for j in 0..n.saturating_sub(1) {
-        let (eb, _, _) = bend_twist_node(&s.frames[j], &s.frames[j + 1], &p.rest_darboux[j], &p.bend_twist_stiffness[j], p.node_length(j));
+        let (eb, _, _) = bend_twist_node(
+            &s.frames[j],
+            &s.frames[j + 1],
+            &p.rest_darboux[j],
+            &p.bend_twist_stiffness[j],
+            p.node_length(j),
+        );
         e.bend_twist += eb.to_f64();
     }
     for j in 0..n {
         let (ra, rb) = (&s.positions[j], &s.positions[j + 1]);
-        e.parallel += parallel_element(ra, rb, &s.frames[j], p.parallel_stiffness[j], p.rest_lengths[j]).0.to_f64();
+        e.parallel += parallel_element(
+            ra,
+            rb,
+            &s.frames[j],
+            p.parallel_stiffness[j],
+            p.rest_lengths[j],
+        )
+        .0
+        .to_f64();
         if model.extensible {
-            e.stretch += stretch_element(ra, rb, p.stretch_stiffness[j], p.rest_lengths[j]).0.to_f64();
+            e.stretch += stretch_element(ra, rb, p.stretch_stiffness[j], p.rest_lengths[j])
+                .0
+                .to_f64();
         }
         let w = s.angular_velocities[j];
         e.kinetic_rotation += 0.5 * w.dot(&p.inertias[j].component_mul(&w)).to_f64();
@@ -153,7 +198,13 @@ pub fn energies<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &ForceModel<T
 ///
 /// This is the reference definition of the right-hand side of the equations of motion; the
 /// backends either call it or are tested against it.
-pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &ForceModel<T>, forces: &mut [Vec3<T>], torques: &mut [Vec3<T>]) {
+pub fn accumulate_forces<T: Real>(
+    s: &RodState<T>,
+    p: &RodParams<T>,
+    model: &ForceModel<T>,
+    forces: &mut [Vec3<T>],
+    torques: &mut [Vec3<T>],
+) {
     let n = s.elements();
     debug_assert_eq!(forces.len(), n + 1);
     debug_assert_eq!(torques.len(), n);
@@ -168,7 +219,14 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
         if model.extensible {
             fb += stretch_element(ra, rb, p.stretch_stiffness[j], l0).1;
             if p.stretch_damping[j] > T::zero() {
-                fb += stretch_damping_element(ra, rb, &s.velocities[j], &s.velocities[j + 1], p.stretch_damping[j], l0);
+                fb += stretch_damping_element(
+                    ra,
+                    rb,
+                    &s.velocities[j],
+                    &s.velocities[j + 1],
+                    p.stretch_damping[j],
+                    l0,
+                );
             }
         }
         forces[j] -= fb;
@@ -177,7 +235,13 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
         torques[j] += tq;
     }
     for j in 0..n.saturating_sub(1) {
-        let (_, ta, tb) = bend_twist_node(&s.frames[j], &s.frames[j + 1], &p.rest_darboux[j], &p.bend_twist_stiffness[j], p.node_length(j));
+        let (_, ta, tb) = bend_twist_node(
+            &s.frames[j],
+            &s.frames[j + 1],
+            &p.rest_darboux[j],
+            &p.bend_twist_stiffness[j],
+            p.node_length(j),
+        );
         torques[j] += ta;
         torques[j + 1] += tb;
     }
@@ -185,7 +249,14 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
     if p.bend_damping.iter().any(|&c| c > T::zero()) {
         for j in 0..n.saturating_sub(1) {
             let (qa, qb) = (&s.frames[j], &s.frames[j + 1]);
-            let (da, db) = bend_damping_node(qa, qb, &s.angular_velocities[j], &s.angular_velocities[j + 1], p.bend_damping[j], p.node_length(j));
+            let (da, db) = bend_damping_node(
+                qa,
+                qb,
+                &s.angular_velocities[j],
+                &s.angular_velocities[j + 1],
+                p.bend_damping[j],
+                p.node_length(j),
+            );
             torques[j] += da;
             torques[j + 1] += db;
         }
@@ -195,9 +266,9 @@ pub fn accumulate_forces<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &For
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Material;
     use crate::quat::rotate_body;
     use crate::rod::{RestShape, RodSpec, build_rod};
-    use crate::Material;
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
     /// A random, curved and twisted rod with random rest shape and velocities.
@@ -206,34 +277,71 @@ mod tests {
         let mut pts = vec![[0.0; 3]];
         let mut dir = Vec3::new(1.0, 0.0, 0.0);
         for _ in 0..n {
-            dir = (dir + Vec3::new(rng.random_range(-0.4..0.4), rng.random_range(-0.4..0.4), rng.random_range(-0.4..0.4))).normalize();
+            dir = (dir
+                + Vec3::new(
+                    rng.random_range(-0.4..0.4),
+                    rng.random_range(-0.4..0.4),
+                    rng.random_range(-0.4..0.4),
+                ))
+            .normalize();
             let l = rng.random_range(0.008..0.012);
             let last = Vec3::from(*pts.last().unwrap());
             pts.push((last + dir * l).into());
         }
-        let mut spec = RodSpec::new(Material::new(rng.random_range(1e5..1e7), rng.random_range(1e5..1e7), 1100.0, 2e-3));
-        spec.rest_shape = RestShape::Uniform([rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0)]);
+        let mut spec = RodSpec::new(Material::new(
+            rng.random_range(1e5..1e7),
+            rng.random_range(1e5..1e7),
+            1100.0,
+            2e-3,
+        ));
+        spec.rest_shape = RestShape::Uniform([
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-5.0..5.0),
+        ]);
         spec.bend_damping = 1e-3;
         spec.stretch_damping = 0.5;
         let (mut s, p) = build_rod::<f64>(&pts, &spec).unwrap();
         // Perturb frames and positions off the adapted configuration and give them velocities.
         for q in s.frames.iter_mut() {
-            *q = rotate_body(q, &Vec3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)));
+            *q = rotate_body(
+                q,
+                &Vec3::new(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                ),
+            );
         }
         for r in s.positions.iter_mut() {
-            *r += Vec3::new(rng.random_range(-1e-3..1e-3), rng.random_range(-1e-3..1e-3), rng.random_range(-1e-3..1e-3));
+            *r += Vec3::new(
+                rng.random_range(-1e-3..1e-3),
+                rng.random_range(-1e-3..1e-3),
+                rng.random_range(-1e-3..1e-3),
+            );
         }
         for v in s.velocities.iter_mut() {
-            *v = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            *v = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
         }
         for w in s.angular_velocities.iter_mut() {
-            *w = Vec3::new(rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0));
+            *w = Vec3::new(
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-5.0..5.0),
+            );
         }
         (s, p)
     }
 
     fn model(extensible: bool) -> ForceModel<f64> {
-        ForceModel { extensible, gravity: Vec3::new(0.3, -9.81, 0.1) }
+        ForceModel {
+            extensible,
+            gravity: Vec3::new(0.3, -9.81, 0.1),
+        }
     }
 
     fn potential(s: &RodState<f64>, p: &RodParams<f64>, m: &ForceModel<f64>) -> f64 {
@@ -250,20 +358,31 @@ mod tests {
                 // Remove dissipation and velocities so only conservative terms remain.
                 p.drag = 0.0;
                 s.velocities.iter_mut().for_each(|v| *v = Vec3::zeros());
-                s.angular_velocities.iter_mut().for_each(|w| *w = Vec3::zeros());
+                s.angular_velocities
+                    .iter_mut()
+                    .for_each(|w| *w = Vec3::zeros());
                 let m = model(extensible);
                 let n = s.elements();
                 let (mut f, mut t) = (vec![Vec3::zeros(); n + 1], vec![Vec3::zeros(); n]);
                 accumulate_forces(&s, &p, &m, &mut f, &mut t);
                 let h = 1e-6;
-                let scale = f.iter().chain(t.iter()).map(|x| x.norm()).fold(0.0, f64::max);
+                let scale = f
+                    .iter()
+                    .chain(t.iter())
+                    .map(|x| x.norm())
+                    .fold(0.0, f64::max);
                 for i in 0..=n {
                     for c in 0..3 {
                         let (mut sp, mut sm) = (s.clone(), s.clone());
                         sp.positions[i][c] += h;
                         sm.positions[i][c] -= h;
                         let g = (potential(&sp, &p, &m) - potential(&sm, &p, &m)) / (2.0 * h);
-                        assert!((f[i][c] + g).abs() < 1e-6 * scale, "seed {seed} point {i}.{c}: force {} vs -dE {}", f[i][c], -g);
+                        assert!(
+                            (f[i][c] + g).abs() < 1e-6 * scale,
+                            "seed {seed} point {i}.{c}: force {} vs -dE {}",
+                            f[i][c],
+                            -g
+                        );
                     }
                 }
                 for j in 0..n {
@@ -274,7 +393,12 @@ mod tests {
                         sp.frames[j] = rotate_body(&s.frames[j], &th);
                         sm.frames[j] = rotate_body(&s.frames[j], &(-th));
                         let g = (potential(&sp, &p, &m) - potential(&sm, &p, &m)) / (2.0 * h);
-                        assert!((t[j][c] + g).abs() < 1e-6 * scale, "seed {seed} frame {j}.{c}: torque {} vs -dE {}", t[j][c], -g);
+                        assert!(
+                            (t[j][c] + g).abs() < 1e-6 * scale,
+                            "seed {seed} frame {j}.{c}: torque {} vs -dE {}",
+                            t[j][c],
+                            -g
+                        );
                     }
                 }
             }
@@ -290,12 +414,14 @@ mod tests {
         let dissipation = |s: &RodState<f64>| {
             let mut d = 0.0;
             for j in 0..n - 1 {
-                let rel = rotate(&s.frames[j + 1], &s.angular_velocities[j + 1]) - rotate(&s.frames[j], &s.angular_velocities[j]);
+                let rel = rotate(&s.frames[j + 1], &s.angular_velocities[j + 1])
+                    - rotate(&s.frames[j], &s.angular_velocities[j]);
                 d += 0.5 * p.bend_damping[j] * rel.norm_squared() / p.node_length(j);
             }
             for j in 0..n {
                 let e = s.positions[j + 1] - s.positions[j];
-                let rate = e.normalize().dot(&(s.velocities[j + 1] - s.velocities[j])) / p.rest_lengths[j];
+                let rate =
+                    e.normalize().dot(&(s.velocities[j + 1] - s.velocities[j])) / p.rest_lengths[j];
                 d += 0.5 * p.stretch_damping[j] * p.rest_lengths[j] * rate * rate;
             }
             for i in 0..=n {
@@ -308,7 +434,9 @@ mod tests {
         let (mut f, mut t) = (f0.clone(), t0.clone());
         let mut rest = s.clone();
         rest.velocities.iter_mut().for_each(|v| *v = Vec3::zeros());
-        rest.angular_velocities.iter_mut().for_each(|w| *w = Vec3::zeros());
+        rest.angular_velocities
+            .iter_mut()
+            .for_each(|w| *w = Vec3::zeros());
         accumulate_forces(&rest, &p, &m, &mut f0, &mut t0);
         accumulate_forces(&s, &p, &m, &mut f, &mut t);
         let h = 1e-6;
@@ -318,7 +446,10 @@ mod tests {
                 sp.velocities[i][c] += h;
                 sm.velocities[i][c] -= h;
                 let g = (dissipation(&sp) - dissipation(&sm)) / (2.0 * h);
-                assert!((f[i][c] - f0[i][c] + g).abs() < 1e-6 * (1.0 + g.abs()), "point {i}.{c}");
+                assert!(
+                    (f[i][c] - f0[i][c] + g).abs() < 1e-6 * (1.0 + g.abs()),
+                    "point {i}.{c}"
+                );
             }
         }
         for j in 0..n {
@@ -327,7 +458,10 @@ mod tests {
                 sp.angular_velocities[j][c] += h;
                 sm.angular_velocities[j][c] -= h;
                 let g = (dissipation(&sp) - dissipation(&sm)) / (2.0 * h);
-                assert!((t[j][c] - t0[j][c] + g).abs() < 1e-6 * (1.0 + g.abs()), "frame {j}.{c}");
+                assert!(
+                    (t[j][c] - t0[j][c] + g).abs() < 1e-6 * (1.0 + g.abs()),
+                    "frame {j}.{c}"
+                );
             }
         }
     }
@@ -337,7 +471,10 @@ mod tests {
     #[test]
     fn energies_are_invariant_under_rigid_motions() {
         let (s, p) = random_rod(3, 15);
-        let m = ForceModel { extensible: true, gravity: Vec3::zeros() };
+        let m = ForceModel {
+            extensible: true,
+            gravity: Vec3::zeros(),
+        };
         let e0 = energies(&s, &p, &m);
         let rot = crate::quat::exp_rotation(&Vec3::new(0.7, -1.3, 2.1));
         let shift = Vec3::new(3.0, -1.0, 0.5);
@@ -349,12 +486,18 @@ mod tests {
             *q = rot * *q;
         }
         let e1 = energies(&moved, &p, &m);
-        for (a, b) in [(e0.bend_twist, e1.bend_twist), (e0.parallel, e1.parallel), (e0.stretch, e1.stretch)] {
+        for (a, b) in [
+            (e0.bend_twist, e1.bend_twist),
+            (e0.parallel, e1.parallel),
+            (e0.stretch, e1.stretch),
+        ] {
             assert!((a - b).abs() <= 1e-10 * a.abs().max(1e-12), "{a} vs {b}");
         }
         let mut rest = s.clone();
         rest.velocities.iter_mut().for_each(|v| *v = Vec3::zeros());
-        rest.angular_velocities.iter_mut().for_each(|w| *w = Vec3::zeros());
+        rest.angular_velocities
+            .iter_mut()
+            .for_each(|w| *w = Vec3::zeros());
         let mut p0 = p.clone();
         p0.drag = 0.0;
         let n = s.elements();

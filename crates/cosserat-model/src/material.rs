@@ -35,7 +35,11 @@ pub struct MaterialError {
 
 impl std::fmt::Display for MaterialError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "`{}` = {} is invalid: expected {}", self.field, self.value, self.expected)
+        write!(
+            f,
+            "`{}` = {} is invalid: expected {}",
+            self.field, self.value, self.expected
+        )
     }
 }
 

@@ -30,14 +30,27 @@ impl<T: Real> RodState<T> {
 
     /// Converts the state to another precision.
     pub fn cast<U: Real>(&self) -> RodState<U> {
-        let v = |x: &Vec3<T>| Vec3::new(U::lit(x.x.to_f64()), U::lit(x.y.to_f64()), U::lit(x.z.to_f64()));
+        let v = |x: &Vec3<T>| {
+            Vec3::new(
+                U::lit(x.x.to_f64()),
+                U::lit(x.y.to_f64()),
+                U::lit(x.z.to_f64()),
+            )
+        };
         RodState {
             positions: self.positions.iter().map(v).collect(),
             velocities: self.velocities.iter().map(v).collect(),
             frames: self
                 .frames
                 .iter()
-                .map(|q| Quat::new(U::lit(q.w.to_f64()), U::lit(q.i.to_f64()), U::lit(q.j.to_f64()), U::lit(q.k.to_f64())))
+                .map(|q| {
+                    Quat::new(
+                        U::lit(q.w.to_f64()),
+                        U::lit(q.i.to_f64()),
+                        U::lit(q.j.to_f64()),
+                        U::lit(q.k.to_f64()),
+                    )
+                })
                 .collect(),
             angular_velocities: self.angular_velocities.iter().map(v).collect(),
         }
@@ -110,10 +123,17 @@ impl std::fmt::Display for RodBuildError {
         match self {
             Self::TooFewPoints(n) => write!(f, "a rod needs at least 2 points, got {n}"),
             Self::NonFinitePoint(i) => write!(f, "point {i} is not finite"),
-            Self::ZeroLengthElement(j) => write!(f, "element {j} has zero length (points {j} and {} coincide)", j + 1),
+            Self::ZeroLengthElement(j) => write!(
+                f,
+                "element {j} has zero length (points {j} and {} coincide)",
+                j + 1
+            ),
             Self::FoldedBack(i) => write!(f, "the polyline folds back on itself at point {i}"),
             Self::Material(e) => write!(f, "{e}"),
-            Self::InvalidCoefficient(name, v) => write!(f, "`{name}` = {v} is invalid: expected a finite number >= 0"),
+            Self::InvalidCoefficient(name, v) => write!(
+                f,
+                "`{name}` = {v} is invalid: expected a finite number >= 0"
+            ),
         }
     }
 }
@@ -171,7 +191,10 @@ impl RodSpec {
 /// Frames are adapted to the segments (`d3` along each) and carried from one segment to the
 /// next by parallel transport (the rotation of least angle), so a polyline built without twist
 /// gets frames without twist.
-pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodState<T>, RodParams<T>), RodBuildError> {
+pub fn build_rod<T: Real>(
+    points: &[[f64; 3]],
+    spec: &RodSpec,
+) -> Result<(RodState<T>, RodParams<T>), RodBuildError> {
     spec.material.validate().map_err(RodBuildError::Material)?;
     for (name, v) in [
         ("bend_damping", spec.bend_damping),
@@ -206,14 +229,21 @@ pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodSta
     let mut frames: Vec<Quat<f64>> = Vec::with_capacity(n);
     frames.push(frame_from_tangent(&tangents[0], &hint));
     for j in 1..n {
-        let transport = rotation_between(&tangents[j - 1], &tangents[j]).ok_or(RodBuildError::FoldedBack(j))?;
+        let transport =
+            rotation_between(&tangents[j - 1], &tangents[j]).ok_or(RodBuildError::FoldedBack(j))?;
         let q = transport * frames[j - 1];
         frames.push(q / q.norm());
     }
     let m = &spec.material;
     let rest_darboux: Vec<Vec3<f64>> = match spec.rest_shape {
         RestShape::Initial => (0..n.saturating_sub(1))
-            .map(|j| darboux(&frames[j], &frames[j + 1], 0.5 * (lengths[j] + lengths[j + 1])))
+            .map(|j| {
+                darboux(
+                    &frames[j],
+                    &frames[j + 1],
+                    0.5 * (lengths[j] + lengths[j + 1]),
+                )
+            })
             .collect(),
         RestShape::Uniform(u) => vec![Vec3::from(u); n.saturating_sub(1)],
     };
@@ -225,13 +255,18 @@ pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodSta
     }
     let ipl = m.inertia_per_length();
     let k = m.bend_twist_stiffness();
-    let kp = spec.parallel_stiffness.unwrap_or_else(|| m.shear_stiffness());
+    let kp = spec
+        .parallel_stiffness
+        .unwrap_or_else(|| m.shear_stiffness());
     let t = T::lit;
     let v3 = |v: Vec3<f64>| Vec3::new(t(v.x), t(v.y), t(v.z));
     let state = RodState {
         positions: p.iter().map(|x| v3(*x)).collect(),
         velocities: vec![Vec3::zeros(); n + 1],
-        frames: frames.iter().map(|q| Quat::new(t(q.w), t(q.i), t(q.j), t(q.k))).collect(),
+        frames: frames
+            .iter()
+            .map(|q| Quat::new(t(q.w), t(q.i), t(q.j), t(q.k)))
+            .collect(),
         angular_velocities: vec![Vec3::zeros(); n],
     };
     let params = RodParams {
@@ -239,7 +274,10 @@ pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodSta
         rest_darboux: rest_darboux.into_iter().map(v3).collect(),
         masses: masses.iter().map(|&x| t(x)).collect(),
         inv_masses: masses.iter().map(|&x| t(1.0 / x)).collect(),
-        inertias: lengths.iter().map(|&l| Vec3::new(t(ipl[0] * l), t(ipl[1] * l), t(ipl[2] * l))).collect(),
+        inertias: lengths
+            .iter()
+            .map(|&l| Vec3::new(t(ipl[0] * l), t(ipl[1] * l), t(ipl[2] * l)))
+            .collect(),
         bend_twist_stiffness: vec![Vec3::new(t(k[0]), t(k[1]), t(k[2])); n.saturating_sub(1)],
         stretch_stiffness: vec![t(m.stretch_stiffness()); n],
         parallel_stiffness: vec![t(kp); n],
@@ -253,7 +291,12 @@ pub fn build_rod<T: Real>(points: &[[f64; 3]], spec: &RodSpec) -> Result<(RodSta
 
 /// Points of a straight rod from `start` along the unit `direction`, `n` equal elements of total
 /// `length`.
-pub fn straight_polyline(start: [f64; 3], direction: [f64; 3], length: f64, n: usize) -> Vec<[f64; 3]> {
+pub fn straight_polyline(
+    start: [f64; 3],
+    direction: [f64; 3],
+    length: f64,
+    n: usize,
+) -> Vec<[f64; 3]> {
     let d = Vec3::from(direction).normalize();
     (0..=n)
         .map(|i| {
@@ -287,7 +330,10 @@ mod tests {
     #[test]
     fn bad_geometry_is_rejected() {
         let spec = RodSpec::new(mat());
-        assert_eq!(build_rod::<f64>(&[[0.0; 3]], &spec).unwrap_err(), RodBuildError::TooFewPoints(1));
+        assert_eq!(
+            build_rod::<f64>(&[[0.0; 3]], &spec).unwrap_err(),
+            RodBuildError::TooFewPoints(1)
+        );
         assert_eq!(
             build_rod::<f64>(&[[0.0; 3], [0.0; 3]], &spec).unwrap_err(),
             RodBuildError::ZeroLengthElement(0)
