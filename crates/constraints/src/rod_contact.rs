@@ -120,7 +120,7 @@ impl<T: Real> RodContactSet<T> {
     }
 
     /// Resolves contact `k` once; `rb` is `None` for a self-contact (both segments in `ra`).
-    #[inline]
+    #[inline(always)]
     fn resolve<V: PointVelocities<T>>(
         &mut self,
         k: usize,
@@ -175,14 +175,10 @@ impl<T: Real> RodContactSet<T> {
         let acc = (old + (-c.gap / h - n.dot(&v)) * inv_w).max(T::zero());
         self.normal_impulse[k] = acc;
         let dn = acc - old;
-        if dn != T::zero() {
-            apply(ra, rb.as_deref_mut(), n * dn);
-        }
-        // Friction on the relative tangential velocity.
-        let v = match rb.as_deref() {
-            Some(r) => rel(ra, r),
-            None => rel(ra, ra),
-        };
+        // Every point has a scalar inverse mass, so an impulse P changes the relative velocity
+        // by exactly W P: the friction step can use the velocity after the normal impulse
+        // without reading it back, and both go to the points in one application.
+        let v = v + n * (dn * w);
         let vt = v - n * n.dot(&v);
         let old_t = self.tangent_impulse[k];
         let wanted = old_t - vt * inv_w;
@@ -195,9 +191,9 @@ impl<T: Real> RodContactSet<T> {
             Vec3::zeros()
         };
         self.tangent_impulse[k] = new_t;
-        let dt = new_t - old_t;
-        if dt != Vec3::zeros() {
-            apply(ra, rb, dt);
+        let p = n * dn + (new_t - old_t);
+        if p != Vec3::zeros() {
+            apply(ra, rb, p);
         }
     }
 }
