@@ -205,6 +205,9 @@ pub struct SolverSection {
     pub divergence_strain: f64,
     /// Speed [m/s] beyond which the run is declared diverged.
     pub divergence_speed: f64,
+    /// `"iterative"` (the paper's impulses, default) or `"direct"` (exact: Newton iterations
+    /// on the tridiagonal constraint system).
+    pub constraint_solver: String,
     /// Refuse a time step beyond the estimated stable step of the explicit scheme (default
     /// true).
     pub check_stability: bool,
@@ -240,6 +243,7 @@ impl Default for SolverSection {
             gravity: [0.0, 0.0, -9.81],
             divergence_strain: 0.5,
             divergence_speed: 1e3,
+            constraint_solver: "iterative".into(),
             check_stability: true,
             scheme: "explicit".into(),
             stiff: None,
@@ -600,6 +604,17 @@ impl Checker<'_> {
             .divergence_strain(divergence_strain)
             .divergence_speed(self.positive("solver.divergence_speed", s.divergence_speed)?)
             .check_stability(s.check_stability)
+            .direct_constraints(match s.constraint_solver.as_str() {
+                "iterative" => false,
+                "direct" => true,
+                other => {
+                    return Err(self.invalid(
+                        "solver.constraint_solver",
+                        other,
+                        "expected \"iterative\" or \"direct\"",
+                    ));
+                }
+            })
             .stiff_solver(self.stiff(s)?);
         for (i, rod) in scene.rods.iter().enumerate() {
             b.add_rod(self.rod(i, rod, environment.as_ref())?);

@@ -70,6 +70,42 @@ pub struct CpuRod<T: Real> {
     /// Impulses the end distance constraints gave their free neighbours this step
     /// (Gauss–Seidel ordering; the red–black solver keeps its own).
     pub(crate) end_impulses: [Vec3<T>; 2],
+    /// The exact inextensibility solver, when chosen instead of the iterative sweeps.
+    pub(crate) direct: Option<Box<DirectState<T>>>,
+}
+
+/// State of the direct (Newton, tridiagonal) distance-constraint solver of one rod
+/// (`constraints::direct`): settings, scratch, and array-of-structs copies of the working
+/// layout's positions and velocities, which that solver takes.
+#[derive(Clone, Debug)]
+pub(crate) struct DirectState<T: Real> {
+    settings: constraints::direct::DirectSettings,
+    scratch: constraints::direct::DirectScratch,
+    r: Vec<Vec3<T>>,
+    v: Vec<Vec3<T>>,
+}
+
+impl<T: Real> DirectState<T> {
+    /// Solves the distance constraints of the working layout's state exactly.
+    fn solve(&mut self, w: &mut crate::soa::SoaState<T>, p: &SoaParams<T>, h: T) {
+        let n = self.r.len();
+        for i in 0..n {
+            self.r[i] = w.r.get(i);
+            self.v[i] = w.v.get(i);
+        }
+        constraints::direct::solve_distance_direct(
+            &self.r,
+            &mut self.v,
+            &p.inv_masses,
+            &p.rest_lengths,
+            h,
+            &self.settings,
+            &mut self.scratch,
+        );
+        for i in 0..n {
+            w.v.set(i, self.v[i]);
+        }
+    }
 }
 
 impl<T: Real> CpuRod<T> {
@@ -108,7 +144,25 @@ impl<T: Real> CpuRod<T> {
             reaction,
             kinematic: [Vec3::zeros(); 2],
             end_impulses: [Vec3::zeros(); 2],
+            direct: None,
         }
+    }
+
+    /// Replaces the iterative distance-constraint sweeps by the exact direct solver
+    /// (`constraints::direct`: Newton iterations on the tridiagonal system `J M⁻¹ Jᵀ λ = b`),
+    /// which leaves every segment at its rest length to the solver's tolerance after each
+    /// step. Contacts, if any, are then swept `iterations` times. End reactions are not tracked
+    /// through it.
+    #[must_use]
+    pub fn with_direct_solver(mut self, settings: constraints::direct::DirectSettings) -> Self {
+        let n = self.elements();
+        self.direct = Some(Box::new(DirectState {
+            settings,
+            scratch: constraints::direct::DirectScratch::new(n),
+            r: vec![Vec3::zeros(); n + 1],
+            v: vec![Vec3::zeros(); n + 1],
+        }));
+        self
     }
 
     /// Sets the cut-off frequency [Hz] of the low-pass filter on the reported end reactions
@@ -416,6 +470,20 @@ fn solve_constraints<T: Real>(rod: &mut CpuRod<T>, settings: &SolverSettings<T>)
         .as_mut()
         .filter(|m| !m.contacts.is_empty())
         .map(|m| (&mut m.contacts, &m.friction));
+    if let (false, Some(d)) = (settings.extensible, rod.direct.as_deref_mut()) {
+        d.solve(w, p, h);
+        if let Some((set, friction)) = contacts.as_mut() {
+            for _ in 0..settings.iterations.max(1) {
+                set.sweep_soa(
+                    h,
+                    friction,
+                    &p.inv_masses,
+                    [&mut w.v.x, &mut w.v.y, &mut w.v.z],
+                );
+            }
+        }
+        return distance;
+    }
     let r = [&w.r.x[..], &w.r.y[..], &w.r.z[..]];
     if !settings.extensible && settings.iterations > 0 {
         match settings.ordering {
