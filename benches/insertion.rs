@@ -16,8 +16,13 @@ fn depth(sim: &Simulation) -> f64 {
     let Some(v) = sim.environment().and_then(|e| e.vessel.as_ref()) else {
         return f64::NAN;
     };
-    let tip = *sim.positions(RodHandle(0)).last().expect("a rod has points");
-    (0..3).map(|k| (tip[k] - v.entry_point[k]) * v.entry_direction[k]).sum()
+    let tip = *sim
+        .positions(RodHandle(0))
+        .last()
+        .expect("a rod has points");
+    (0..3)
+        .map(|k| (tip[k] - v.entry_point[k]) * v.entry_direction[k])
+        .sum()
 }
 
 fn run(scene: &Path, windows: usize) {
@@ -30,19 +35,30 @@ fn run(scene: &Path, windows: usize) {
     };
     let mut sim = builder.build().expect("the scene builds");
     let per_window = length.steps / windows as u64;
-    println!("\n### {name}: {} elements, dt = {:.1e} s, {} triangles\n", sim.element_count(), sim.dt(), sim.environment().map_or(0, |e| e.triangles()));
-    println!("| simulated s | tip depth [mm] | µs/step | detection µs/step | contacts | max penetration [µm] | escaped |");
+    println!(
+        "\n### {name}: {} elements, dt = {:.1e} s, {} triangles\n",
+        sim.element_count(),
+        sim.dt(),
+        sim.environment().map_or(0, |e| e.triangles())
+    );
+    println!(
+        "| simulated s | tip depth [mm] | µs/step | detection µs/step | contacts | max penetration [µm] | escaped |"
+    );
     println!("|---|---|---|---|---|---|---|");
     let mut last_detection = 0.0;
     for _ in 0..windows {
-        let before = sim.contact_report().map_or(0.0, |c| c.detection_us_per_step * sim.steps() as f64);
+        let before = sim
+            .contact_report()
+            .map_or(0.0, |c| c.detection_us_per_step * sim.steps() as f64);
         let t0 = Instant::now();
         if let Err(e) = sim.run(per_window) {
             println!("| diverged: {e} |");
             return;
         }
         let wall = t0.elapsed().as_secs_f64();
-        let c = sim.contact_report().expect("an insertion scene has an environment");
+        let c = sim
+            .contact_report()
+            .expect("an insertion scene has an environment");
         let detection_total = c.detection_us_per_step * sim.steps() as f64;
         let detection = (detection_total - before.max(last_detection)) / per_window as f64;
         last_detection = detection_total;
