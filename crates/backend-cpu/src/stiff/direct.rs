@@ -283,22 +283,23 @@ mod tests {
     use cosserat_model::Quat;
     use cosserat_model::quat::exp_rotation;
 
-    /// A curved, twisted, slightly sheared and stretched chain with one held point and one held
-    /// frame, and its constraints.
-    fn chain(
-        n: usize,
-    ) -> (
+    /// Constraints, inverse masses and inertias of a test chain.
+    type Chain = (
         Vec<StretchShear<f64>>,
         Vec<BendTwist<f64>>,
         Vec<f64>,
         Vec<Vec3<f64>>,
-    ) {
+    );
+
+    /// A curved, twisted, slightly sheared and stretched chain with one held point and one held
+    /// frame, and its constraints.
+    fn chain(n: usize) -> Chain {
         let mut x = vec![Vec3::zeros()];
         let mut q = Vec::new();
         let mut frame = Quat::identity();
         for j in 0..n {
             let fj = j as f64;
-            frame = frame * exp_rotation(&Vec3::new(0.2 * fj.sin(), 0.1, -0.15 * fj.cos()));
+            frame *= exp_rotation(&Vec3::new(0.2 * fj.sin(), 0.1, -0.15 * fj.cos()));
             q.push(frame);
             let d3 = cosserat_model::quat::d3(&frame);
             let e = d3 * 0.01 * (1.0 + 0.01 * fj.cos()) + Vec3::new(1e-4, -2e-4, 5e-5);
