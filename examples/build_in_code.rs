@@ -20,17 +20,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let wire = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], 0.3, 150, polymer)
         .name("wire")
         .rest_shape(RestShape::Uniform([10.0, 0.0, 0.0]))
-        .damping(1e-10, 0.0, 5.0)
+        .damping(0.0, 0.0, 5.0)
         .start(EndCondition::clamped().driven(push_and_twist));
     let mut sim = SimulationBuilder::new()
-        .dt(1e-5)
+        .dt(1.5e-6)
         .iterations(10)
         .gravity([0.0, 0.0, -9.81])
         .with_rod(wire)
         .build()?;
     let wire = RodHandle(0);
     for _ in 0..10 {
-        sim.run(10_000)?;
+        sim.run(40_000)?;
         let tip = *sim.positions(wire).last().expect("a rod has points");
         println!(
             "t = {:.2} s  tip = [{:+.4}, {:+.4}, {:+.4}] m  max strain {:.1e}",

@@ -11,7 +11,7 @@
 //! // A 0.5 m rubber-like rod clamped at one end, drooping under gravity.
 //! let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], 0.5, 50, Material::new(1e7, 3.3e6, 1100.0, 2e-3))
 //!     .clamp_start()
-//!     .damping(1e-5, 0.0, 1.0);
+//!     .damping(0.0, 0.0, 1.0);
 //! let mut sim = SimulationBuilder::new().dt(2e-5).with_rod(rod).build()?;
 //! sim.run(100)?;
 //! let tip = *sim.positions(cosserat::RodHandle(0)).last().unwrap();
