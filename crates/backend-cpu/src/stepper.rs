@@ -575,7 +575,8 @@ pub(crate) fn gauss_seidel_sweep<T: Real>(
     let lo = usize::from(track[0] && n > 0);
     let hi = if track[1] { n.saturating_sub(1) } else { n };
     if lo == 1 {
-        distance[0] += project_gs(r, [vx, vy, vz], inv_masses, rest_lengths[0], h, 0);
+        distance[0] +=
+            constraints::project_distance_soa(r, [vx, vy, vz], inv_masses, rest_lengths[0], h, 0);
     }
     if hi > lo {
         solve_distance_gauss_seidel_soa(
@@ -588,42 +589,15 @@ pub(crate) fn gauss_seidel_sweep<T: Real>(
     }
     if track[1] && n > 0 && hi >= lo {
         // The impulse on point n − 1 is minus the one on the held point n.
-        distance[1] -= project_gs(r, [vx, vy, vz], inv_masses, rest_lengths[n - 1], h, n - 1);
+        distance[1] -= constraints::project_distance_soa(
+            r,
+            [vx, vy, vz],
+            inv_masses,
+            rest_lengths[n - 1],
+            h,
+            n - 1,
+        );
     }
-}
-
-/// The distance constraint between points `a`, `a + 1` (Gauss–Seidel arithmetic); returns the
-/// impulse [N s] given to point `a + 1`.
-#[inline]
-fn project_gs<T: Real>(
-    r: [&[T]; 3],
-    v: [&mut [T]; 3],
-    inv_masses: &[T],
-    l0: T,
-    h: T,
-    a: usize,
-) -> Vec3<T> {
-    let [rx, ry, rz] = r;
-    let [vx, vy, vz] = v;
-    let b = a + 1;
-    let (wa, wb) = (inv_masses[a], inv_masses[b]);
-    let w = wa + wb;
-    if w <= T::zero() {
-        return Vec3::zeros();
-    }
-    let dx = (rx[b] - rx[a]) + (vx[b] - vx[a]) * h;
-    let dy = (ry[b] - ry[a]) + (vy[b] - vy[a]) * h;
-    let dz = (rz[b] - rz[a]) + (vz[b] - vz[a]) * h;
-    let len = (dx * dx + dy * dy + dz * dz).sqrt();
-    let s = (l0 - len) / (h * w * len);
-    let (sa, sb) = (s * wa, s * wb);
-    vx[a] -= dx * sa;
-    vy[a] -= dy * sa;
-    vz[a] -= dz * sa;
-    vx[b] += dx * sb;
-    vy[b] += dy * sb;
-    vz[b] += dz * sb;
-    Vec3::new(dx, dy, dz) * s
 }
 
 /// The divergence check after a step: every frame finite, every length ratio inside the band.

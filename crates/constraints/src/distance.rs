@@ -88,6 +88,41 @@ pub fn solve_distance_iteration<T: Real>(
     }
 }
 
+/// The impulse of the distance constraint between points `a` and `a + 1`, on coordinate
+/// slices (`[x, y, z]`): the arithmetic of [`solve_distance_iteration`]. Returns the impulse
+/// [N s] given to point `a + 1` (its negative went to `a`); zero when both are kinematic.
+#[inline(always)]
+pub fn project_distance_soa<T: Real>(
+    positions: [&[T]; 3],
+    velocities: [&mut [T]; 3],
+    inv_masses: &[T],
+    l0: T,
+    h: T,
+    a: usize,
+) -> Vec3<T> {
+    let [rx, ry, rz] = positions;
+    let [vx, vy, vz] = velocities;
+    let b = a + 1;
+    let (wa, wb) = (inv_masses[a], inv_masses[b]);
+    let w = wa + wb;
+    if w <= T::zero() {
+        return Vec3::zeros();
+    }
+    let dx = (rx[b] - rx[a]) + (vx[b] - vx[a]) * h;
+    let dy = (ry[b] - ry[a]) + (vy[b] - vy[a]) * h;
+    let dz = (rz[b] - rz[a]) + (vz[b] - vz[a]) * h;
+    let len = (dx * dx + dy * dy + dz * dz).sqrt();
+    let s = (l0 - len) / (h * w * len);
+    let (sa, sb) = (s * wa, s * wb);
+    vx[a] -= dx * sa;
+    vy[a] -= dy * sa;
+    vz[a] -= dz * sa;
+    vx[b] += dx * sb;
+    vy[b] += dy * sb;
+    vz[b] += dz * sb;
+    Vec3::new(dx, dy, dz) * s
+}
+
 /// One Gauss–Seidel sweep of [`solve_distance_iteration`] on coordinate slices (`[x, y, z]`).
 pub fn solve_distance_gauss_seidel_soa<T: Real>(
     positions: [&[T]; 3],
@@ -96,27 +131,16 @@ pub fn solve_distance_gauss_seidel_soa<T: Real>(
     rest_lengths: &[T],
     h: T,
 ) {
-    let [rx, ry, rz] = positions;
     let [vx, vy, vz] = velocities;
     for (j, &l0) in rest_lengths.iter().enumerate() {
-        let (a, b) = (j, j + 1);
-        let (wa, wb) = (inv_masses[a], inv_masses[b]);
-        let w = wa + wb;
-        if w <= T::zero() {
-            continue;
-        }
-        let dx = (rx[b] - rx[a]) + (vx[b] - vx[a]) * h;
-        let dy = (ry[b] - ry[a]) + (vy[b] - vy[a]) * h;
-        let dz = (rz[b] - rz[a]) + (vz[b] - vz[a]) * h;
-        let len = (dx * dx + dy * dy + dz * dz).sqrt();
-        let s = (l0 - len) / (h * w * len);
-        let (sa, sb) = (s * wa, s * wb);
-        vx[a] -= dx * sa;
-        vy[a] -= dy * sa;
-        vz[a] -= dz * sa;
-        vx[b] += dx * sb;
-        vy[b] += dy * sb;
-        vz[b] += dz * sb;
+        project_distance_soa(
+            positions,
+            [&mut *vx, &mut *vy, &mut *vz],
+            inv_masses,
+            l0,
+            h,
+            j,
+        );
     }
 }
 

@@ -24,7 +24,8 @@ pub mod velocities;
 pub use binding::{BindingSet, BindingVariant, BoundPoint};
 pub use contact::{ContactSet, Friction, PointContact};
 pub use distance::{
-    Ordering, solve_distance_gauss_seidel_soa, solve_distance_iteration, strain_extremes,
+    Ordering, project_distance_soa, solve_distance_gauss_seidel_soa, solve_distance_iteration,
+    strain_extremes,
 };
 pub use red_black::{RedBlackSolver, SplitVelocities};
 pub use rod_contact::{RodContactSet, SegmentContact};
