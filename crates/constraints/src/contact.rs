@@ -29,6 +29,23 @@ pub struct Friction<T: Real> {
     pub kinetic_coefficient: T,
 }
 
+impl<T: Real> Friction<T> {
+    /// The accumulated tangential impulse after one projection: the impulse `wanted` that would
+    /// stop the sliding is kept while it lies inside the static cone `μ_s λ_n` (stick), and is
+    /// otherwise scaled onto the kinetic cone `μ_k λ_n` (slip).
+    #[inline]
+    pub fn clamp(&self, wanted: Vec3<T>, normal_impulse: T) -> Vec3<T> {
+        let norm = wanted.norm();
+        if norm <= self.static_coefficient * normal_impulse {
+            wanted
+        } else if norm > T::zero() {
+            wanted * (self.kinetic_coefficient * normal_impulse / norm)
+        } else {
+            Vec3::zeros()
+        }
+    }
+}
+
 /// One point in contact with the surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointContact<T: Real> {
@@ -113,14 +130,7 @@ impl<T: Real> ContactSet<T> {
         let vt = v - n * n.dot(&v);
         let old_t = self.tangent_impulse[k];
         let wanted = old_t - vt;
-        let norm = wanted.norm();
-        let new_t = if norm <= friction.static_coefficient * acc {
-            wanted
-        } else if norm > T::zero() {
-            wanted * (friction.kinetic_coefficient * acc / norm)
-        } else {
-            Vec3::zeros()
-        };
+        let new_t = friction.clamp(wanted, acc);
         self.tangent_impulse[k] = new_t;
         v + (new_t - old_t)
     }

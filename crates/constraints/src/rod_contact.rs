@@ -182,14 +182,7 @@ impl<T: Real> RodContactSet<T> {
         let vt = v - n * n.dot(&v);
         let old_t = self.tangent_impulse[k];
         let wanted = old_t - vt * inv_w;
-        let norm = wanted.norm();
-        let new_t = if norm <= friction.static_coefficient * acc {
-            wanted
-        } else if norm > T::zero() {
-            wanted * (friction.kinetic_coefficient * acc / norm)
-        } else {
-            Vec3::zeros()
-        };
+        let new_t = friction.clamp(wanted, acc);
         self.tangent_impulse[k] = new_t;
         let p = n * dn + (new_t - old_t);
         if p != Vec3::zeros() {
