@@ -2,21 +2,20 @@
 //! 2018, "Direct position-based solver for stiff rods", section 4).
 //!
 //! One Newton step of XPBD (Macklin et al. 2016, eq. 12 with the Schur complement of eq. 9)
-//! solves `(J M⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ)` for every constraint of the rod together. Deul et
-//! al. observe that the constraint graph of a rod is a chain, so with the unknowns ordered
-//! element by element, `(λ_Γ0, λ_Ω0, λ_Γ1, λ_Ω1, …)`, the matrix is block tridiagonal with 6×6
-//! blocks (their eq. 17; they factorise it with a sparse LDLᵀ over the tree, which for a chain
-//! is this recursion). Block `j` couples to block `j + 1` through point `r_{j+1}` (shared by
-//! `Γ_j` and `Γ_{j+1}`) and frame `q_{j+1}` (shared by `Ω_j`, `Ω_{j+1}` and `Γ_{j+1}`).
+//! solves `(J K⁻¹ Jᵀ + α̃) Δλ = rhs` for every constraint of the rod together (`K` is the
+//! mass matrix with the frames' geometric-stiffness bound of `super::Work::precondition`;
+//! diagonal per point and per frame). Deul et al. observe that the constraint graph of a rod
+//! is a chain, so the matrix is banded along the rod (their eq. 17; they factorise it with a
+//! sparse LDLᵀ over the tree, which for a chain is a banded recursion).
 //!
-//! The block Cholesky factorisation `S'_0 = D_0`, `S'_j = D_j − U_{j−1}ᵀ U_{j−1}`,
-//! `S'_j = L_j L_jᵀ`, `U_j = L_j⁻¹ E_j` costs about 500 multiply–adds per element, a solve with
-//! it about 115; both are `O(n)` and exact, so the number of iterations does not grow with the
-//! length of the rod or with its stiffness, which is what Gauss–Seidel cannot offer
-//! (`docs/stiff-solver.md` measures both).
-//!
-//! The last element has no bend–twist constraint; its three `Ω` rows are identity rows with a
-//! zero right-hand side, which keeps every block 6×6.
+//! With the unknowns ordered `(λ_Γ0, λ_Ω0, λ_Γ1, λ_Ω1, …, λ_Γ(n−1))` in 3×3 blocks, every
+//! block couples to at most two blocks on either side and one coupling inside that band
+//! (`Γ_j`–`Ω_{j+1}`) is zero; [`BlockTridiagonal`] eliminates block by block, inverting each
+//! 3×3 pivot in closed form. Both factorisation and solve are `O(n)` and exact, so the number
+//! of iterations does not grow with the length of the rod or with its stiffness, which is what
+//! Gauss–Seidel cannot offer (`docs/stiff-solver.md` measures both). An earlier version used
+//! 6×6 element blocks with a Cholesky factorisation of each (six dependent square roots per
+//! element); the 3×3 closed-form pivots measured 2–3× faster (`docs/benchmarks/stiff.md`).
 //!
 //! Everything here is `f64`: with frame inverse inertias near 1e12 and compliances near 1e-11
 //! the matrix spans more than `f32` can resolve.
@@ -24,9 +23,6 @@
 use super::constraints::{BendTwist, StretchShear};
 use cosserat_model::Vec3;
 use nalgebra::Matrix3;
-
-/// A dense 6×6 block, row-major.
-pub(crate) type M6 = [[f64; 6]; 6];
 
 /// `a diag(w) bᵀ`.
 #[inline(always)]
@@ -38,61 +34,6 @@ fn mwmt(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
         }
     }
     aw * b.transpose()
-}
-
-#[inline(always)]
-fn put(m: &mut M6, r0: usize, c0: usize, b: &Matrix3<f64>) {
-    for r in 0..3 {
-        for c in 0..3 {
-            m[r0 + r][c0 + c] = b[(r, c)];
-        }
-    }
-}
-
-/// In-place Cholesky of the lower triangle; the diagonal holds the inverse pivots. A pivot that
-/// is not positive (a row no free degree of freedom can change, e.g. an element whose points and
-/// frame are all held) gets an inverse of zero, which leaves its multiplier unchanged.
-#[inline(always)]
-fn chol6(a: &mut M6) {
-    for j in 0..6 {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        let inv = if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 };
-        a[j][j] = inv;
-        for i in j + 1..6 {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s * inv;
-        }
-    }
-}
-
-/// `b ← L⁻¹ b`.
-#[inline(always)]
-fn forward6(l: &M6, b: &mut [f64; 6]) {
-    for i in 0..6 {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[i][k] * b[k];
-        }
-        b[i] = s * l[i][i];
-    }
-}
-
-/// `b ← L⁻ᵀ b`.
-#[inline(always)]
-fn backward6(l: &M6, b: &mut [f64; 6]) {
-    for i in (0..6).rev() {
-        let mut s = b[i];
-        for k in i + 1..6 {
-            s -= l[k][i] * b[k];
-        }
-        b[i] = s * l[i][i];
-    }
 }
 
 /// What the assembly needs to know about one rod besides its current constraint Jacobians.
@@ -107,69 +48,174 @@ pub(crate) struct Masses<'a> {
     pub(crate) alpha_omega: &'a [Vec3<f64>],
 }
 
-/// The diagonal block `D_j` of `J M⁻¹ Jᵀ + α̃`.
-fn diagonal_block(j: usize, ss: &[StretchShear<f64>], bt: &[BendTwist<f64>], m: &Masses<'_>) -> M6 {
-    let mut d = [[0.0; 6]; 6];
-    let s = &ss[j];
-    let wj = &m.inv_inertia[j];
-    let wsum = m.inv_mass[j] + m.inv_mass[j + 1];
-    let mut gg = mwmt(&s.d_theta, wj, &s.d_theta) + s.d_rb * s.d_rb.transpose() * wsum;
-    for k in 0..3 {
-        gg[(k, k)] += m.alpha_gamma[j][k];
-    }
-    put(&mut d, 0, 0, &gg);
-    if j < bt.len() {
-        let b = &bt[j];
-        let go = mwmt(&s.d_theta, wj, &b.d_theta_a);
-        let mut oo = mwmt(&b.d_theta_a, wj, &b.d_theta_a)
-            + mwmt(&b.d_theta_b, &m.inv_inertia[j + 1], &b.d_theta_b);
-        for k in 0..3 {
-            oo[(k, k)] += m.alpha_omega[j][k];
-        }
-        put(&mut d, 0, 3, &go);
-        put(&mut d, 3, 0, &go.transpose());
-        put(&mut d, 3, 3, &oo);
-    } else {
-        for k in 3..6 {
-            d[k][k] = 1.0;
-        }
-    }
-    d
+/// A 3×3 block, row-major.
+type M3 = [[f64; 3]; 3];
+
+#[inline(always)]
+fn m3(b: &Matrix3<f64>) -> M3 {
+    [
+        [b[(0, 0)], b[(0, 1)], b[(0, 2)]],
+        [b[(1, 0)], b[(1, 1)], b[(1, 2)]],
+        [b[(2, 0)], b[(2, 1)], b[(2, 2)]],
+    ]
 }
 
-/// The off-diagonal block `E_j` (rows of element `j`, columns of element `j + 1`).
-fn off_diagonal_block(
-    j: usize,
+/// `a b`.
+#[inline(always)]
+fn mul(a: &M3, b: &M3) -> M3 {
+    let mut c = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for k in 0..3 {
+            c[r][k] = a[r][0] * b[0][k] + a[r][1] * b[1][k] + a[r][2] * b[2][k];
+        }
+    }
+    c
+}
+
+/// `c + aᵀ b`.
+#[inline(always)]
+fn add_tmul(c: &M3, a: &M3, b: &M3) -> M3 {
+    let mut out = *c;
+    for r in 0..3 {
+        for k in 0..3 {
+            out[r][k] += a[0][r] * b[0][k] + a[1][r] * b[1][k] + a[2][r] * b[2][k];
+        }
+    }
+    out
+}
+
+/// The inverse of a symmetric positive (semi)definite 3×3 block. Closed form (adjugate) when
+/// the determinant is positive; otherwise a Cholesky factorisation whose non-positive pivots
+/// get an inverse of zero (a row that no free degree of freedom can change, e.g. an element
+/// whose points and frame are all held), which leaves that multiplier unchanged.
+#[inline(always)]
+fn inverse_spd(a: &M3) -> M3 {
+    let c00 = a[1][1] * a[2][2] - a[1][2] * a[2][1];
+    let c01 = a[1][2] * a[2][0] - a[1][0] * a[2][2];
+    let c02 = a[1][0] * a[2][1] - a[1][1] * a[2][0];
+    let det = a[0][0] * c00 + a[0][1] * c01 + a[0][2] * c02;
+    if det > 0.0 && a[0][0] > 0.0 && c00 > 0.0 && det.is_finite() {
+        let inv = 1.0 / det;
+        let c11 = a[0][0] * a[2][2] - a[0][2] * a[2][0];
+        let c12 = a[0][2] * a[1][0] - a[0][0] * a[1][2];
+        let c22 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+        let (o01, o02, o12) = (c01 * inv, c02 * inv, c12 * inv);
+        return [
+            [c00 * inv, o01, o02],
+            [o01, c11 * inv, o12],
+            [o02, o12, c22 * inv],
+        ];
+    }
+    // Cholesky with zero inverse pivots, then A⁺ = L⁻ᵀ L⁻¹.
+    let mut l = [[0.0; 3]; 3];
+    for j in 0..3 {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= l[j][k] * l[j][k];
+        }
+        let inv = if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 };
+        l[j][j] = inv;
+        for i in j + 1..3 {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            l[i][j] = s * inv;
+        }
+    }
+    // m = L⁻¹ column by column.
+    let mut m = [[0.0; 3]; 3];
+    for c in 0..3 {
+        for i in c..3 {
+            let mut s = if i == c { 1.0 } else { 0.0 };
+            for k in c..i {
+                s -= l[i][k] * m[k][c];
+            }
+            m[i][c] = s * l[i][i];
+        }
+    }
+    let mut out = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            out[r][c] = (0..3).map(|k| m[k][r] * m[k][c]).sum();
+        }
+    }
+    out
+}
+
+/// Block row `k` of `J K⁻¹ Jᵀ + α̃` in the ordering `(λ_Γ0, λ_Ω0, λ_Γ1, …)`: the diagonal
+/// block and the blocks in columns `k + 1` and `k + 2` (zero past the end).
+#[inline(always)]
+fn blocks(
+    k: usize,
     ss: &[StretchShear<f64>],
     bt: &[BendTwist<f64>],
     m: &Masses<'_>,
-) -> M6 {
-    let mut e = [[0.0; 6]; 6];
-    let w = m.inv_mass[j + 1];
-    put(
-        &mut e,
-        0,
-        0,
-        &(ss[j].d_rb * ss[j + 1].d_rb.transpose() * (-w)),
-    );
-    let b = &bt[j];
-    let wb = &m.inv_inertia[j + 1];
-    put(&mut e, 3, 0, &mwmt(&b.d_theta_b, wb, &ss[j + 1].d_theta));
-    if j + 1 < bt.len() {
-        put(&mut e, 3, 3, &mwmt(&b.d_theta_b, wb, &bt[j + 1].d_theta_a));
+) -> (M3, M3, M3) {
+    let zero = [[0.0; 3]; 3];
+    let j = k / 2;
+    if k.is_multiple_of(2) {
+        // Γ_j: points j, j + 1 and frame j.
+        let s = &ss[j];
+        let wj = &m.inv_inertia[j];
+        let wsum = m.inv_mass[j] + m.inv_mass[j + 1];
+        // ∂Γ/∂r = Rᵀ / l0, so (∂Γ/∂r)(∂Γ/∂r)ᵀ = I / l0² (the squared norm of a row).
+        let inv_l2 = s.d_rb.row(0).norm_squared();
+        let mut gg = mwmt(&s.d_theta, wj, &s.d_theta);
+        for c in 0..3 {
+            gg[(c, c)] += m.alpha_gamma[j][c] + wsum * inv_l2;
+        }
+        if j < bt.len() {
+            let a1 = mwmt(&s.d_theta, wj, &bt[j].d_theta_a);
+            let a2 = s.d_rb * ss[j + 1].d_rb.transpose() * (-m.inv_mass[j + 1]);
+            (m3(&gg), m3(&a1), m3(&a2))
+        } else {
+            (m3(&gg), zero, zero)
+        }
+    } else {
+        // Ω_j: frames j and j + 1.
+        let b = &bt[j];
+        let wb = &m.inv_inertia[j + 1];
+        let mut oo = mwmt(&b.d_theta_a, &m.inv_inertia[j], &b.d_theta_a)
+            + mwmt(&b.d_theta_b, wb, &b.d_theta_b);
+        for c in 0..3 {
+            oo[(c, c)] += m.alpha_omega[j][c];
+        }
+        let a1 = mwmt(&b.d_theta_b, wb, &ss[j + 1].d_theta);
+        let a2 = if j + 1 < bt.len() {
+            m3(&mwmt(&b.d_theta_b, wb, &bt[j + 1].d_theta_a))
+        } else {
+            zero
+        };
+        (m3(&oo), m3(&a1), a2)
     }
-    e
 }
 
-/// The factorised block tridiagonal matrix of one rod.
+/// One eliminated 3×3 block row: `P⁻¹` and `P⁻¹ A_{k,k+1}`, `P⁻¹ A_{k,k+2}`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Pivot {
+    p_inv: M3,
+    y: M3,
+    z: M3,
+}
+
+/// The factorised `J K⁻¹ Jᵀ + α̃` of one rod, as a block `LDLᵀ` with 3×3 blocks.
+///
+/// The unknowns are ordered `(λ_Γ0, λ_Ω0, λ_Γ1, λ_Ω1, …, λ_Γ(n−1))` (the last element has no
+/// bend–twist constraint): `2n − 1` blocks of 3. Each block couples only to the two blocks on
+/// either side (`Γ_j`–`Ω_j` and `Ω_j`–`Γ_{j+1}` through frames `j` and `j + 1`, `Γ_j`–`Γ_{j+1}`
+/// through point `j + 1`, `Ω_j`–`Ω_{j+1}` through frame `j + 1`), and `Γ_j`–`Ω_{j+1}` is zero,
+/// so the matrix is banded with two 3×3 blocks on each side of the diagonal and the
+/// elimination fills nothing outside that band. Eliminating block `k` inverts its pivot in
+/// closed form (no chain of square roots) and updates the three blocks below and right of it:
+/// about 170 multiply–adds per block, 340 per element; a solve about 80 per element.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BlockTridiagonal {
-    l: Vec<M6>,
-    u: Vec<M6>,
+    piv: Vec<Pivot>,
 }
 
 impl BlockTridiagonal {
-    /// Assembles `J M⁻¹ Jᵀ + α̃` at the configuration the Jacobians were evaluated at and
+    /// Assembles `J K⁻¹ Jᵀ + α̃` at the configuration the Jacobians were evaluated at and
     /// factorises it.
     pub(crate) fn factor(
         &mut self,
@@ -178,75 +224,93 @@ impl BlockTridiagonal {
         m: &Masses<'_>,
     ) {
         let n = ss.len();
-        self.l.resize(n, [[0.0; 6]; 6]);
-        self.u.resize(n.saturating_sub(1), [[0.0; 6]; 6]);
-        for j in 0..n {
-            let mut d = diagonal_block(j, ss, bt, m);
-            if j > 0 {
-                let u = &self.u[j - 1];
-                for r in 0..6 {
-                    for c in 0..=r {
-                        let mut s = 0.0;
-                        for k in 0..6 {
-                            s += u[k][r] * u[k][c];
-                        }
-                        d[r][c] -= s;
-                    }
+        if n == 0 {
+            self.piv.clear();
+            return;
+        }
+        let count = 2 * n - 1;
+        self.piv.resize(count, Pivot::default());
+        let zero = [[0.0; 3]; 3];
+        // Amounts still to subtract from the next two diagonal blocks and the block between.
+        let (mut s11, mut s12, mut s22) = (zero, zero, zero);
+        for k in 0..count {
+            let (mut d, mut a1, a2) = blocks(k, ss, bt, m);
+            // Updates from the blocks eliminated before.
+            for r in 0..3 {
+                for c in 0..3 {
+                    d[r][c] -= s11[r][c];
+                    a1[r][c] -= s12[r][c];
                 }
             }
-            chol6(&mut d);
-            self.l[j] = d;
-            if j + 1 < n {
-                let e = off_diagonal_block(j, ss, bt, m);
-                let mut u = [[0.0; 6]; 6];
-                for c in 0..6 {
-                    let mut col = [e[0][c], e[1][c], e[2][c], e[3][c], e[4][c], e[5][c]];
-                    forward6(&self.l[j], &mut col);
-                    for r in 0..6 {
-                        u[r][c] = col[r];
-                    }
-                }
-                self.u[j] = u;
-            }
+            let p_inv = inverse_spd(&d);
+            let y = mul(&p_inv, &a1);
+            let z = mul(&p_inv, &a2);
+            // Schur complements on the next two blocks (amounts still to subtract).
+            s11 = add_tmul(&s22, &a1, &y);
+            s12 = add_tmul(&zero, &a1, &z);
+            s22 = add_tmul(&zero, &a2, &z);
+            self.piv[k] = Pivot { p_inv, y, z };
         }
     }
 
     /// Solves the factorised system in place: `x` holds the right-hand side on entry and the
-    /// solution on return.
+    /// solution on return (the bend–twist entries of the last element are set to zero).
     pub(crate) fn solve(&self, x: &mut [[f64; 6]]) {
-        let n = self.l.len();
-        debug_assert_eq!(x.len(), n);
-        for j in 0..n {
-            if j > 0 {
-                let (prev, cur) = x.split_at_mut(j);
-                let (y, u) = (&prev[j - 1], &self.u[j - 1]);
-                for r in 0..6 {
-                    let mut s = 0.0;
-                    for k in 0..6 {
-                        s += u[k][r] * y[k];
-                    }
-                    cur[0][r] -= s;
+        let n = x.len();
+        if n == 0 {
+            return;
+        }
+        let blocks = 2 * n - 1;
+        debug_assert_eq!(self.piv.len(), blocks);
+        let get = |x: &[[f64; 6]], k: usize| -> [f64; 3] {
+            let o = 3 * (k % 2);
+            let e = &x[k / 2];
+            [e[o], e[o + 1], e[o + 2]]
+        };
+        let set = |x: &mut [[f64; 6]], k: usize, v: [f64; 3]| {
+            let o = 3 * (k % 2);
+            x[k / 2][o..o + 3].copy_from_slice(&v);
+        };
+        // Forward: z_k = b_k − Y_{k−1}ᵀ z_{k−1} − Z_{k−2}ᵀ z_{k−2}; then w_k = P_k⁻¹ z_k.
+        let (mut z1, mut z2) = ([0.0; 3], [0.0; 3]);
+        for k in 0..blocks {
+            let mut b = get(x, k);
+            if k >= 1 {
+                let y = &self.piv[k - 1].y;
+                for r in 0..3 {
+                    b[r] -= y[0][r] * z1[0] + y[1][r] * z1[1] + y[2][r] * z1[2];
                 }
             }
-            forward6(&self.l[j], &mut x[j]);
-        }
-        for j in (0..n).rev() {
-            if j + 1 < n {
-                let (cur, next) = x.split_at_mut(j + 1);
-                let (z, u) = (&next[0], &self.u[j]);
-                for r in 0..6 {
-                    let mut s = 0.0;
-                    for k in 0..6 {
-                        s += u[r][k] * z[k];
-                    }
-                    cur[j][r] -= s;
+            if k >= 2 {
+                let z = &self.piv[k - 2].z;
+                for r in 0..3 {
+                    b[r] -= z[0][r] * z2[0] + z[1][r] * z2[1] + z[2][r] * z2[2];
                 }
             }
-            backward6(&self.l[j], &mut x[j]);
+            z2 = z1;
+            z1 = b;
+            let p = &self.piv[k].p_inv;
+            let w = [0, 1, 2].map(|r| p[r][0] * b[0] + p[r][1] * b[1] + p[r][2] * b[2]);
+            set(x, k, w);
         }
+        // Backward: x_k = w_k − Y_k x_{k+1} − Z_k x_{k+2}.
+        let (mut x1, mut x2) = ([0.0; 3], [0.0; 3]);
+        for k in (0..blocks).rev() {
+            let mut v = get(x, k);
+            let pv = &self.piv[k];
+            for r in 0..3 {
+                v[r] -= pv.y[r][0] * x1[0] + pv.y[r][1] * x1[1] + pv.y[r][2] * x1[2];
+                v[r] -= pv.z[r][0] * x2[0] + pv.z[r][1] * x2[1] + pv.z[r][2] * x2[2];
+            }
+            x2 = x1;
+            x1 = v;
+            set(x, k, v);
+        }
+        x[n - 1][3..].fill(0.0);
     }
 
-    /// Dense `J M⁻¹ Jᵀ + α̃` (order `6n`), for tests of the assembly.
+    /// Dense `J K⁻¹ Jᵀ + α̃` (order `6n`, the last element's bend–twist rows as identity
+    /// rows), for tests of the assembly.
     #[cfg(test)]
     pub(crate) fn dense(
         ss: &[StretchShear<f64>],
@@ -255,22 +319,22 @@ impl BlockTridiagonal {
     ) -> Vec<Vec<f64>> {
         let n = ss.len();
         let mut a = vec![vec![0.0; 6 * n]; 6 * n];
-        for j in 0..n {
-            let d = diagonal_block(j, ss, bt, m);
-            for r in 0..6 {
-                for c in 0..6 {
-                    a[6 * j + r][6 * j + c] = d[r][c];
-                }
-            }
-            if j + 1 < n {
-                let e = off_diagonal_block(j, ss, bt, m);
-                for r in 0..6 {
-                    for c in 0..6 {
-                        a[6 * j + r][6 * (j + 1) + c] = e[r][c];
-                        a[6 * (j + 1) + c][6 * j + r] = e[r][c];
+        for k in 0..2 * n - 1 {
+            let (d, a1, a2) = blocks(k, ss, bt, m);
+            for r in 0..3 {
+                for c in 0..3 {
+                    a[3 * k + r][3 * k + c] = d[r][c];
+                    for (off, b) in [(1, &a1), (2, &a2)] {
+                        if 3 * (k + off) < 6 * n - 3 {
+                            a[3 * k + r][3 * (k + off) + c] = b[r][c];
+                            a[3 * (k + off) + c][3 * k + r] = b[r][c];
+                        }
                     }
                 }
             }
+        }
+        for r in 6 * n - 3..6 * n {
+            a[r][r] = 1.0;
         }
         a
     }

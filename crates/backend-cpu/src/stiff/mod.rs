@@ -107,6 +107,8 @@ pub struct StiffSettings {
     /// leaves bending dynamics alone up to `(l/λ)²`, but slows torsion waves by up to
     /// `√(l² / (6 r²))` (`docs/stiff-solver.md`).
     pub inertia_floor: f64,
+    /// Geometric-stiffness preconditioning of the frames (multiplier; 0 turns it off).
+    pub geometric: f64,
 }
 
 impl Default for StiffSettings {
@@ -115,10 +117,11 @@ impl Default for StiffSettings {
     fn default() -> Self {
         Self {
             scheme: StiffScheme::Direct,
-            iterations: 2,
-            tolerance: 0.0,
-            refactor: Refactor::EveryStep,
-            inertia_floor: 1.0,
+            iterations: 4,
+            tolerance: 1e-5,
+            refactor: Refactor::EveryIteration,
+            inertia_floor: 0.0,
+            geometric: 1.0,
         }
     }
 }
@@ -134,6 +137,8 @@ pub struct StiffReport {
     pub residual: f64,
     /// Factorisations since the scratch was created.
     pub factorisations: u64,
+    /// Iterations (or sweeps) since the scratch was created.
+    pub total_iterations: u64,
 }
 
 /// Per-rod constants of the stiff scheme, in `f64`.
@@ -172,6 +177,8 @@ pub(crate) struct Work {
     bt: Vec<BendTwist<f64>>,
     rhs: Vec<[f64; 6]>,
     dtheta: Vec<Vec3<f64>>,
+    inv_k: Vec<Vec3<f64>>,
+    lambda_prev: Vec<[f64; 6]>,
 }
 
 /// Scratch memory and cached constants of the stiff scheme for one rod; the caller owns one per
@@ -296,6 +303,8 @@ impl Work {
         self.omega = vec![z; n];
         self.dtheta = vec![z; n];
         self.lambda = vec![[0.0; 6]; n];
+        self.lambda_prev = vec![[0.0; 6]; n];
+        self.inv_k = vec![z; n];
         self.rhs = vec![[0.0; 6]; n];
         let m = nalgebra::Matrix3::zeros();
         self.ss = vec![
@@ -316,21 +325,8 @@ impl Work {
         ];
     }
 
-    /// Evaluates every constraint and its Jacobian and the right-hand side of one Newton step
-    /// of the full XPBD system (Macklin et al. 2016, eqs. 9–11 with `K ≈ M`):
-    ///
-    /// `g = M (x − x̃) − Jᵀ λ`, `u = −M⁻¹ g`, `(J M⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ + J u)`,
-    /// `Δx = u + M⁻¹ Jᵀ Δλ`.
-    ///
-    /// Keeping `g` (which the simplified XPBD update drops) makes the fixed point the exact
-    /// implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting guess, so the iteration
-    /// can start from the positions the velocities alone would reach and loads need not be
-    /// folded into a far-away first guess. For frames, `x − x̃` is the body rotation from `q̃`
-    /// to `q` in the first-order map of [`apply_rotation`].
-    ///
-    /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
-    /// (strains, and bend–twist as angles `l̄ |ΔΩ|`).
-    fn evaluate(&mut self, k: &Consts) -> f64 {
+    /// Evaluates every constraint and its Jacobian at the current iterate.
+    fn constraints(&mut self, k: &Consts) {
         let n = k.l0.len();
         for j in 0..n {
             self.ss[j] = stretch_shear(&self.x[j], &self.x[j + 1], &self.q[j], k.l0[j]);
@@ -338,6 +334,63 @@ impl Work {
         for j in 0..n.saturating_sub(1) {
             self.bt[j] = bend_twist(&self.q[j], &self.q[j + 1], &k.rest_u[j], k.lbar[j]);
         }
+    }
+
+    /// The frames' block `K_θ` of the Newton matrix: inertia plus an isotropic bound `σ_j` of
+    /// the geometric stiffness `Σ λ ∇²_θθ C` that the constraints through frame `j` give it at
+    /// the multipliers `lambda` (see [`StiffSettings::geometric`]); stores `K_θ⁻¹` in `inv_k`.
+    ///
+    /// Bounds, per unit multiplier, from the second derivatives of the constraints under
+    /// body rotations: stretch–shear `½(λ gᵀ + g λᵀ) − (λ·g) I`, at most `2 |λ| |g|`;
+    /// bend–twist, own frame `(λ·s_v)/(2 l̄)` and the neighbour coupling at most
+    /// `|λ| (1 + 2|s_v|)/(2 l̄)`, together at most `|λ| / l̄` for small relative rotations.
+    fn precondition(&mut self, k: &Consts, geometric: f64, use_previous: bool) {
+        let n = k.l0.len();
+        let lam = if use_previous {
+            &self.lambda_prev
+        } else {
+            &self.lambda
+        };
+        let norm = |l: &[f64]| (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+        for j in 0..n {
+            if k.inv_inertia[j].x == 0.0 {
+                self.inv_k[j] = Vec3::zeros();
+                continue;
+            }
+            let mut sigma = 0.0;
+            if geometric > 0.0 {
+                let g = self.ss[j].value + Vec3::z();
+                sigma += 2.0 * norm(&lam[j][..3]) * g.norm();
+                if j + 1 < n {
+                    sigma += norm(&lam[j][3..]) / k.lbar[j];
+                }
+                if j > 0 {
+                    sigma += norm(&lam[j - 1][3..]) / k.lbar[j - 1];
+                }
+                sigma *= geometric;
+            }
+            self.inv_k[j] = k.inertia[j].map(|i| 1.0 / (i + sigma));
+        }
+    }
+
+    /// The right-hand side of one Newton step of the full XPBD system (Macklin et al. 2016,
+    /// eqs. 9–11) at the constraints of the last [`constraints`](Self::constraints) call:
+    ///
+    /// `g = M (x − x̃) − Jᵀ λ`, `u = −K⁻¹ g`, `(J K⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ + J u)`,
+    /// `Δx = u + K⁻¹ Jᵀ Δλ`,
+    ///
+    /// with `K = M` for points and `K_θ = I + σ` for frames ([`precondition`](Self::precondition)).
+    /// `K` only steers the iteration: its fixed point `g = 0`, `C + α̃ λ = 0` does not depend
+    /// on it. Keeping `g` (which the simplified XPBD update drops) makes that fixed point the
+    /// exact implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting guess, so the
+    /// iteration can start from the positions the velocities alone would reach and loads need
+    /// not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
+    /// from `q̃` to `q` in the first-order map of [`apply_rotation`].
+    ///
+    /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
+    /// (strains, and bend–twist as angles `l̄ |ΔΩ|`).
+    fn rhs(&mut self, k: &Consts) -> f64 {
+        let n = k.l0.len();
         // u = x̃ − x + M⁻¹ Jᵀ λ.
         for i in 0..=n {
             self.u_x[i] = self.x_pred[i] - self.x[i];
@@ -365,7 +418,7 @@ impl Work {
             } else {
                 s.imag() * 2.0
             };
-            self.u_th[j] = to_target + self.dtheta[j].component_mul(&k.inv_inertia[j]);
+            self.u_th[j] = to_target + self.dtheta[j].component_mul(&self.inv_k[j]);
         }
         let mut worst: f64 = 0.0;
         for j in 0..n {
@@ -423,7 +476,7 @@ impl Work {
             self.dtheta[j + 1] += b.d_theta_b.tr_mul(&dl);
         }
         for j in 0..n {
-            let th = self.u_th[j] + self.dtheta[j].component_mul(&k.inv_inertia[j]);
+            let th = self.u_th[j] + self.dtheta[j].component_mul(&self.inv_k[j]);
             apply_rotation(&mut self.q[j], &th);
             for c in 0..6 {
                 self.lambda[j][c] += self.rhs[j][c];
@@ -543,19 +596,30 @@ pub fn step_rod_stiff<T: Real>(
                     if last && stiff.tolerance <= 0.0 {
                         break;
                     }
-                    residual = w.evaluate(k);
+                    w.constraints(k);
+                    let mut refactor = !*factor_valid
+                        || match stiff.refactor {
+                            Refactor::EveryIteration => true,
+                            Refactor::EveryStep => it == 0,
+                            Refactor::Lagged => false,
+                        };
+                    if refactor && !last {
+                        w.precondition(k, stiff.geometric, it == 0);
+                    }
+                    residual = w.rhs(k);
                     if residual <= stiff.tolerance || last {
                         break;
                     }
-                    let refactor = match stiff.refactor {
-                        Refactor::EveryIteration => true,
-                        Refactor::EveryStep => it == 0,
-                        Refactor::Lagged => !*factor_valid || residual > 0.25 * previous,
-                    };
-                    if refactor || !*factor_valid {
+                    if !refactor && stiff.refactor == Refactor::Lagged && residual > 0.25 * previous
+                    {
+                        w.precondition(k, stiff.geometric, it == 0);
+                        residual = w.rhs(k);
+                        refactor = true;
+                    }
+                    if refactor {
                         let m = Masses {
                             inv_mass: &k.inv_mass,
-                            inv_inertia: &k.inv_inertia,
+                            inv_inertia: &w.inv_k,
                             alpha_gamma: &k.alpha_gamma,
                             alpha_omega: &k.alpha_omega,
                         };
@@ -579,7 +643,9 @@ pub fn step_rod_stiff<T: Real>(
                 }
             }
         }
+        w.lambda_prev.copy_from_slice(&w.lambda);
         report.iterations = used;
+        report.total_iterations += used as u64;
         report.residual = residual;
         // 3. Velocities from the positions and frames.
         let inv_h = 1.0 / h;
