@@ -3,7 +3,15 @@
 //! `docs/stiff-solver.md`.
 //!
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_stability -- [what]`
-//! with `what` one of `cantilever`, `stability`, `bisect`, `frequency`, `gs` (default: all).
+//! with `what` one of `cantilever`, `stability`, `bisect`, `frequency`, `gs` (default: all),
+//! or `timing` (per-step cost at 1000 elements), `trace PRESET_INDEX N DT` (the first
+//! steps of the pushed-and-twisted run with up to 30 iterations) and `debug`.
+//!
+//! Environment overrides of the stiff settings, for the measurements of
+//! `docs/stiff-solver.md`: `GEOM` (geometric multiplier), `ITERS`, `TOL`, `REFACTOR`
+//! (`it`, `step`, `lag`), `FLOOR` (inertia floor); of the scenarios: `PUSH` [m/s], `TWIST`
+//! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `ONLY` (preset names), `DTS`
+//! (comma-separated steps), `PUSHED_ONLY`.
 
 use backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
@@ -173,9 +181,9 @@ fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
 
 fn stability() {
     println!(
-        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | us/step |"
+        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let only = std::env::var("ONLY").unwrap_or_default();
     let dts: Vec<f64> = std::env::var("DTS").map_or(vec![1e-3, 1e-4], |v| {
         v.split(',').map(|x| x.parse().unwrap()).collect()
@@ -208,7 +216,7 @@ fn stability() {
                     Err(e) => e.step + 1,
                 };
                 println!(
-                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {:.0} |",
+                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {el:.1} | {:.0} |",
                     p.name,
                     if pushed { "pushed+twisted" } else { "pendulum" },
                     scratch.report().total_iterations as f64 / done as f64,
@@ -277,8 +285,15 @@ fn frequency() {
         "| preset | dt [s] | analytic f1 [Hz] | measured f1 [Hz] | error | amplitude ratio per period |"
     );
     println!("|---|---|---|---|---|---|");
+    let only = std::env::var("ONLY").unwrap_or_default();
+    let dts: Vec<f64> = std::env::var("DTS").map_or(vec![1e-3, 1e-4], |v| {
+        v.split(',').map(|x| x.parse().unwrap()).collect()
+    });
     for p in &PRESETS {
-        for dt in [1e-3, 1e-4] {
+        if !only.is_empty() && !only.contains(p.name) {
+            continue;
+        }
+        for &dt in &dts {
             let m = p.material();
             let length: f64 = 0.5;
             let n = 500;
@@ -358,12 +373,13 @@ fn frequency() {
 fn main() {
     let what = std::env::args().nth(1).unwrap_or_default();
     if what == "cantilever" || what.is_empty() {
-        for refactor in [Refactor::Lagged, Refactor::EveryStep] {
-            let st = StiffSettings {
-                refactor,
-                ..StiffSettings::default()
-            };
-            println!("{refactor:?}");
+        let one = StiffSettings {
+            iterations: 1,
+            tolerance: 0.0,
+            ..StiffSettings::default()
+        };
+        for (label, st) in [("default", stiff_default()), ("1 iteration", one)] {
+            println!("{label}");
             for p in &PRESETS {
                 for dt in [1e-3, 1e-4] {
                     cantilever(p, dt, 500, &st, false);
@@ -485,23 +501,17 @@ fn main() {
         let pi: usize = args.get(2).map_or(0, |a| a.parse().unwrap());
         let n: usize = args.get(3).map_or(500, |a| a.parse().unwrap());
         let dt: f64 = args.get(4).map_or(1e-3, |a| a.parse().unwrap());
-        let floor: f64 = args.get(5).map_or(1.0, |a| a.parse().unwrap());
         let p = &PRESETS[pi];
         let mut r = scenario(p, 1.0, n, true);
         let mut s = settings(dt);
         s.divergence_strain = 1e-3;
-        let st = StiffSettings {
-            iterations: 30,
-            tolerance: 1e-12,
-            inertia_floor: floor,
-            geometric: std::env::var("GEOM").map_or(0.0, |v| v.parse().unwrap()),
-            refactor: if std::env::var_os("EVERY_IT").is_some() {
-                Refactor::EveryIteration
-            } else {
-                Refactor::EveryStep
-            },
-            ..stiff_default()
-        };
+        let mut st = stiff_default();
+        if std::env::var_os("ITERS").is_none() {
+            st.iterations = 30;
+        }
+        if std::env::var_os("TOL").is_none() {
+            st.tolerance = 1e-12;
+        }
         let mut sc = StiffScratch::new();
         for k in 0..5 {
             let res = step_rod_stiff(&mut r, &s, &st, &mut sc, k as f64 * dt, 0, k, 1);

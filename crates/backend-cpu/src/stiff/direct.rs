@@ -26,14 +26,41 @@ use nalgebra::Matrix3;
 
 /// `a diag(w) bᵀ`.
 #[inline(always)]
-fn mwmt(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
-    let mut aw = *a;
-    for c in 0..3 {
-        for r in 0..3 {
-            aw[(r, c)] *= w[c];
+fn awbt(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> M3 {
+    let mut c = [[0.0; 3]; 3];
+    for r in 0..3 {
+        let aw = [a[(r, 0)] * w[0], a[(r, 1)] * w[1], a[(r, 2)] * w[2]];
+        for (k, ck) in c[r].iter_mut().enumerate() {
+            *ck = aw[0] * b[(k, 0)] + aw[1] * b[(k, 1)] + aw[2] * b[(k, 2)];
         }
     }
-    aw * b.transpose()
+    c
+}
+
+/// `c + a diag(w) aᵀ` (symmetric: the upper triangle, mirrored).
+#[inline(always)]
+fn add_awat(c: &mut M3, a: &Matrix3<f64>, w: &Vec3<f64>) {
+    for r in 0..3 {
+        let aw = [a[(r, 0)] * w[0], a[(r, 1)] * w[1], a[(r, 2)] * w[2]];
+        for k in r..3 {
+            c[r][k] += aw[0] * a[(k, 0)] + aw[1] * a[(k, 1)] + aw[2] * a[(k, 2)];
+        }
+    }
+    c[1][0] = c[0][1];
+    c[2][0] = c[0][2];
+    c[2][1] = c[1][2];
+}
+
+/// `[g]× diag(w) [g]×ᵀ` in closed form.
+#[inline(always)]
+fn cross_w_cross(g: &Vec3<f64>, w: &Vec3<f64>) -> M3 {
+    let (x, y, z) = (g.x, g.y, g.z);
+    let (o01, o02, o12) = (-w[2] * x * y, -w[1] * x * z, -w[0] * y * z);
+    [
+        [w[1] * z * z + w[2] * y * y, o01, o02],
+        [o01, w[0] * z * z + w[2] * x * x, o12],
+        [o02, o12, w[0] * y * y + w[1] * x * x],
+    ]
 }
 
 /// What the assembly needs to know about one rod besides its current constraint Jacobians.
@@ -51,15 +78,6 @@ pub(crate) struct Masses<'a> {
 /// A 3×3 block, row-major.
 type M3 = [[f64; 3]; 3];
 
-#[inline(always)]
-fn m3(b: &Matrix3<f64>) -> M3 {
-    [
-        [b[(0, 0)], b[(0, 1)], b[(0, 2)]],
-        [b[(1, 0)], b[(1, 1)], b[(1, 2)]],
-        [b[(2, 0)], b[(2, 1)], b[(2, 2)]],
-    ]
-}
-
 /// `a b`.
 #[inline(always)]
 fn mul(a: &M3, b: &M3) -> M3 {
@@ -70,6 +88,22 @@ fn mul(a: &M3, b: &M3) -> M3 {
         }
     }
     c
+}
+
+/// `c + aᵀ b` for a symmetric result (`b = P a` with `P` symmetric): the upper triangle,
+/// mirrored.
+#[inline(always)]
+fn add_tmul_sym(c: &M3, a: &M3, b: &M3) -> M3 {
+    let mut out = *c;
+    for r in 0..3 {
+        for k in r..3 {
+            out[r][k] += a[0][r] * b[0][k] + a[1][r] * b[1][k] + a[2][r] * b[2][k];
+        }
+    }
+    out[1][0] = out[0][1];
+    out[2][0] = out[0][2];
+    out[2][1] = out[1][2];
+    out
 }
 
 /// `c + aᵀ b`.
@@ -155,39 +189,41 @@ fn blocks(
     let zero = [[0.0; 3]; 3];
     let j = k / 2;
     if k.is_multiple_of(2) {
-        // Γ_j: points j, j + 1 and frame j.
+        // Γ_j: points j, j + 1 and frame j; ∂Γ/∂θ = [g]× with g = Γ + e3.
         let s = &ss[j];
         let wj = &m.inv_inertia[j];
-        let wsum = m.inv_mass[j] + m.inv_mass[j + 1];
+        let g = s.value + Vec3::z();
+        let mut gg = cross_w_cross(&g, wj);
         // ∂Γ/∂r = Rᵀ / l0, so (∂Γ/∂r)(∂Γ/∂r)ᵀ = I / l0² (the squared norm of a row).
-        let inv_l2 = s.d_rb.row(0).norm_squared();
-        let mut gg = mwmt(&s.d_theta, wj, &s.d_theta);
+        let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
         for c in 0..3 {
-            gg[(c, c)] += m.alpha_gamma[j][c] + wsum * inv_l2;
+            gg[c][c] += m.alpha_gamma[j][c] + wsum;
         }
         if j < bt.len() {
-            let a1 = mwmt(&s.d_theta, wj, &bt[j].d_theta_a);
-            let a2 = s.d_rb * ss[j + 1].d_rb.transpose() * (-m.inv_mass[j + 1]);
-            (m3(&gg), m3(&a1), m3(&a2))
+            let a1 = awbt(&s.d_theta, wj, &bt[j].d_theta_a);
+            let w = Vec3::repeat(-m.inv_mass[j + 1]);
+            let a2 = awbt(&s.d_rb, &w, &ss[j + 1].d_rb);
+            (gg, a1, a2)
         } else {
-            (m3(&gg), zero, zero)
+            (gg, zero, zero)
         }
     } else {
         // Ω_j: frames j and j + 1.
         let b = &bt[j];
         let wb = &m.inv_inertia[j + 1];
-        let mut oo = mwmt(&b.d_theta_a, &m.inv_inertia[j], &b.d_theta_a)
-            + mwmt(&b.d_theta_b, wb, &b.d_theta_b);
+        let mut oo = zero;
         for c in 0..3 {
-            oo[(c, c)] += m.alpha_omega[j][c];
+            oo[c][c] = m.alpha_omega[j][c];
         }
-        let a1 = mwmt(&b.d_theta_b, wb, &ss[j + 1].d_theta);
+        add_awat(&mut oo, &b.d_theta_a, &m.inv_inertia[j]);
+        add_awat(&mut oo, &b.d_theta_b, wb);
+        let a1 = awbt(&b.d_theta_b, wb, &ss[j + 1].d_theta);
         let a2 = if j + 1 < bt.len() {
-            m3(&mwmt(&b.d_theta_b, wb, &bt[j + 1].d_theta_a))
+            awbt(&b.d_theta_b, wb, &bt[j + 1].d_theta_a)
         } else {
             zero
         };
-        (m3(&oo), m3(&a1), a2)
+        (oo, a1, a2)
     }
 }
 
@@ -246,9 +282,9 @@ impl BlockTridiagonal {
             let y = mul(&p_inv, &a1);
             let z = mul(&p_inv, &a2);
             // Schur complements on the next two blocks (amounts still to subtract).
-            s11 = add_tmul(&s22, &a1, &y);
+            s11 = add_tmul_sym(&s22, &a1, &y);
             s12 = add_tmul(&zero, &a1, &z);
-            s22 = add_tmul(&zero, &a2, &z);
+            s22 = add_tmul_sym(&zero, &a2, &z);
             self.piv[k] = Pivot { p_inv, y, z };
         }
     }
