@@ -361,6 +361,11 @@ fn frequency() {
                     .fold(f64::MAX, f64::min)
             };
             let ratio = min_in(per) / min_in(0);
+            if std::env::var_os("ZS").is_some() {
+                for k in (0..zs.len()).step_by(zs.len() / 40 + 1) {
+                    println!("z[{k}] = {:.4e}", zs[k]);
+                }
+            }
             println!(
                 "| {} | {dt:e} | {analytic:.4} | {measured:.4} | {:+.2e} | {ratio:.4} |",
                 p.name,
@@ -494,6 +499,34 @@ fn main() {
             println!(
                 "stiff n={n} iterations<={iters} tolerance={tolerance:e} {refactor:?}: median {med:.1} us/step, min {min:.1}"
             );
+        }
+    }
+    if what == "f32" {
+        // The default iteration count in f32 against f64 (the benchmark's pendulum).
+        let spec = RodSpec::new(PRESETS[0].material());
+        let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 1.0, 1000);
+        let (st32, p32) = build_rod::<f32>(&pts, &spec).unwrap();
+        let mut r = CpuRod::new(
+            st32,
+            p32,
+            [EndCondition::pinned(), EndCondition::free()],
+            vec![],
+        );
+        let s = SolverSettings::<f32> {
+            dt: 1e-3,
+            iterations: 10,
+            ordering: Ordering::RedBlack,
+            extensible: false,
+            gravity: Vec3::new(0.0, 0.0, -9.81),
+            divergence_strain: 0.1,
+        };
+        let mut scratch = StiffScratch::new();
+        let st = stiff_default();
+        for k in 0..4000u64 {
+            step_rod_stiff(&mut r, &s, &st, &mut scratch, k as f64 * 1e-3, 0, k, 1).unwrap();
+            if k % 400 == 0 {
+                println!("step {k}: {:?}", scratch.report());
+            }
         }
     }
     if what == "trace" {

@@ -326,7 +326,8 @@ impl BlockTridiagonal {
             z2 = z1;
             z1 = b;
             let p = &self.piv[k].p_inv;
-            let w = [0, 1, 2].map(|r| p[r][0] * b[0] + p[r][1] * b[1] + p[r][2] * b[2]);
+            let row = |r: usize| p[r][0] * b[0] + p[r][1] * b[1] + p[r][2] * b[2];
+            let w = [row(0), row(1), row(2)];
             set(x, k, w);
         }
         // Backward: x_k = w_k − Y_k x_{k+1} − Z_k x_{k+2}.
