@@ -50,11 +50,66 @@ pub struct SegmentContact<T: Real> {
 }
 
 /// The rod–rod contacts of one step with their accumulated impulses.
+///
+/// # Solver layout
+///
+/// The first [`sweep`](Self::sweep) after the contacts change gathers the points they touch
+/// into one compact local array (velocity and inverse mass of each point, whatever rod and
+/// layout it comes from) and precomputes each contact's row: the local indices of its four
+/// points, its weights, `W`, `1 / W` and the bias `−gap / h`. Each sweep then copies the
+/// touched points' velocities in, runs the projected Gauss–Seidel pass on the local array, and
+/// hands each point the impulse that makes its change of velocity
+/// ([`PointVelocities::apply_impulse`]; a kinematic end gets the sum of the impulses it
+/// received, which the rod records as its reaction). The rows are ordered by level: a contact
+/// comes after every earlier contact it shares a point with, and contacts sharing no point
+/// are adjacent, so that consecutive contacts do not wait for each other. Contacts that share
+/// a point keep their order, and contacts that share none commute, so the level order gives
+/// the same result as the order the contacts were pushed in.
 #[derive(Clone, Debug, Default)]
 pub struct RodContactSet<T: Real> {
     contacts: Vec<SegmentContact<T>>,
     normal_impulse: Vec<T>,
     tangent_impulse: Vec<Vec3<T>>,
+    /// Whether `rows` and `points` match `contacts` (and `h`).
+    prepared: bool,
+    prepared_h: T,
+    /// The touched points: `(rod, point)`.
+    points: Vec<(u32, u32)>,
+    /// Per rod: point index → local index (`u32::MAX` for none); all `u32::MAX` between calls.
+    lookup: Vec<Vec<u32>>,
+    /// Local velocities `[x, y, z]` and inverse mass.
+    local: Vec<[T; 4]>,
+    /// Velocities of the local points at the start of the current sweep.
+    start: Vec<[T; 3]>,
+    /// Momentum each kinematic local point received in the current sweep (only kept if
+    /// `any_kinematic`).
+    received: Vec<[T; 3]>,
+    any_kinematic: bool,
+    /// Level of the last row that used each local point (scratch of the ordering).
+    level: Vec<u32>,
+    /// Level of each row, and the start of each level (scratch of the ordering).
+    row_level: Vec<u32>,
+    level_start: Vec<u32>,
+    rows: Vec<Row<T>>,
+    sorted: Vec<Row<T>>,
+}
+
+/// A contact in solver form (see [`RodContactSet`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Row<T: Real> {
+    /// Index of the contact.
+    k: u32,
+    /// Local indices of `a0`, `a1`, `b0`, `b1`.
+    p: [u32; 4],
+    /// `1 − s`, `s`, `1 − t`, `t`.
+    c: [T; 4],
+    n: [T; 3],
+    /// `−gap / h`.
+    bias: T,
+    w: T,
+    inv_w: T,
+    /// Whether one of the points is kinematic (its impulses are recorded).
+    kinematic: bool,
 }
 
 impl<T: Real> RodContactSet<T> {
@@ -64,6 +119,19 @@ impl<T: Real> RodContactSet<T> {
             contacts: Vec::new(),
             normal_impulse: Vec::new(),
             tangent_impulse: Vec::new(),
+            prepared: false,
+            prepared_h: T::zero(),
+            points: Vec::new(),
+            lookup: Vec::new(),
+            local: Vec::new(),
+            start: Vec::new(),
+            received: Vec::new(),
+            any_kinematic: false,
+            level: Vec::new(),
+            row_level: Vec::new(),
+            level_start: Vec::new(),
+            rows: Vec::new(),
+            sorted: Vec::new(),
         }
     }
 
@@ -72,6 +140,7 @@ impl<T: Real> RodContactSet<T> {
         self.contacts.clear();
         self.normal_impulse.clear();
         self.tangent_impulse.clear();
+        self.prepared = false;
     }
 
     /// Adds a contact with zero accumulated impulse.
@@ -79,6 +148,7 @@ impl<T: Real> RodContactSet<T> {
         self.contacts.push(c);
         self.normal_impulse.push(T::zero());
         self.tangent_impulse.push(Vec3::zeros());
+        self.prepared = false;
     }
 
     /// The contacts.
@@ -106,87 +176,193 @@ impl<T: Real> RodContactSet<T> {
         &self.tangent_impulse
     }
 
-    /// One sweep over the contacts; `rods[k]` are the velocities of rod `k`.
-    pub fn sweep<V: PointVelocities<T>>(&mut self, h: T, friction: &Friction<T>, rods: &mut [V]) {
-        for k in 0..self.contacts.len() {
-            let c = self.contacts[k];
-            let (a, b) = (c.rod_a as usize, c.rod_b as usize);
-            if a == b {
-                self.resolve(k, h, friction, &mut rods[a], None);
-            } else if let Ok([ra, rb]) = rods.get_disjoint_mut([a, b]) {
-                self.resolve(k, h, friction, ra, Some(rb));
-            }
+    /// Local index of point `i` of rod `r`, adding it if new.
+    fn local_index<V: PointVelocities<T>>(&mut self, rods: &[V], r: u32, i: u32) -> u32 {
+        let map = &mut self.lookup[r as usize];
+        if map.len() <= i as usize {
+            map.resize(i as usize + 1, u32::MAX);
         }
+        let slot = &mut map[i as usize];
+        if *slot == u32::MAX {
+            *slot = self.points.len() as u32;
+            self.points.push((r, i));
+            let rod = &rods[r as usize];
+            let v = rod.velocity(i as usize);
+            self.local.push([v.x, v.y, v.z, rod.inv_mass(i as usize)]);
+            self.level.push(0);
+        }
+        *slot
     }
 
-    /// Resolves contact `k` once; `rb` is `None` for a self-contact (both segments in `ra`).
-    #[inline(always)]
-    fn resolve<V: PointVelocities<T>>(
-        &mut self,
-        k: usize,
-        h: T,
-        friction: &Friction<T>,
-        ra: &mut V,
-        mut rb: Option<&mut V>,
-    ) {
-        let c = self.contacts[k];
+    /// Builds the solver layout (see the type's docs).
+    fn prepare<V: PointVelocities<T>>(&mut self, h: T, rods: &[V]) {
         let one = T::one();
-        let (a0, b0) = (c.segment_a as usize, c.segment_b as usize);
-        let (s, t, n) = (c.s, c.t, c.normal);
-        let (sa, sb) = (one - s, one - t);
-        macro_rules! rod_b {
-            () => {
-                match rb.as_deref_mut() {
-                    Some(r) => r,
-                    None => &mut *ra,
-                }
-            };
+        self.points.clear();
+        self.local.clear();
+        self.level.clear();
+        self.rows.clear();
+        self.row_level.clear();
+        if self.lookup.len() < rods.len() {
+            self.lookup.resize(rods.len(), Vec::new());
         }
-        let wa = sa * sa * ra.inv_mass(a0) + s * s * ra.inv_mass(a0 + 1);
-        let wb = {
-            let r = rod_b!();
-            sb * sb * r.inv_mass(b0) + t * t * r.inv_mass(b0 + 1)
-        };
-        let w = wa + wb;
-        if !(w > T::zero()) {
+        let mut levels = 0;
+        for k in 0..self.contacts.len() {
+            let c = self.contacts[k];
+            if c.rod_a as usize >= rods.len() || c.rod_b as usize >= rods.len() {
+                continue;
+            }
+            let (a0, b0) = (c.segment_a, c.segment_b);
+            let p = [
+                self.local_index(rods, c.rod_a, a0),
+                self.local_index(rods, c.rod_a, a0 + 1),
+                self.local_index(rods, c.rod_b, b0),
+                self.local_index(rods, c.rod_b, b0 + 1),
+            ];
+            let (s, t) = (c.s, c.t);
+            let (sa, sb) = (one - s, one - t);
+            let im = |j: usize| self.local[p[j] as usize][3];
+            let wa = sa * sa * im(0) + s * s * im(1);
+            let wb = sb * sb * im(2) + t * t * im(3);
+            let w = wa + wb;
+            if !(w > T::zero()) {
+                continue;
+            }
+            let level = p.iter().map(|&j| self.level[j as usize]).max().unwrap_or(0) + 1;
+            for &j in &p {
+                self.level[j as usize] = level;
+            }
+            levels = levels.max(level);
+            self.row_level.push(level);
+            self.rows.push(Row {
+                k: k as u32,
+                p,
+                c: [sa, s, sb, t],
+                n: [c.normal.x, c.normal.y, c.normal.z],
+                bias: -c.gap / h,
+                w,
+                inv_w: one / w,
+                kinematic: (0..4).any(|j| !(im(j) > T::zero())),
+            });
+        }
+        // Level order, stable within a level: a counting sort on the rows' levels.
+        if levels > 1 {
+            let start = &mut self.level_start;
+            start.clear();
+            start.resize(levels as usize + 1, 0);
+            for &l in &self.row_level {
+                start[l as usize] += 1;
+            }
+            let mut sum = 0;
+            for x in start.iter_mut() {
+                (*x, sum) = (sum, sum + *x);
+            }
+            self.sorted.clear();
+            self.sorted.resize(self.rows.len(), Row::default());
+            for (r, &l) in self.rows.iter().zip(&self.row_level) {
+                let slot = &mut start[l as usize];
+                self.sorted[*slot as usize] = *r;
+                *slot += 1;
+            }
+            std::mem::swap(&mut self.rows, &mut self.sorted);
+        }
+        for &(r, i) in &self.points {
+            self.lookup[r as usize][i as usize] = u32::MAX;
+        }
+        self.any_kinematic = self.rows.iter().any(|r| r.kinematic);
+        self.received.clear();
+        self.received.resize(self.points.len(), [T::zero(); 3]);
+        self.prepared = true;
+        self.prepared_h = h;
+    }
+
+    /// One sweep over the contacts; `rods[k]` are the velocities of rod `k`.
+    pub fn sweep<V: PointVelocities<T>>(&mut self, h: T, friction: &Friction<T>, rods: &mut [V]) {
+        if self.contacts.is_empty() {
             return;
         }
-        let inv_w = one / w;
-        let rel = |ra: &V, rb: &V| {
-            (ra.velocity(a0) * sa + ra.velocity(a0 + 1) * s)
-                - (rb.velocity(b0) * sb + rb.velocity(b0 + 1) * t)
-        };
-        let apply = |ra: &mut V, rb: Option<&mut V>, p: Vec3<T>| {
-            ra.apply_impulse(a0, p * sa);
-            ra.apply_impulse(a0 + 1, p * s);
-            let r = match rb {
-                Some(r) => r,
-                None => ra,
+        if !self.prepared || self.prepared_h != h {
+            self.prepare(h, rods);
+        } else {
+            for (l, &(r, i)) in self.local.iter_mut().zip(&self.points) {
+                let v = rods[r as usize].velocity(i as usize);
+                l[0] = v.x;
+                l[1] = v.y;
+                l[2] = v.z;
+            }
+        }
+        self.start.clear();
+        self.start
+            .extend(self.local.iter().map(|l| [l[0], l[1], l[2]]));
+        if self.any_kinematic {
+            self.received.fill([T::zero(); 3]);
+        }
+        let zero = T::zero();
+        let local = &mut self.local[..];
+        let received = &mut self.received[..];
+        for row in &self.rows {
+            let k = row.k as usize;
+            let [i0, i1, i2, i3] = row.p.map(|j| j as usize);
+            let [sa, s, sb, t] = row.c;
+            let n = Vec3::new(row.n[0], row.n[1], row.n[2]);
+            let vel = |l: &[T; 4]| Vec3::new(l[0], l[1], l[2]);
+            let v = (vel(&local[i0]) * sa + vel(&local[i1]) * s)
+                - (vel(&local[i2]) * sb + vel(&local[i3]) * t);
+            // Normal: accumulate and clamp to a push (λ_n ≥ 0).
+            let old = self.normal_impulse[k];
+            let acc = (old + (row.bias - n.dot(&v)) * row.inv_w).max(zero);
+            if acc == zero && old == zero {
+                // Apart and staying apart: no push, hence no friction either (the tangential
+                // impulse is clamped to a zero cone, as it was at the last sweep).
+                continue;
+            }
+            self.normal_impulse[k] = acc;
+            let dn = acc - old;
+            // Every point has a scalar inverse mass, so an impulse P changes the relative
+            // velocity by exactly W P: the friction step can use the velocity after the normal
+            // impulse without reading it back, and both go to the points in one application.
+            let v = v + n * (dn * row.w);
+            let vt = v - n * n.dot(&v);
+            let old_t = self.tangent_impulse[k];
+            let wanted = old_t - vt * row.inv_w;
+            let new_t = friction.clamp(wanted, acc);
+            self.tangent_impulse[k] = new_t;
+            let p = n * dn + (new_t - old_t);
+            if p != Vec3::zeros() {
+                for (j, c) in [(i0, sa), (i1, s), (i2, -sb), (i3, -t)] {
+                    let q = p * c;
+                    let l = &mut local[j];
+                    let w = l[3];
+                    l[0] += q.x * w;
+                    l[1] += q.y * w;
+                    l[2] += q.z * w;
+                }
+                if row.kinematic {
+                    for (j, c) in [(i0, sa), (i1, s), (i2, -sb), (i3, -t)] {
+                        let q = p * c;
+                        let r = &mut received[j];
+                        r[0] += q.x;
+                        r[1] += q.y;
+                        r[2] += q.z;
+                    }
+                }
+            }
+        }
+        // Hand the points their change: a moving point the impulse that makes it, a kinematic
+        // one the impulses it received (recorded as its reaction).
+        for (j, &(rod, i)) in self.points.iter().enumerate() {
+            let (l, v0) = (&self.local[j], &self.start[j]);
+            let w = l[3];
+            let impulse = if w > zero {
+                [(l[0] - v0[0]) / w, (l[1] - v0[1]) / w, (l[2] - v0[2]) / w]
+            } else if self.any_kinematic {
+                self.received[j]
+            } else {
+                continue;
             };
-            r.apply_impulse(b0, p * (-sb));
-            r.apply_impulse(b0 + 1, p * (-t));
-        };
-        // Normal: accumulate and clamp to a push (λ_n ≥ 0).
-        let v = match rb.as_deref() {
-            Some(r) => rel(ra, r),
-            None => rel(ra, ra),
-        };
-        let old = self.normal_impulse[k];
-        let acc = (old + (-c.gap / h - n.dot(&v)) * inv_w).max(T::zero());
-        self.normal_impulse[k] = acc;
-        let dn = acc - old;
-        // Every point has a scalar inverse mass, so an impulse P changes the relative velocity
-        // by exactly W P: the friction step can use the velocity after the normal impulse
-        // without reading it back, and both go to the points in one application.
-        let v = v + n * (dn * w);
-        let vt = v - n * n.dot(&v);
-        let old_t = self.tangent_impulse[k];
-        let wanted = old_t - vt * inv_w;
-        let new_t = friction.clamp(wanted, acc);
-        self.tangent_impulse[k] = new_t;
-        let p = n * dn + (new_t - old_t);
-        if p != Vec3::zeros() {
-            apply(ra, rb, p);
+            if impulse != [zero; 3] {
+                rods[rod as usize]
+                    .apply_impulse(i as usize, Vec3::new(impulse[0], impulse[1], impulse[2]));
+            }
         }
     }
 }
@@ -298,5 +474,140 @@ mod tests {
         let held = views[1].held[0] + views[1].held[1];
         let on_a = (views[0].velocity(0) + views[0].velocity(1) - Vec3::new(4.0, 0.0, -2.0)) / 1.0;
         assert!((held + on_a).norm() < 1e-9, "{held:?} vs {on_a:?}");
+    }
+
+    /// The sweep as first written: contact by contact in push order, straight on the rods'
+    /// velocities.
+    fn reference_sweep(
+        set: &mut RodContactSet<f64>,
+        h: f64,
+        friction: &Friction<f64>,
+        rods: &mut [SoaVelocities<'_, f64>],
+    ) {
+        for k in 0..set.contacts.len() {
+            let c = set.contacts[k];
+            let (a0, b0) = (c.segment_a as usize, c.segment_b as usize);
+            let (s, t, n) = (c.s, c.t, c.normal);
+            let (sa, sb) = (1.0 - s, 1.0 - t);
+            let (ra, rb) = (c.rod_a as usize, c.rod_b as usize);
+            let w = sa * sa * rods[ra].inv_mass(a0)
+                + s * s * rods[ra].inv_mass(a0 + 1)
+                + sb * sb * rods[rb].inv_mass(b0)
+                + t * t * rods[rb].inv_mass(b0 + 1);
+            if !(w > 0.0) {
+                continue;
+            }
+            let v = (rods[ra].velocity(a0) * sa + rods[ra].velocity(a0 + 1) * s)
+                - (rods[rb].velocity(b0) * sb + rods[rb].velocity(b0 + 1) * t);
+            let old = set.normal_impulse[k];
+            let acc = (old + (-c.gap / h - n.dot(&v)) / w).max(0.0);
+            set.normal_impulse[k] = acc;
+            let dn = acc - old;
+            let v = v + n * (dn * w);
+            let vt = v - n * n.dot(&v);
+            let old_t = set.tangent_impulse[k];
+            let new_t = friction.clamp(old_t - vt / w, acc);
+            set.tangent_impulse[k] = new_t;
+            let p = n * dn + (new_t - old_t);
+            rods[ra].apply_impulse(a0, p * sa);
+            rods[ra].apply_impulse(a0 + 1, p * s);
+            rods[rb].apply_impulse(b0, p * (-sb));
+            rods[rb].apply_impulse(b0 + 1, p * (-t));
+        }
+    }
+
+    /// Many overlapping contacts within and between three rods (some points kinematic): the
+    /// level-ordered sweep on the local layout gives what the contact-by-contact sweep gives,
+    /// velocities, impulses and the impulses recorded on held ends alike.
+    #[test]
+    fn local_level_ordered_sweep_matches_the_sequential_sweep() {
+        // A small deterministic generator (no dependency).
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let points = 12;
+        let make = |rnd: &mut dyn FnMut() -> f64| -> Vec<Rod> {
+            (0..3)
+                .map(|r| {
+                    let mut rod = Rod::new(Vec3::zeros(), 1.0);
+                    rod.v = [0, 1, 2].map(|_| (0..points).map(|_| rnd() - 0.5).collect());
+                    rod.w = (0..points)
+                        .map(|i| {
+                            if r == 1 && (i == 0 || i == points - 1) {
+                                0.0
+                            } else {
+                                0.5 + rnd()
+                            }
+                        })
+                        .collect();
+                    rod
+                })
+                .collect()
+        };
+        let mut a = make(&mut rnd);
+        let mut b: Vec<Rod> = a
+            .iter()
+            .map(|r| Rod {
+                v: r.v.clone(),
+                w: r.w.clone(),
+                held: r.held,
+            })
+            .collect();
+        let mut set = RodContactSet::new();
+        for _ in 0..60 {
+            let (ra, rb) = ((rnd() * 3.0) as u32, (rnd() * 3.0) as u32);
+            let n = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5).normalize();
+            set.push(SegmentContact {
+                rod_a: ra,
+                segment_a: (rnd() * (points - 1) as f64) as u32,
+                s: rnd(),
+                rod_b: rb,
+                segment_b: (rnd() * (points - 1) as f64) as u32,
+                t: rnd(),
+                normal: n,
+                gap: 2e-3 * (rnd() - 0.7),
+            });
+        }
+        let mut reference = set.clone();
+        let friction = Friction {
+            static_coefficient: 0.4,
+            kinetic_coefficient: 0.3,
+        };
+        let h = 1e-2;
+        let mut va: Vec<_> = a.iter_mut().map(Rod::view).collect();
+        let mut vb: Vec<_> = b.iter_mut().map(Rod::view).collect();
+        for _ in 0..10 {
+            set.sweep(h, &friction, &mut va);
+            reference_sweep(&mut reference, h, &friction, &mut vb);
+        }
+        assert!(set.normal_impulses().iter().any(|&x| x > 0.0));
+        for (x, y) in set
+            .normal_impulses()
+            .iter()
+            .zip(reference.normal_impulses())
+        {
+            assert!((x - y).abs() < 1e-12, "{x} vs {y}");
+        }
+        for (x, y) in set
+            .tangent_impulses()
+            .iter()
+            .zip(reference.tangent_impulses())
+        {
+            assert!((x - y).norm() < 1e-12, "{x:?} vs {y:?}");
+        }
+        for (ra, rb) in va.iter().zip(&vb) {
+            for i in 0..points {
+                let d = ra.velocity(i) - rb.velocity(i);
+                assert!(d.norm() < 1e-12, "{i}: {d:?}");
+            }
+            for e in 0..2 {
+                assert!((ra.held[e] - rb.held[e]).norm() < 1e-12);
+            }
+        }
+        assert!(vb[1].held[0].norm() + vb[1].held[1].norm() > 0.0 || va[1].held[0].norm() == 0.0);
     }
 }
