@@ -19,7 +19,7 @@
 //!   `(J M⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ)` (their eqs. 9–12) and the step is implicit Euler in
 //!   the positions, so no stiffness limits `h`;
 //! - Deul, Kugelstadt, Weiler & Bender (2018), *Direct position-based solver for stiff rods*:
-//!   that system is block tridiagonal along a rod and is solved exactly in `O(n)` ([`direct`]),
+//!   that system is banded along a rod and is solved exactly in `O(n)` (`direct.rs`),
 //!   which keeps the iteration count independent of the rod's length and stiffness.
 //!
 //! **Compliances** follow from the energies of `docs/model.md`, so a converged step has the
@@ -34,11 +34,14 @@
 //!    `ω += −h I⁻¹ (ω × I ω)`, `q̃ = q ⊗ exp(h ω / 2)`; held ends follow their prescribed
 //!    motion;
 //! 2. from `λ = 0`, iterate the constraint solve (direct or Gauss–Seidel), updating points by
-//!    `M⁻¹ Jᵀ Δλ` and frames by the body rotation `I⁻¹ J_θᵀ Δλ`;
+//!    `u + M⁻¹ Jᵀ Δλ` and frames by the body rotation `u_θ + K_θ⁻¹ J_θᵀ Δλ` (the direct
+//!    solver's Newton step, `Work::rhs`; `K_θ` is the frame inertia plus a bound of the
+//!    constraints' geometric stiffness, [`StiffSettings::geometric`]), until the residual is
+//!    below [`StiffSettings::tolerance`];
 //! 3. `v = (x − x_old)/(h (1 + h γ))` (drag `γ` of the medium, implicit, after the solve so
 //!    that it does not weaken static loads), `ω = log(q̄_old q)/h`.
 //!
-//! The solve always runs in `f64`, whatever the rod's precision; see [`direct`] for why.
+//! The solve always runs in `f64`, whatever the rod's precision; see `direct.rs` for why.
 //!
 //! Not supported here (yet): the internal damping coefficients `bend_damping` and
 //! `stretch_damping` of `RodParams` are ignored by this scheme (implicit Euler is itself
@@ -102,19 +105,27 @@ pub struct StiffSettings {
     /// model's `ρ l (I, I, J)`.
     ///
     /// A thin rod's frames are nearly massless (`ρ I l / (m l²) = r² / (4 l²)`, 1e-3 to 1e-2
-    /// here), and the direct solve then has to cancel rotations of tens of radians to leave
-    /// the milliradians that are asked for: twisting a clamped nitinol end at 6 rad/s with
-    /// 5 mm elements diverged at the first step. The floor changes no static equilibrium and
-    /// leaves bending dynamics alone up to `(l/λ)²`, but slows torsion waves by up to
-    /// `√(l² / (6 r²))` (`docs/stiff-solver.md`).
+    /// here). A floor helped the first version (two chord iterations, no geometric bound)
+    /// converge; with [`geometric`](Self::geometric) it is not needed and the default is 0. It
+    /// changes no static equilibrium and leaves bending dynamics alone up to `(l/λ)²`, but
+    /// slows torsion waves by up to `√(l² / (6 r²))` (`docs/stiff-solver.md`).
     pub inertia_floor: f64,
-    /// Geometric-stiffness preconditioning of the frames (multiplier; 0 turns it off).
+    /// Multiplier of the geometric-stiffness bound `σ` added to each frame's block of the
+    /// Newton matrix (`K_θ = I + geometric · σ`; 0 turns it off, giving XPBD's `K = M`).
+    ///
+    /// XPBD approximates the Hessian `M − Σ λ ∇²C` by `M`; for a thin rod's frames the
+    /// geometric part (tension through stretch–shear, moments through bend–twist) exceeds the
+    /// inertia by orders of magnitude, and the iteration then over-rotates them. `σ` bounds
+    /// that part per frame from the multipliers (the previous step's on the first iteration);
+    /// it steers the iteration only, the converged step does not depend on it. Measured in
+    /// `docs/stiff-solver.md`: half the iterations for the same tolerance.
     pub geometric: f64,
 }
 
 impl Default for StiffSettings {
-    /// Direct solve, factorised once per step, two iterations per step (a fixed cost; the
-    /// residual left over is corrected by the next step, as `docs/stiff-solver.md` measures).
+    /// Direct solve, Newton (a factorisation per iteration) with the geometric bound of the
+    /// frames, iterating until the residual is at most 1e-5 (at most 4 iterations, at least
+    /// one), the model's own frame inertia: the settings measured in `docs/stiff-solver.md`.
     fn default() -> Self {
         Self {
             scheme: StiffScheme::Direct,

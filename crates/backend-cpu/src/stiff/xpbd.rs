@@ -23,7 +23,7 @@ fn awat(a: &Matrix3<f64>, w: &nalgebra::Vector3<f64>) -> Matrix3<f64> {
 }
 
 /// One Gauss–Seidel sweep over all constraints; returns the largest residual met (scaled as in
-/// [`super::residual_norm`]) before the sweep corrected it.
+/// `Work::rhs`) before the sweep corrected it.
 pub(crate) fn sweep(w: &mut Work, k: &Consts) -> f64 {
     let n = k.l0.len();
     let mut worst: f64 = 0.0;
