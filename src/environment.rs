@@ -125,7 +125,8 @@ impl Environment {
 
     /// Points of `points` whose centre lies outside the lumen (behind the nearest wall),
     /// searching up to `reach` metres for the wall. For a generated vessel, the part of a wire
-    /// that has not yet passed the entry point is not counted: it has not been inserted.
+    /// that has not yet passed the entry point is not counted: it has not been inserted. Nor is a
+    /// point whose nearest feature is the rim of an open end: it left through the opening.
     pub fn escaped(&self, points: &[[f64; 3]], reach: f64) -> usize {
         let inserted = |p: &[f64; 3]| {
             self.vessel.as_ref().is_none_or(|v| {
@@ -142,7 +143,7 @@ impl Environment {
                     && self
                         .collider
                         .nearest(p, reach)
-                        .is_some_and(|n| n.signed_distance < 0.0)
+                        .is_some_and(|n| n.signed_distance < 0.0 && !n.at_opening)
             })
             .count()
     }

@@ -380,6 +380,9 @@ pub struct EndSection {
     pub start_time: Option<f64>,
     /// When it stops [s].
     pub end_time: Option<f64>,
+    /// Length [m] of a straight introducer from the start point along the first element, in
+    /// which points move only along its axis (`rod.start` only).
+    pub guide: Option<f64>,
 }
 
 /// `[[rod.load]]`.
@@ -1072,6 +1075,16 @@ impl Checker<'_> {
             .collides(r.collides.unwrap_or(true))
             .start(self.end(&f("start"), &r.start, t_start)?)
             .end(self.end(&f("end"), &r.end, t_end)?);
+        if let Some(g) = r.end.guide {
+            return Err(self.invalid(
+                f("end.guide"),
+                g,
+                "a guide (introducer) is fed from the start end only: set rod.start.guide",
+            ));
+        }
+        if let Some(g) = r.start.guide {
+            rb = rb.guide(self.positive(&f("start.guide"), g)?);
+        }
         let n = rb.element_count() as i64;
         for (k, load) in r.loads.iter().enumerate() {
             let idx = if load.point < 0 {
@@ -1133,6 +1146,7 @@ impl Checker<'_> {
             kind: e.kind.clone(),
             start_time: e.start_time,
             end_time: e.end_time,
+            guide: e.guide,
         };
         let kind = match e.kind.as_deref() {
             None | Some("free") => EndKind::Free,

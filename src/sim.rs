@@ -8,8 +8,8 @@
 use crate::environment::Environment;
 pub use backend_cpu::{BindingSpec, CouplingStats, EndReaction, RodContactSpec};
 use backend_cpu::{
-    CpuRod, Divergence, EndCondition, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
-    StepStats,
+    CpuRod, Divergence, EndCondition, Guide, Ordering, Par, PointLoad, PrescribedMotion,
+    SolverSettings, StepStats,
 };
 pub use constraints::BindingVariant;
 use cosserat_model::energy::{Energies, ForceModel, energies};
@@ -54,6 +54,7 @@ pub struct RodBuilder {
     loads: Vec<(usize, [f64; 3])>,
     name: Option<String>,
     collides: bool,
+    guide: Option<f64>,
 }
 
 impl RodBuilder {
@@ -80,6 +81,7 @@ impl RodBuilder {
             loads: Vec::new(),
             name: None,
             collides: true,
+            guide: None,
         }
     }
 
@@ -188,6 +190,15 @@ impl RodBuilder {
         self
     }
 
+    /// Feeds the rod through a straight, frictionless introducer of `length` [m] that starts at
+    /// the first point and runs along the first element: the points inside it move only along
+    /// its axis (see [`backend_cpu::guide`]). Use it with a pushed start to insert a wire
+    /// through an entry point without the outside part buckling.
+    pub fn guide(mut self, length: f64) -> Self {
+        self.guide = Some(length);
+        self
+    }
+
     /// Adds a constant force [N] on point `point`.
     pub fn load(mut self, point: usize, force: [f64; 3]) -> Self {
         self.loads.push((point, force));
@@ -208,12 +219,22 @@ impl RodBuilder {
                 force: v3(f),
             })
             .collect();
-        let rod = CpuRod::new(state, params, ends, loads);
+        let mut rod = CpuRod::new(state, params, ends, loads);
+        if let (Some(length), [a, b, ..]) = (self.guide, self.points.as_slice()) {
+            let direction = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            if let Some(g) = Guide::new(*a, direction, length, self.spec.material.radius) {
+                rod = rod.with_guide(g);
+            }
+        }
         Ok(match environment {
             Some(env) if self.collides => rod.with_mesh(env.contact_settings()),
             _ => rod,
         })
     }
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 fn v3<T: Real>(a: [f64; 3]) -> Vec3<T> {
@@ -459,6 +480,19 @@ impl SimulationBuilder {
             ));
         }
         for (i, r) in self.rods.iter().enumerate() {
+            if let Some(length) = r.guide {
+                let rod_length = r.points.windows(2).map(|w| dist(w[0], w[1])).sum::<f64>();
+                if !(length > 0.0 && length <= rod_length) {
+                    return Err(BuildError::Setting(format!(
+                        "rod {i}: guide length {length} m is invalid: expected a number > 0 and at most the rod's length ({rod_length} m)"
+                    )));
+                }
+                if self.backend == Backend::Gpu || self.stiff.is_some() {
+                    return Err(BuildError::Setting(format!(
+                        "rod {i}: a guide (introducer) runs with the explicit scheme on the CPU backends only"
+                    )));
+                }
+            }
             for &(point, _) in &r.loads {
                 if point > r.element_count() {
                     return Err(BuildError::LoadPoint {

@@ -19,6 +19,7 @@
 
 pub mod coupling;
 pub mod ends;
+pub mod guide;
 pub mod mesh_contact;
 pub mod reaction;
 mod soa;
@@ -28,6 +29,7 @@ pub mod stiff;
 pub use constraints::Ordering;
 pub use coupling::{BindingSpec, Coupling, CouplingStats, RodContactSpec, step_coupled_batch};
 pub use ends::{EndCondition, EndKind, PrescribedMotion};
+pub use guide::Guide;
 pub use mesh_contact::{CollisionStats, MeshContactSettings};
 pub use reaction::EndReaction;
 pub use stepper::{

@@ -1,6 +1,7 @@
 //! The time step (paper Fig. 5, without collisions) and its parallel driver.
 
 use crate::ends::EndCondition;
+use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
 use crate::reaction::{EndReaction, Reactions};
 use crate::soa::{self, SoaParams, SoaState};
@@ -72,6 +73,43 @@ pub struct CpuRod<T: Real> {
     pub(crate) end_impulses: [Vec3<T>; 2],
     /// The exact inextensibility solver, when chosen instead of the iterative sweeps.
     pub(crate) direct: Option<Box<DirectState<T>>>,
+    /// An introducer that keeps the first points on a line (`None`: no guide, no cost).
+    pub(crate) guide: Option<Guide>,
+    /// Held end points' positions in `f64`, advanced by their prescribed velocity (see
+    /// [`HeldPath`]).
+    pub(crate) held_path: [HeldPath; 2],
+}
+
+/// The path of a held end point, accumulated in `f64`.
+///
+/// Why: in `f32` a point half a metre from the origin has a spacing of 6e-8 m, and a hand pushing
+/// at 0.2 m/s moves it by 7e-7 m per step of 3.5 µs, so each coordinate's increment is rounded by
+/// up to 4 %, the same way every step. The held point then left its prescribed straight path by
+/// millimetres per second (harmless for a free hand, fatal next to a guide that holds the following
+/// points on the exact axis). The point is instead set to the `f64` sum after each step. If the
+/// stored position was changed from outside, the sum restarts from it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct HeldPath {
+    position: Option<[f64; 3]>,
+}
+
+impl HeldPath {
+    /// The position after a step of `h` at velocity `v`, starting from `current` unless it is
+    /// where the last step left it.
+    fn advance<T: Real>(&mut self, current: Vec3<T>, v: Vec3<T>, h: T) -> Vec3<T> {
+        let start = match self.position {
+            Some(p) if Vec3::new(T::lit(p[0]), T::lit(p[1]), T::lit(p[2])) == current => p,
+            _ => [current.x.to_f64(), current.y.to_f64(), current.z.to_f64()],
+        };
+        let h = h.to_f64();
+        let p = [
+            start[0] + v.x.to_f64() * h,
+            start[1] + v.y.to_f64() * h,
+            start[2] + v.z.to_f64() * h,
+        ];
+        self.position = Some(p);
+        Vec3::new(T::lit(p[0]), T::lit(p[1]), T::lit(p[2]))
+    }
 }
 
 /// State of the direct (Newton, tridiagonal) distance-constraint solver of one rod
@@ -145,7 +183,16 @@ impl<T: Real> CpuRod<T> {
             kinematic: [Vec3::zeros(); 2],
             end_impulses: [Vec3::zeros(); 2],
             direct: None,
+            guide: None,
+            held_path: [HeldPath::default(); 2],
         }
+    }
+
+    /// Feeds the rod through a straight introducer from its first point (see [`crate::guide`]).
+    #[must_use]
+    pub fn with_guide(mut self, guide: Guide) -> Self {
+        self.guide = Some(guide);
+        self
     }
 
     /// Replaces the iterative distance-constraint sweeps by the exact direct solver
@@ -427,6 +474,9 @@ pub(crate) fn before_constraints<T: Real>(
             }
         }
     }
+    if let Some(guide) = &rod.guide {
+        guide.constrain(w);
+    }
     if let Some(mesh) = rod.mesh.as_mut() {
         mesh.detect(&w.r.x, &w.r.y, &w.r.z, rod.params.radius.to_f64());
     }
@@ -549,7 +599,21 @@ pub(crate) fn after_constraints<T: Real>(
         rx.finish(distance, rod.kinematic, settings.dt);
         rod.kinematic = [Vec3::zeros(); 2];
     }
+    if let Some(guide) = &rod.guide {
+        guide.constrain(&mut rod.work);
+    }
+    let n = rod.elements();
+    let held = [
+        (0, rod.ends[0].holds_point()),
+        (n, rod.ends[1].holds_point()),
+    ];
+    let before = held.map(|(i, yes)| yes.then(|| (rod.work.r.get(i), rod.work.v.get(i))));
     soa::integrate_positions(&mut rod.work, &rod.work_params, settings.dt);
+    for ((path, (i, _)), b) in rod.held_path.iter_mut().zip(held).zip(before) {
+        if let Some((r, v)) = b {
+            rod.work.r.set(i, path.advance(r, v, settings.dt));
+        }
+    }
     check(&rod.work, consts.lo2, consts.hi2)
 }
 

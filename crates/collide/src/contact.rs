@@ -7,18 +7,27 @@
 //!
 //! # Orientation and depth
 //!
-//! The mesh normals point into the lumen (see [`TriMesh::orient_into_lumen`]). For a contact we
-//! use the triangle's **face normal** `n` (by winding) as the response direction, as the paper
-//! does, and the signed distance `s = ±|p − c|`, positive when the centre `p` is on the lumen side
-//! of the face (`(p − c)·n ≥ 0`). The penetration depth is `r − s`: between 0 and `r` while the
-//! centre is still inside, above `r` once the centre has crossed the wall.
+//! The mesh normals point into the lumen (see [`TriMesh::orient_into_lumen`]). Each contact has
+//! a **feature normal** `n`: the face normal when the closest point `c` lies inside the face, as
+//! in the paper, and the angle-weighted pseudo-normal of the edge or vertex otherwise (Bærentzen &
+//! Aanæs 2005; on a flat wall all three are the face normal). The signed distance is
+//! `s = ±|p − c|`, positive when `(p − c)·n ≥ 0`, and the penetration depth is `r − s`: between
+//! 0 and `r` while the centre is still inside, above `r` once the centre has crossed the wall.
+//!
+//! Why not the face normal everywhere: near a ridge of the surface (the rim of a branch junction)
+//! a centre in the lumen can lie behind the *plane* of a triangle whose closest point is an edge.
+//! Signed by the face, that triangle entered the sphere with depth `r + |p − c|` ≈ 2r in a single
+//! step, and the contact impulse threw the point out at 2r/h (hundreds of m/s at haptic steps).
+//! Signed by the feature, depths grow continuously from 0 as triangles enter the sphere. For the
+//! same reason, a point whose nearest feature says it is in the lumen ignores contacts seen from
+//! behind (a fold or thin wall).
 //!
 //! # Point response
 //!
 //! As in the paper, a point's response is the penetration-weighted average of the normals of the
 //! triangles it touches: `dir = normalize(Σ dᵢ nᵢ)`, and we report the depth as the same weighted
-//! mean of the depths, `Σ dᵢ² / Σ dᵢ` (equal to the common depth when all touched triangles are
-//! coplanar, never above the largest one, which is reported too).
+//! mean of the depths, `Σ dᵢ² / Σ dᵢ` (never above the largest one, which is reported too and is
+//! what the solver uses).
 //!
 //! # Escaped points
 //!
@@ -49,11 +58,12 @@ pub struct Contact {
     pub closest: [f64; 3],
     /// Unsigned distance from the sphere centre to the triangle (`< r`).
     pub distance: f64,
-    /// `±distance`, positive on the lumen side of the face.
+    /// `±distance`, positive on the lumen side of the closest feature.
     pub signed_distance: f64,
     /// Penetration depth `r − signed_distance` (> 0).
     pub depth: f64,
-    /// Unit face normal (into the lumen): the direction to push the point.
+    /// Unit feature normal (into the lumen): the face normal, or the pseudo-normal of the edge or
+    /// vertex holding the closest point; the direction to push the point.
     pub normal: [f64; 3],
 }
 
@@ -61,7 +71,8 @@ pub struct Contact {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PointResponse {
     /// Unit response direction, the depth-weighted mean of the contact normals; zero if no contact
-    /// (or if the normals cancel exactly).
+    /// acts (none, only triangles seen from behind by a point in the lumen, or normals that cancel
+    /// exactly).
     pub direction: [f64; 3],
     /// Depth-weighted mean depth `Σ dᵢ² / Σ dᵢ`; 0 if no contact.
     pub depth: f64,
@@ -198,6 +209,9 @@ pub struct Nearest {
     pub distance: f64,
     /// Distance signed by the pseudo-normal of the closest feature: positive in the lumen.
     pub signed_distance: f64,
+    /// The closest feature is an edge or vertex of the mesh's boundary (the rim of an open end):
+    /// a point outside there may have left through the opening rather than through the wall.
+    pub at_opening: bool,
 }
 
 /// A mesh with its AABB tree and the data for fast sphere queries. Immutable after build, so one
@@ -211,6 +225,10 @@ pub struct MeshCollider {
     vertex_normals: Vec<Vector3<f64>>,
     /// Edge pseudo-normals, 3 per triangle in leaf order (edge k = corner k → k+1).
     edge_normals: Vec<[Vector3<f64>; 3]>,
+    /// Whether each of those edges lies on the mesh's boundary (belongs to one triangle only).
+    edge_on_boundary: Vec<[bool; 3]>,
+    /// Whether each mesh vertex lies on the boundary.
+    vertex_on_boundary: Vec<bool>,
 }
 
 impl MeshCollider {
@@ -225,7 +243,7 @@ impl MeshCollider {
         let nt = mesh.triangles().len();
         let face: Vec<Vector3<f64>> = (0..nt).map(|t| mesh.face_normal(t)).collect();
         let mut vertex_normals = vec![Vector3::zeros(); mesh.vertices().len()];
-        let mut edge_map: HashMap<(u32, u32), Vector3<f64>> = HashMap::with_capacity(nt * 2);
+        let mut edge_map: HashMap<(u32, u32), (Vector3<f64>, u32)> = HashMap::with_capacity(nt * 2);
         for (t, tri) in mesh.triangles().iter().enumerate() {
             let p = mesh.triangle(t);
             for k in 0..3 {
@@ -234,16 +252,26 @@ impl MeshCollider {
                 let angle = e1.angle(&e2);
                 vertex_normals[tri[k] as usize] += face[t] * angle;
                 let (u, v) = (tri[k], tri[(k + 1) % 3]);
-                *edge_map
+                let e = edge_map
                     .entry((u.min(v), u.max(v)))
-                    .or_insert_with(Vector3::zeros) += face[t];
+                    .or_insert_with(|| (Vector3::zeros(), 0));
+                e.0 += face[t];
+                e.1 += 1;
             }
         }
         for n in &mut vertex_normals {
             *n = n.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
         }
+        let mut vertex_on_boundary = vec![false; mesh.vertices().len()];
+        for (&(u, v), &(_, count)) in &edge_map {
+            if count == 1 {
+                vertex_on_boundary[u as usize] = true;
+                vertex_on_boundary[v as usize] = true;
+            }
+        }
         let mut tris = Vec::with_capacity(nt);
         let mut edge_normals = Vec::with_capacity(nt);
+        let mut edge_on_boundary = Vec::with_capacity(nt);
         for &t in bvh.tri_indices() {
             let t = t as usize;
             let [a, b, c] = mesh.triangle(t);
@@ -255,12 +283,15 @@ impl MeshCollider {
             });
             let tri = mesh.triangles()[t];
             let mut en = [Vector3::zeros(); 3];
-            for (k, slot) in en.iter_mut().enumerate() {
+            let mut boundary = [false; 3];
+            for k in 0..3 {
                 let (u, v) = (tri[k], tri[(k + 1) % 3]);
-                let s = edge_map[&(u.min(v), u.max(v))];
-                *slot = s.try_normalize(0.0).unwrap_or(face[t]);
+                let (sum, count) = edge_map[&(u.min(v), u.max(v))];
+                en[k] = sum.try_normalize(0.0).unwrap_or(face[t]);
+                boundary[k] = count == 1;
             }
             edge_normals.push(en);
+            edge_on_boundary.push(boundary);
         }
         Self {
             mesh,
@@ -268,6 +299,8 @@ impl MeshCollider {
             tris,
             vertex_normals,
             edge_normals,
+            edge_on_boundary,
+            vertex_on_boundary,
         }
     }
 
@@ -279,6 +312,18 @@ impl MeshCollider {
     /// The tree.
     pub fn bvh(&self) -> &Bvh {
         &self.bvh
+    }
+
+    /// Whether `feature` of the triangle in leaf-order slot `slot` lies on the mesh's boundary.
+    fn on_boundary(&self, slot: usize, feature: Feature) -> bool {
+        match feature {
+            Feature::Face => false,
+            Feature::Edge(k) => self.edge_on_boundary[slot][k as usize],
+            Feature::Vertex(k) => {
+                let t = self.bvh.tri_indices()[slot] as usize;
+                self.vertex_on_boundary[self.mesh.triangles()[t][k as usize] as usize]
+            }
+        }
     }
 
     /// The pseudo-normal of `feature` of the triangle in leaf-order slot `slot`.
@@ -305,9 +350,7 @@ impl MeshCollider {
         let first = out.len();
         let pv = Vector3::from(*p);
         let r2 = r * r;
-        let mut best = (f64::INFINITY, 0usize, Feature::Face, Vector3::zeros());
-        let mut sum_n = Vector3::zeros();
-        let (mut sum_w, mut sum_w2, mut max_d) = (0.0, 0.0, 0.0f64);
+        let mut nearest = (f64::INFINITY, 0.0, false);
         self.bvh.for_each_near(p, r, |slot| {
             let t = &self.tris[slot];
             let (c, feature) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
@@ -315,41 +358,61 @@ impl MeshCollider {
             let d2 = diff.norm_squared();
             if d2 < r2 {
                 let d = d2.sqrt();
-                let sd = if diff.dot(&t.n) >= 0.0 { d } else { -d };
-                let depth = r - sd;
-                if d2 < best.0 {
-                    best = (d2, slot, feature, diff);
+                let n = self.pseudo_normal(slot, feature);
+                let sd = if diff.dot(&n) >= 0.0 { d } else { -d };
+                if d2 < nearest.0 {
+                    nearest = (d2, sd, self.on_boundary(slot, feature));
                 }
-                sum_n += t.n * depth;
-                sum_w += depth;
-                sum_w2 += depth * depth;
-                max_d = max_d.max(depth);
                 out.push(Contact {
                     point,
                     triangle: self.bvh.tri_indices()[slot],
                     closest: c.into(),
                     distance: d,
                     signed_distance: sd,
-                    depth,
-                    normal: t.n.into(),
+                    depth: r - sd,
+                    normal: n.into(),
                 });
             }
         });
-        let count = out.len() - first;
-        if count == 0 {
+        if out.len() == first {
             return PointResponse {
                 first: first as u32,
                 ..PointResponse::default()
             };
         }
-        let escaped = best.3.dot(&self.pseudo_normal(best.1, best.2)) < 0.0;
+        // The nearest feature decides the side (exact for a closed manifold). A centre in the lumen
+        // that sees some other triangle from behind (a fold, a thin wall, the far side of a
+        // junction's rim) is not pushed through that triangle: such a contact would enter the
+        // sphere with a depth of 2r in one step, a kick of 2r/h. It stays in the contact list
+        // (the geometric query is complete) but not in the response.
+        // Behind the rim of an open end is outside the mesh but not through its wall.
+        let escaped = nearest.1 < 0.0 && !nearest.2;
+        let mut sum_n = Vector3::zeros();
+        let (mut sum_w, mut sum_w2, mut max_d) = (0.0, 0.0, 0.0f64);
+        for k in out[first..]
+            .iter()
+            .filter(|k| escaped || k.signed_distance >= 0.0)
+        {
+            sum_n += Vector3::from(k.normal) * k.depth;
+            sum_w += k.depth;
+            sum_w2 += k.depth * k.depth;
+            max_d = max_d.max(k.depth);
+        }
+        let count = (out.len() - first) as u32;
+        if !(sum_w > 0.0) {
+            return PointResponse {
+                first: first as u32,
+                count,
+                ..PointResponse::default()
+            };
+        }
         let direction = sum_n.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
         PointResponse {
             direction: direction.into(),
             depth: sum_w2 / sum_w,
             max_depth: max_d,
             first: first as u32,
-            count: count as u32,
+            count,
             escaped,
         }
     }
@@ -436,6 +499,7 @@ impl MeshCollider {
             closest: c.into(),
             distance: d,
             signed_distance: sign * d,
+            at_opening: self.on_boundary(slot, f),
         })
     }
 }
@@ -538,5 +602,64 @@ mod tests {
             assert_eq!(gt.a, [a.x as f32, a.y as f32, a.z as f32]);
         }
         assert_eq!(g.depth as usize, c.bvh().depth());
+    }
+
+    /// A ridge seen from the lumen: a floor `z = 0` for `x < 0` (normal +z) bent down into a wall
+    /// `x = 0` for `z < 0` (normal +x). The lumen wraps round the edge on the y axis, like the
+    /// rim of a branch junction.
+    fn ridge() -> MeshCollider {
+        let v = vec![
+            [-1.0, -1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [-1.0, 1.0, 0.0],
+            [0.0, -1.0, -1.0],
+            [0.0, 1.0, -1.0],
+        ];
+        let t = vec![[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]];
+        MeshCollider::new(TriMesh::new(v, t, "ridge").expect("valid").0)
+    }
+
+    #[test]
+    fn a_point_beside_a_ridge_is_not_pushed_through_the_other_face() {
+        let c = ridge();
+        assert!((c.mesh().face_normal(0).z - 1.0).abs() < 1e-12);
+        assert!((c.mesh().face_normal(2).x - 1.0).abs() < 1e-12);
+        let r = 0.1;
+        let mut buf = ContactBuffer::new();
+        // Above the floor, just short of the edge: 0.5 r above the floor, 0.1 r behind the
+        // plane of the wall. The wall's closest point is on the shared edge.
+        let p = [-0.01, 0.0, 0.05];
+        c.detect(&[p], r, &mut buf);
+        let resp = buf.responses()[0];
+        assert!(!resp.escaped);
+        let wall = buf.contacts().iter().filter(|k| k.triangle >= 2).count();
+        assert!(resp.count >= 2 && wall >= 1, "{:?}", buf.contacts());
+        // The floor gives r − 0.5 r; every other contact is shallower. Signed by the wall's face
+        // normal, the wall triangles would report r + |p − edge| ≈ 1.5 r.
+        assert!((resp.max_depth - 0.5 * r).abs() < 1e-12, "{resp:?}");
+        for k in buf.contacts() {
+            assert!(
+                k.signed_distance > 0.0 && k.depth <= 0.5 * r + 1e-12,
+                "{k:?}"
+            );
+        }
+        // Pushed up and out over the edge, never into the wall's side.
+        assert!(
+            resp.direction[2] > 0.7 && resp.direction[0] > 0.0,
+            "{resp:?}"
+        );
+        // Past the wall's plane and beside it: the mirror case.
+        c.detect(&[[0.05, 0.0, -0.01]], r, &mut buf);
+        let resp = buf.responses()[0];
+        assert!(!resp.escaped && (resp.max_depth - 0.5 * r).abs() < 1e-12);
+        assert!(
+            resp.direction[0] > 0.7 && resp.direction[2] > 0.0,
+            "{resp:?}"
+        );
+        // Inside the solid below the floor and behind the wall: escaped, pushed back out.
+        c.detect(&[[-0.02, 0.0, -0.03]], r, &mut buf);
+        let resp = buf.responses()[0];
+        assert!(resp.escaped && resp.max_depth > r, "{resp:?}");
     }
 }

@@ -104,12 +104,19 @@ fn compare(c: &MeshCollider, pm: &PMesh, p: [f64; 3], r: f64) -> Result<(), Test
     for k in buf.contacts() {
         prop_assert!(close(k.depth, r - k.signed_distance));
         prop_assert!(k.signed_distance.abs() == k.distance);
+        // The feature normal is a unit vector on the side of the signed distance, and
+        // `p = closest + |d|·(p − closest)/|d|` with the sign agreeing with the normal.
         let n = nalgebra::Vector3::from(k.normal);
         prop_assert!((n.norm() - 1.0).abs() < 1e-12);
-        prop_assert!(close(
-            n.dot(&c.mesh().face_normal(k.triangle as usize)),
-            1.0
-        ));
+        let diff = nalgebra::Vector3::from(p) - nalgebra::Vector3::from(k.closest);
+        prop_assert!(close(diff.norm(), k.distance));
+        prop_assert_eq!(diff.dot(&n) >= 0.0, k.signed_distance >= 0.0);
+        // Inside the face, the feature normal is the face normal.
+        let face = c.mesh().face_normal(k.triangle as usize);
+        let along = diff.cross(&face).norm() <= 1e-9 * diff.norm().max(1e-300);
+        if along && k.distance > 1e-9 {
+            prop_assert!(close(n.dot(&face), 1.0));
+        }
     }
     // Nearest triangle: same distance as parry's projection on the whole mesh.
     let q = PV::new(p[0], p[1], p[2]);
