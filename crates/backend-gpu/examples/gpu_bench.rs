@@ -444,25 +444,26 @@ fn variant_section(quick: bool) -> Vec<Value> {
             workgroup.clone(),
         ));
     }
-    for threads in [64u32, 128] {
+    for threads in [64u32, 96, 128, 160, 192, 256] {
+        let v = KernelVariant {
+            multi_threads: threads,
+            ..base.clone()
+        };
         cases.push((
             format!("multi-workgroup, unrolled, {threads} threads"),
             1000,
             1,
             KernelPath::MultiWorkgroup,
-            threads,
-            base.clone(),
+            256,
+            v.clone(),
         ));
         cases.push((
             format!("multi-workgroup, unrolled, {threads} threads, inverseSqrt impulse"),
             1000,
             1,
             KernelPath::MultiWorkgroup,
-            threads,
-            KernelVariant {
-                rsqrt: true,
-                ..base.clone()
-            },
+            256,
+            KernelVariant { rsqrt: true, ..v },
         ));
     }
     for n in [512usize, 4096] {
@@ -477,14 +478,19 @@ fn variant_section(quick: bool) -> Vec<Value> {
                 ..base.clone()
             },
         ));
-        cases.push((
-            "multi-workgroup, unrolled".into(),
-            n,
-            1,
-            KernelPath::MultiWorkgroup,
-            256,
-            base.clone(),
-        ));
+        for threads in [128u32, 256] {
+            cases.push((
+                format!("multi-workgroup, unrolled, {threads} threads"),
+                n,
+                1,
+                KernelPath::MultiWorkgroup,
+                256,
+                KernelVariant {
+                    multi_threads: threads,
+                    ..base.clone()
+                },
+            ));
+        }
     }
     cases.push((
         "single workgroup, 1024 threads".into(),

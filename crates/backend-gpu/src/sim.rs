@@ -1249,11 +1249,12 @@ fn make_plan(
         .filter(|&(_, ept)| ept <= variant.subgroup_points_per_thread.max(2));
     let halo = round_up(2 * iterations + 4, 2);
     // Chunks for the two multi-workgroup paths: owned points per workgroup at least 2 halos.
+    let multi_threads = (max_threads.min(variant.multi_threads) / 32 * 32).max(32);
     let multi_ept = (1..=8)
         .map(|k| 2 * k)
-        .find(|&e| max_threads * e >= 4 * halo + 64)
+        .find(|&e| multi_threads * e >= 4 * halo + 64)
         .unwrap_or(16);
-    let chunk = (max_threads * multi_ept - 2 * halo) / 2 * 2;
+    let chunk = (multi_threads * multi_ept - 2 * halo) / 2 * 2;
 
     let multi_items = || -> Vec<ItemG> {
         let mut items = Vec::new();
@@ -1300,7 +1301,11 @@ fn make_plan(
     };
     let path = match options.path {
         KernelPath::Auto => {
-            if single_ept <= 4 || subgroup.is_some() {
+            // One workgroup while each thread holds at most two points (up to 512 elements
+            // with 256 threads); beyond that, windows over several co-resident workgroups
+            // where the adapter allows them (H200, 1000 elements: 5.5 µs/step against 6.6 for
+            // one workgroup with four points per thread).
+            if single_ept <= 2 || subgroup.is_some() {
                 KernelPath::SingleWorkgroup
             } else if grid_ok.is_ok() {
                 KernelPath::MultiWorkgroup
@@ -1365,7 +1370,7 @@ fn make_plan(
                 None => (single_threads, single_ept, items, 0),
             }
         }
-        _ => (max_threads, multi_ept, grid_items, halo),
+        _ => (multi_threads, multi_ept, grid_items, halo),
     };
     if path == KernelPath::MultiWorkgroup {
         flags.push("GRID");
