@@ -5,7 +5,8 @@
 //! accuracy (the pendulum's largest strain and its energy drift over 0.2 s of simulated time,
 //! with the same settings), and writes both into `docs/benchmarks/cpu.md` together with the
 //! machine it ran on. It then runs the insertion benchmark (`benches/insertion.rs`, time per
-//! step against insertion depth) into `docs/benchmarks/insertion.md`.
+//! step against insertion depth) and the free-space benchmark (`benches/free_space.rs`, the
+//! step with and without the collision code in play) into `docs/benchmarks/insertion.md`.
 //!
 //! The GPU part builds and runs the GPU backend's benchmark example on whatever adapter this
 //! machine has and writes `docs/benchmarks/gpu-local.json`; the committed H100/H200 tables in
@@ -158,16 +159,101 @@ The accuracy columns come from the same configuration run for 0.2 s: the largest
     )
     .map_err(|e| format!("docs/benchmarks/cpu.json: {e}"))?;
     print!("{md}");
-    println!("\nrunning the insertion benchmark (benches/insertion.rs)…");
-    let table = cargo(&["bench", "--bench", "insertion"])?;
+    insertion(&docs)
+}
+
+/// The conditions of a run that a timing depends on: hypervisor, load average, commit.
+fn conditions() -> String {
+    let hypervisor = Command::new("lscpu").output().ok().and_then(|o| {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find(|l| l.starts_with("Hypervisor vendor:"))
+            .map(|l| format!("{} guest, ", l.split(':').nth(1).unwrap_or("").trim()))
+    });
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unknown".into());
+    let git = |args: &[&str]| {
+        Command::new("git")
+            .args(args)
+            .current_dir(root())
+            .output()
+            .ok()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let commit = git(&["rev-parse", "--short", "HEAD"]).unwrap_or_else(|| "unknown".into());
+    let dirty = git(&[
+        "status",
+        "--porcelain",
+        "--",
+        "src",
+        "crates",
+        "benches",
+        "scenes",
+    ])
+    .is_some_and(|s| !s.is_empty());
+    format!(
+        "{}load average {load} (1, 5, 15 min) at the start, commit {commit}{}",
+        hypervisor.unwrap_or_default(),
+        if dirty {
+            " with uncommitted changes"
+        } else {
+            ""
+        }
+    )
+}
+
+/// The insertion benchmark (`benches/insertion.rs`, time per step against depth to full depth)
+/// and the free-space benchmark (`benches/free_space.rs`, what the collision code costs a rod
+/// that touches nothing) into `docs/benchmarks/insertion.md`.
+fn insertion(docs: &Path) -> Result<bool, String> {
     let mut ins = String::new();
     let _ = writeln!(ins, "# Guidewire insertion: time per step against depth\n");
     let _ = writeln!(
         ins,
-        "Machine: {}. Command: `cargo xtask bench` (`benches/insertion.rs`). The paper's test 3.3: a 512-element wire pushed at 0.2 m/s into the vessel, 10 constraint iterations with friction per step, serial CPU, f32. Each row is a window of simulated time; `detection` is the share of the step spent finding contacts.",
-        machine()
+        "Machine: {}; {}. Command: `cargo xtask bench` (`benches/insertion.rs`, `benches/free_space.rs`). The paper's test 3.3: a 512-element wire pushed at 0.2 m/s through a straight introducer into the vessel to full depth (2.45 s of simulated time, 700 000 steps), 10 constraint iterations with friction per step, serial CPU, f32. Each row is a window of simulated time; `µs/step` is the wall time of the whole step, `detection` the part of it spent finding contacts, `contacts` the points in contact at the end of the window, `max penetration` and `escaped` the largest seen since the start.",
+        machine(),
+        conditions()
     );
+    println!("\nrunning the insertion benchmark (benches/insertion.rs)…");
+    let table = cargo(&["bench", "--bench", "insertion"])?;
     ins.push_str(table.trim_start_matches(|c: char| c != '\n' && c != '#'));
+    println!("\nrunning the free-space benchmark (benches/free_space.rs)…");
+    cargo(&["bench", "--bench", "free_space", "--", "--noplot"])?;
+    let _ = writeln!(ins, "\n## Free space pays nothing for collisions\n");
+    let _ = writeln!(
+        ins,
+        "Issue 5: a scene pays only for what it uses. `benches/free_space.rs` (criterion, medians) steps the same 512-element pendulum (f32, serial, 10 red–black sweeps, dt = 2e-5 s, gravity) built three ways in one run: (a) no environment; (b) the default procedural vessel (~26 000 triangles) in the simulation but the rod built with `collides(false)`; (c) collisions on, the rod swinging more than 1 m from every triangle, so detection runs every step and finds nothing. `single` is one `Simulation::step`, `run(100)` the cost per step inside a batch of 100.\n"
+    );
+    let _ = writeln!(
+        ins,
+        "| case | single [µs] | run(100) [µs/step] | single / (a) | run(100) / (a) |"
+    );
+    let _ = writeln!(ins, "|---|---|---|---|---|");
+    let get = |kind: &str, case: &str| {
+        median_us("free_space", kind, case).map(|v| if kind == "batch100" { v / 100.0 } else { v })
+    };
+    let base = (
+        get("single", "no-environment"),
+        get("batch100", "no-environment"),
+    );
+    for (label, case) in [
+        ("(a) no environment", "no-environment"),
+        ("(b) vessel, `collides(false)`", "collides-false"),
+        ("(c) vessel, rod far from it", "far-away"),
+    ] {
+        let (s, b) = (get("single", case), get("batch100", case));
+        let fmt = |x: Option<f64>, d: usize| x.map_or("–".to_string(), |v| format!("{v:.d$}"));
+        let ratio = |x: Option<f64>, y: Option<f64>| x.zip(y).map(|(x, y)| x / y);
+        let _ = writeln!(
+            ins,
+            "| {label} | {} | {} | {} | {} |",
+            fmt(s, 1),
+            fmt(b, 1),
+            fmt(ratio(s, base.0), 3),
+            fmt(ratio(b, base.1), 3)
+        );
+    }
     std::fs::write(docs.join("insertion.md"), &ins)
         .map_err(|e| format!("docs/benchmarks/insertion.md: {e}"))?;
     print!("{ins}");
