@@ -233,10 +233,6 @@ impl RodBuilder {
     }
 }
 
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
 fn v3<T: Real>(a: [f64; 3]) -> Vec3<T> {
     Vec3::new(T::lit(a[0]), T::lit(a[1]), T::lit(a[2]))
 }
@@ -481,7 +477,11 @@ impl SimulationBuilder {
         }
         for (i, r) in self.rods.iter().enumerate() {
             if let Some(length) = r.guide {
-                let rod_length = r.points.windows(2).map(|w| dist(w[0], w[1])).sum::<f64>();
+                let rod_length: f64 = r
+                    .points
+                    .windows(2)
+                    .map(|w| (Vec3::from(w[1]) - Vec3::from(w[0])).norm())
+                    .sum();
                 if !(length > 0.0 && length <= rod_length) {
                     return Err(BuildError::Setting(format!(
                         "rod {i}: guide length {length} m is invalid: expected a number > 0 and at most the rod's length ({rod_length} m)"

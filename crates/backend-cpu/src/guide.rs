@@ -52,23 +52,17 @@ impl Guide {
         })
     }
 
-    /// Length of the guide [m].
-    pub fn length(&self) -> f64 {
-        self.length
-    }
-
     /// Puts the guided points (from index 1, the first point being held) on the axis and
-    /// removes their sideways velocity. Returns how many points were guided.
+    /// removes their sideways velocity.
     ///
     /// The arithmetic is in `f64` and only the sideways parts are subtracted: recomputing a point
     /// as `origin + axis·along` in `f32`, where `|axis|` is 1 only to rounding, pulled every guided
     /// point towards the origin by about 1e-7 of its distance twice per step, which the distance
     /// constraints could not keep up with over 10⁵ steps.
-    pub(crate) fn constrain<T: Real>(&self, w: &mut SoaState<T>) -> usize {
+    pub(crate) fn constrain<T: Real>(&self, w: &mut SoaState<T>) {
         let n = w.r.x.len();
         let f = |v: Vec3<T>| Vector3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64());
         let back = |v: Vector3<f64>| Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z));
-        let mut guided = 0;
         for i in 1..n {
             let r = f(w.r.get(i));
             let rel = r - self.origin;
@@ -79,9 +73,7 @@ impl Guide {
             }
             w.r.set(i, back(r - lateral));
             let v = f(w.v.get(i));
-            w.v.set(i, back(v - (v - self.axis * v.dot(&self.axis))));
-            guided += 1;
+            w.v.set(i, back(self.axis * v.dot(&self.axis)));
         }
-        guided
     }
 }
