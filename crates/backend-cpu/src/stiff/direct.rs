@@ -78,46 +78,6 @@ pub(crate) struct Masses<'a> {
 /// A 3×3 block, row-major.
 type M3 = [[f64; 3]; 3];
 
-/// `a b`.
-#[inline(always)]
-fn mul(a: &M3, b: &M3) -> M3 {
-    let mut c = [[0.0; 3]; 3];
-    for r in 0..3 {
-        for k in 0..3 {
-            c[r][k] = a[r][0] * b[0][k] + a[r][1] * b[1][k] + a[r][2] * b[2][k];
-        }
-    }
-    c
-}
-
-/// `c + aᵀ b` for a symmetric result (`b = P a` with `P` symmetric): the upper triangle,
-/// mirrored.
-#[inline(always)]
-fn add_tmul_sym(c: &M3, a: &M3, b: &M3) -> M3 {
-    let mut out = *c;
-    for r in 0..3 {
-        for k in r..3 {
-            out[r][k] += a[0][r] * b[0][k] + a[1][r] * b[1][k] + a[2][r] * b[2][k];
-        }
-    }
-    out[1][0] = out[0][1];
-    out[2][0] = out[0][2];
-    out[2][1] = out[1][2];
-    out
-}
-
-/// `c + aᵀ b`.
-#[inline(always)]
-fn add_tmul(c: &M3, a: &M3, b: &M3) -> M3 {
-    let mut out = *c;
-    for r in 0..3 {
-        for k in 0..3 {
-            out[r][k] += a[0][r] * b[0][k] + a[1][r] * b[1][k] + a[2][r] * b[2][k];
-        }
-    }
-    out
-}
-
 /// The inverse of a symmetric positive (semi)definite 3×3 block. Closed form (adjugate) when
 /// the determinant is positive; otherwise a Cholesky factorisation whose non-positive pivots
 /// get an inverse of zero (a row that no free degree of freedom can change, e.g. an element
@@ -227,12 +187,73 @@ fn blocks(
     }
 }
 
-/// One eliminated 3×3 block row: `P⁻¹` and `P⁻¹ A_{k,k+1}`, `P⁻¹ A_{k,k+2}`.
+/// A row of a 3×3 block padded to four lanes (the fourth is zero), so that the elimination's
+/// block products are four-wide multiply–adds (`y[r] = Σ_i a[r][i] · b[i]`, a broadcast and a
+/// row) instead of scalar dot products.
+type R4 = [f64; 4];
+/// A 3×3 block as three padded rows.
+type B4 = [R4; 3];
+
+/// `a · b + c`, fused where the target has FMA.
+#[inline(always)]
+fn fma(a: f64, b: f64, c: f64) -> f64 {
+    #[cfg(target_feature = "fma")]
+    {
+        a.mul_add(b, c)
+    }
+    #[cfg(not(target_feature = "fma"))]
+    {
+        a * b + c
+    }
+}
+
+/// `c + s x`, lane by lane.
+#[inline(always)]
+fn axpy(c: R4, s: f64, x: &R4) -> R4 {
+    [
+        fma(s, x[0], c[0]),
+        fma(s, x[1], c[1]),
+        fma(s, x[2], c[2]),
+        fma(s, x[3], c[3]),
+    ]
+}
+
+#[inline(always)]
+fn scale4(x: &R4, s: f64) -> R4 {
+    [x[0] * s, x[1] * s, x[2] * s, x[3] * s]
+}
+
+#[inline(always)]
+fn pad(m: &M3) -> B4 {
+    m.map(|r| [r[0], r[1], r[2], 0.0])
+}
+
+/// `a b` with `a` given by its 3×3 entries.
+#[inline(always)]
+fn mul4(a: &M3, b: &B4) -> B4 {
+    a.map(|r| axpy(axpy(scale4(&b[0], r[0]), r[1], &b[1]), r[2], &b[2]))
+}
+
+/// `c + aᵀ b` (or `aᵀ b` without `c`).
+#[inline(always)]
+fn tmul4(c: Option<&B4>, a: &B4, b: &B4) -> B4 {
+    let mut out = [[0.0; 4]; 3];
+    for (r, o) in out.iter_mut().enumerate() {
+        let first = match c {
+            Some(c) => axpy(c[r], a[0][r], &b[0]),
+            None => scale4(&b[0], a[0][r]),
+        };
+        *o = axpy(axpy(first, a[1][r], &b[1]), a[2][r], &b[2]);
+    }
+    out
+}
+
+/// One eliminated 3×3 block row: `P⁻¹` and `P⁻¹ A_{k,k+1}`, `P⁻¹ A_{k,k+2}` (padded rows).
 #[derive(Clone, Copy, Debug, Default)]
 struct Pivot {
-    p_inv: M3,
-    y: M3,
-    z: M3,
+    p_inv: B4,
+    y: B4,
+    z: B4,
 }
 
 /// The factorised `J K⁻¹ Jᵀ + α̃` of one rod, as a block `LDLᵀ` with 3×3 blocks.
@@ -266,26 +287,68 @@ impl BlockTridiagonal {
         }
         let count = 2 * n - 1;
         self.piv.resize(count, Pivot::default());
-        let zero = [[0.0; 3]; 3];
+        let zero = [[0.0; 4]; 3];
         // Amounts still to subtract from the next two diagonal blocks and the block between.
         let (mut s11, mut s12, mut s22) = (zero, zero, zero);
-        for k in 0..count {
-            let (mut d, mut a1, a2) = blocks(k, ss, bt, m);
+        for (k, out) in self.piv.iter_mut().enumerate() {
+            let (mut d, a1, a2) = blocks(k, ss, bt, m);
             // Updates from the blocks eliminated before.
             for r in 0..3 {
                 for c in 0..3 {
                     d[r][c] -= s11[r][c];
+                }
+            }
+            let mut a1 = pad(&a1);
+            for r in 0..3 {
+                for c in 0..4 {
                     a1[r][c] -= s12[r][c];
                 }
             }
-            let p_inv = inverse_spd(&d);
-            let y = mul(&p_inv, &a1);
-            let z = mul(&p_inv, &a2);
-            // Schur complements on the next two blocks (amounts still to subtract).
-            s11 = add_tmul_sym(&s22, &a1, &y);
-            s12 = add_tmul(&zero, &a1, &z);
-            s22 = add_tmul_sym(&zero, &a2, &z);
-            self.piv[k] = Pivot { p_inv, y, z };
+            let a2 = pad(&a2);
+            // The pivot's adjugate and determinant (`d` is symmetric). The products with the
+            // adjugate do not wait for the division, and the Schur complement on the next
+            // diagonal block — the only quantity on the dependency chain from one block to
+            // the next — is `a1ᵀ adj a1 / det`, one multiply–add after the division.
+            let c00 = d[1][1] * d[2][2] - d[1][2] * d[1][2];
+            let c01 = d[1][2] * d[0][2] - d[0][1] * d[2][2];
+            let c02 = d[0][1] * d[1][2] - d[1][1] * d[0][2];
+            let det = d[0][0] * c00 + d[0][1] * c01 + d[0][2] * c02;
+            *out = if det > 0.0 && d[0][0] > 0.0 && c00 > 0.0 && det.is_finite() {
+                let c11 = d[0][0] * d[2][2] - d[0][2] * d[0][2];
+                let c12 = d[0][2] * d[0][1] - d[0][0] * d[1][2];
+                let c22 = d[0][0] * d[1][1] - d[0][1] * d[0][1];
+                let adj = [[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]];
+                let ya = mul4(&adj, &a1);
+                let za = mul4(&adj, &a2);
+                let t11 = tmul4(None, &a1, &ya);
+                let inv = 1.0 / det;
+                let y = ya.map(|r| scale4(&r, inv));
+                let z = za.map(|r| scale4(&r, inv));
+                for r in 0..3 {
+                    for c in 0..4 {
+                        s11[r][c] = fma(t11[r][c], inv, s22[r][c]);
+                    }
+                }
+                s12 = tmul4(None, &a1, &z);
+                s22 = tmul4(None, &a2, &z);
+                Pivot {
+                    p_inv: pad(&adj).map(|r| scale4(&r, inv)),
+                    y,
+                    z,
+                }
+            } else {
+                let p_inv = inverse_spd(&d);
+                let y = mul4(&p_inv, &a1);
+                let z = mul4(&p_inv, &a2);
+                s11 = tmul4(Some(&s22), &a1, &y);
+                s12 = tmul4(None, &a1, &z);
+                s22 = tmul4(None, &a2, &z);
+                Pivot {
+                    p_inv: pad(&p_inv),
+                    y,
+                    z,
+                }
+            };
         }
     }
 
@@ -298,50 +361,48 @@ impl BlockTridiagonal {
         }
         let blocks = 2 * n - 1;
         debug_assert_eq!(self.piv.len(), blocks);
-        let get = |x: &[[f64; 6]], k: usize| -> [f64; 3] {
+        let get = |x: &[[f64; 6]], k: usize| -> R4 {
             let o = 3 * (k % 2);
             let e = &x[k / 2];
-            [e[o], e[o + 1], e[o + 2]]
+            [e[o], e[o + 1], e[o + 2], 0.0]
         };
-        let set = |x: &mut [[f64; 6]], k: usize, v: [f64; 3]| {
+        let set = |x: &mut [[f64; 6]], k: usize, v: &R4| {
             let o = 3 * (k % 2);
-            x[k / 2][o..o + 3].copy_from_slice(&v);
+            x[k / 2][o..o + 3].copy_from_slice(&v[..3]);
         };
-        // Forward: z_k = b_k − Y_{k−1}ᵀ z_{k−1} − Z_{k−2}ᵀ z_{k−2}; then w_k = P_k⁻¹ z_k.
-        let (mut z1, mut z2) = ([0.0; 3], [0.0; 3]);
+        // Forward: z_k = b_k − Y_{k−1}ᵀ z_{k−1} − Z_{k−2}ᵀ z_{k−2}; then w_k = P_k⁻¹ z_k
+        // (`Yᵀ z = Σ_i z_i · row_i(Y)`; `P⁻¹` is symmetric).
+        let (mut z1, mut z2) = ([0.0; 4], [0.0; 4]);
         for k in 0..blocks {
             let mut b = get(x, k);
             if k >= 1 {
                 let y = &self.piv[k - 1].y;
-                for r in 0..3 {
-                    b[r] -= y[0][r] * z1[0] + y[1][r] * z1[1] + y[2][r] * z1[2];
-                }
+                b = axpy(axpy(axpy(b, -z1[0], &y[0]), -z1[1], &y[1]), -z1[2], &y[2]);
             }
             if k >= 2 {
                 let z = &self.piv[k - 2].z;
-                for r in 0..3 {
-                    b[r] -= z[0][r] * z2[0] + z[1][r] * z2[1] + z[2][r] * z2[2];
-                }
+                b = axpy(axpy(axpy(b, -z2[0], &z[0]), -z2[1], &z[1]), -z2[2], &z[2]);
             }
             z2 = z1;
             z1 = b;
             let p = &self.piv[k].p_inv;
-            let row = |r: usize| p[r][0] * b[0] + p[r][1] * b[1] + p[r][2] * b[2];
-            let w = [row(0), row(1), row(2)];
-            set(x, k, w);
+            let w = axpy(axpy(scale4(&p[0], b[0]), b[1], &p[1]), b[2], &p[2]);
+            set(x, k, &w);
         }
         // Backward: x_k = w_k − Y_k x_{k+1} − Z_k x_{k+2}.
-        let (mut x1, mut x2) = ([0.0; 3], [0.0; 3]);
+        let (mut x1, mut x2) = ([0.0; 4], [0.0; 4]);
         for k in (0..blocks).rev() {
             let mut v = get(x, k);
             let pv = &self.piv[k];
             for r in 0..3 {
-                v[r] -= pv.y[r][0] * x1[0] + pv.y[r][1] * x1[1] + pv.y[r][2] * x1[2];
-                v[r] -= pv.z[r][0] * x2[0] + pv.z[r][1] * x2[1] + pv.z[r][2] * x2[2];
+                let (y, z) = (&pv.y[r], &pv.z[r]);
+                let t = fma(y[0], x1[0], fma(y[1], x1[1], y[2] * x1[2]));
+                let u = fma(z[0], x2[0], fma(z[1], x2[1], z[2] * x2[2]));
+                v[r] -= t + u;
             }
             x2 = x1;
             x1 = v;
-            set(x, k, v);
+            set(x, k, &v);
         }
         x[n - 1][3..].fill(0.0);
     }

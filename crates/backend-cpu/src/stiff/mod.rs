@@ -164,6 +164,8 @@ pub(crate) struct Consts {
     pub(crate) mass: Vec<f64>,
     pub(crate) inertia: Vec<Vec3<f64>>,
     pub(crate) inv_inertia: Vec<Vec3<f64>>,
+    /// `1 / inertia` also for held frames (the gyroscopic term of the prediction).
+    inv_inertia_own: Vec<Vec3<f64>>,
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
     key: Option<(usize, u64, bool, [EndKind; 2])>,
@@ -194,6 +196,10 @@ pub(crate) struct Work {
     lambda_prev: Vec<[f64; 6]>,
     /// Whether every multiplier is zero (the first iteration of a step).
     lambda_zero: bool,
+    /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (in `f64`); the next
+    /// step continues from them when the rod's state is still their rounding to its precision,
+    /// so that an `f32` rod is not re-rounded between steps (see [`step_rod_stiff`]).
+    shadow: bool,
 }
 
 /// Scratch memory and cached constants of the stiff scheme for one rod; the caller owns one per
@@ -248,6 +254,11 @@ fn exp_small(v: &Vec3<f64>) -> Quat<f64> {
 #[inline(always)]
 fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
     let sn2 = s.imag().norm_squared();
+    if sn2 < 1e-4 && (s.w * s.w + sn2 - 1.0).abs() < 1e-12 {
+        // For a unit quaternion angle = 2 asin|s_v|, and 2 asin(x)/x = 2 (1 + x²/6 + 3x⁴/40
+        // + 5x⁶/112 + 35x⁸/1152 + O(x¹⁰)): no division.
+        return 2.0 + sn2 * (1.0 / 3.0 + sn2 * (0.15 + sn2 * (5.0 / 56.0 + sn2 * (35.0 / 576.0))));
+    }
     if sn2 < 1e-4 * s.w * s.w {
         // atan(t)/t = 1 − t²/3 + t⁴/5 − t⁶/7 + O(t⁸), t = |s_v| / s_w.
         let t2 = sn2 / (s.w * s.w);
@@ -257,12 +268,65 @@ fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
     2.0 * sn.atan2(s.w) / sn
 }
 
+/// `r / |r|` for a quaternion whose norm is 1 up to rounding: one Newton step of `1/√x` at
+/// 1 (relative error `3/8 ε²` for `|r|² = 1 + ε`), the exact division otherwise.
+#[inline(always)]
+fn renormalise(r: Quat<f64>) -> Quat<f64> {
+    let e = r.norm_squared() - 1.0;
+    if e.abs() < 1e-7 {
+        r * (1.0 - 0.5 * e)
+    } else {
+        r / r.norm()
+    }
+}
+
+/// [`apply_rotation`] without a square root or division for rotations below 2e-2 rad: the
+/// rotation `(1, θ/2)` scaled by the series of `1/√(1 + |θ|²/4)` (error below 1e-16), then
+/// [`renormalise`].
+#[inline(always)]
+fn apply_small_rotation(q: &mut Quat<f64>, theta: &Vec3<f64>) {
+    let a = 0.25 * theta.norm_squared();
+    if a >= 1e-4 {
+        return apply_rotation(q, theta);
+    }
+    let s = 1.0 - a * (0.5 - a * (0.375 - a * 0.3125));
+    let hs = 0.5 * s;
+    *q = renormalise(*q * Quat::new(s, hs * theta.x, hs * theta.y, hs * theta.z));
+}
+
+/// `1 / s_w` for a unit quaternion by the series of `(1 − |s_v|²)^(−1/2)` when `|s_v|² < 1e-4`
+/// (error below 1e-20), by division otherwise (and 1 when `s_w` is nearly zero).
+#[inline(always)]
+fn inv_w(s: &Quat<f64>) -> f64 {
+    let x2 = s.imag().norm_squared();
+    if x2 < 1e-4 && (s.w * s.w + x2 - 1.0).abs() < 1e-12 {
+        return 1.0 + x2 * (0.5 + x2 * (0.375 + x2 * (0.3125 + x2 * 0.2734375)));
+    }
+    if s.w.abs() > 1e-12 { 1.0 / s.w } else { 1.0 }
+}
+
 fn v64<T: Real>(v: &Vec3<T>) -> Vec3<f64> {
     Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64())
 }
 
 fn vt<T: Real>(v: &Vec3<f64>) -> Vec3<T> {
     Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z))
+}
+
+fn qt<T: Real>(q: &Quat<f64>) -> Quat<T> {
+    Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k))
+}
+
+/// Whether the rod's state is exactly the rounding of the scratch's `f64` state.
+fn shadow_matches<T: Real>(rod: &CpuRod<T>, w: &Work) -> bool {
+    let s = &rod.state;
+    s.positions.len() == w.x.len()
+        && s.frames.len() == w.q.len()
+        && (0..w.x.len())
+            .all(|i| vt::<T>(&w.x[i]) == s.positions[i] && vt::<T>(&w.v[i]) == s.velocities[i])
+        && (0..w.q.len()).all(|j| {
+            qt::<T>(&w.q[j]) == s.frames[j] && vt::<T>(&w.omega[j]) == s.angular_velocities[j]
+        })
 }
 
 impl Consts {
@@ -300,6 +364,7 @@ impl Consts {
             })
             .collect();
         self.inv_inertia = self.inertia.iter().map(|i| i.map(|x| 1.0 / x)).collect();
+        self.inv_inertia_own = self.inv_inertia.clone();
         if rod.ends[0].holds_frame() {
             self.inv_inertia[0] = Vec3::zeros();
         }
@@ -330,9 +395,10 @@ impl Consts {
 
 impl Work {
     fn resize(&mut self, n: usize) {
-        if self.q.len() == n {
+        if self.q.len() == n && self.x.len() == n + 1 {
             return;
         }
+        self.shadow = false;
         let z = Vec3::zeros();
         self.x = vec![z; n + 1];
         self.v = vec![z; n + 1];
@@ -452,11 +518,7 @@ impl Work {
         }
         for j in 0..n {
             let s = self.q[j].conjugate() * self.q_pred[j];
-            let to_target = if s.w.abs() > 1e-12 {
-                s.imag() * (2.0 / s.w)
-            } else {
-                s.imag() * 2.0
-            };
+            let to_target = s.imag() * (2.0 * inv_w(&s));
             self.u_th[j] = to_target + self.dtheta[j].component_mul(&self.inv_k[j]);
         }
         let mut worst: f64 = 0.0;
@@ -509,7 +571,7 @@ impl Work {
         }
         for j in 0..n {
             let th = self.u_th[j] + self.dtheta[j].component_mul(&self.inv_k[j]);
-            apply_rotation(&mut self.q[j], &th);
+            apply_small_rotation(&mut self.q[j], &th);
             for c in 0..6 {
                 self.lambda[j][c] += self.rhs[j][c];
             }
@@ -579,14 +641,19 @@ pub fn step_rod_stiff<T: Real>(
         report,
     } = scratch;
     w.resize(n);
-    for i in 0..=n {
-        w.x[i] = v64(&rod.state.positions[i]);
-        w.v[i] = v64(&rod.state.velocities[i]);
-    }
-    for j in 0..n {
-        let q = &rod.state.frames[j];
-        w.q[j] = Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64());
-        w.omega[j] = v64(&rod.state.angular_velocities[j]);
+    // Continue from the f64 state of the last step if the rod still holds its rounding (no
+    // one changed the state in between): rounding an f32 state at every step would leave a
+    // residual of the order of f32's resolution that the tolerance sees as unconverged.
+    if !(w.shadow && shadow_matches(rod, w)) {
+        for i in 0..=n {
+            w.x[i] = v64(&rod.state.positions[i]);
+            w.v[i] = v64(&rod.state.velocities[i]);
+        }
+        for j in 0..n {
+            let q = &rod.state.frames[j];
+            w.q[j] = Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64());
+            w.omega[j] = v64(&rod.state.angular_velocities[j]);
+        }
     }
     w.force.fill(Vec3::zeros());
     for load in &rod.loads {
@@ -634,10 +701,11 @@ pub fn step_rod_stiff<T: Real>(
         for j in 0..n {
             w.q_old[j] = w.q[j];
             let (o, inertia) = (w.omega[j], k.inertia[j]);
-            let gyro = o.cross(&inertia.component_mul(&o)).component_div(&inertia);
+            let gyro = o
+                .cross(&inertia.component_mul(&o))
+                .component_mul(&k.inv_inertia_own[j]);
             w.omega[j] = o - gyro * h;
-            let r = w.q[j] * exp_small(&(w.omega[j] * h));
-            w.q[j] = r / r.norm();
+            w.q[j] = renormalise(w.q[j] * exp_small(&(w.omega[j] * h)));
         }
         for (j, end) in held_frames {
             if end.holds_frame() {
@@ -767,10 +835,10 @@ pub fn step_rod_stiff<T: Real>(
         rod.state.velocities[i] = vt(&w.v[i]);
     }
     for j in 0..n {
-        let q = &w.q[j];
-        rod.state.frames[j] = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
+        rod.state.frames[j] = qt(&w.q[j]);
         rod.state.angular_velocities[j] = vt(&w.omega[j]);
     }
+    w.shadow = true;
     result.map(|()| stats)
 }
 
@@ -791,6 +859,21 @@ mod tests {
             assert!(
                 (rv - v).amax() < 1e-15 * (1.0 + a),
                 "log at {a}: {rv} vs {v}"
+            );
+            // The division-free forms used by the direct solver.
+            let q0 = exp_rotation(&Vec3::new(0.3, -1.2, 0.7));
+            let (mut fast, mut exact) = (q0, q0);
+            apply_small_rotation(&mut fast, &v);
+            apply_rotation(&mut exact, &v);
+            assert!(
+                (fast.coords - exact.coords).amax() < 1e-15,
+                "rotation at {a}"
+            );
+            assert!((fast.norm() - 1.0).abs() < 1e-15, "norm at {a}");
+            let s = q0.conjugate() * fast;
+            assert!(
+                (s.imag() * (2.0 * inv_w(&s)) - v).amax() < 1e-15 * (1.0 + a),
+                "inverse map at {a}"
             );
         }
     }
