@@ -43,9 +43,15 @@
 //!
 //! The solve always runs in `f64`, whatever the rod's precision; see `direct.rs` for why.
 //!
-//! Not supported here (yet): the internal damping coefficients `bend_damping` and
-//! `stretch_damping` of `RodParams` are ignored by this scheme (implicit Euler is itself
-//! dissipative, `docs/stiff-solver.md` quantifies it); drag is applied.
+//! **Internal damping** (`bend_damping`, `stretch_damping` of `RodParams`) enters the XPBD way
+//! (Macklin et al. 2016, eq. 26): each constraint row with compliance `α` gets the Rayleigh
+//! dissipation `½ β Ċ²` of the model's definition (`β = c_b l̄` on the bend–twist rows,
+//! `β = c_s l0` on the stretch row in extensible mode) and solves
+//! `C + α̃ λ + γ (C − C_n) = 0`, `γ = α β / h` (details in `Consts::rebuild`): implicit
+//! Euler of the elastic and damping forces. `damping_tests.rs` checks the decay of a
+//! cantilever's first bending mode and of a bar's first axial mode against the damped
+//! oscillator of the model's definition. The Gauss–Seidel variant ([`StiffScheme::GaussSeidel`])
+//! does not apply internal damping. Drag is applied to the solved velocities.
 
 pub mod constraints;
 mod direct;
@@ -168,6 +174,16 @@ pub(crate) struct Consts {
     inv_inertia_own: Vec<Vec3<f64>>,
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
+    /// Internal damping (Macklin et al. 2016, eq. 26) with `γ = α β / h` per constraint row
+    /// (`β` the damping of the constraint's rate, see [`Consts::rebuild`]): `γ / (1 + γ)`.
+    damp_gamma: Vec<Vec3<f64>>,
+    damp_omega: Vec<Vec3<f64>>,
+    /// The compliances of the (row-scaled) damped Newton system, `α̃ / (1 + γ)`; equal to
+    /// `alpha_gamma`, `alpha_omega` without damping.
+    alpha_gamma_matrix: Vec<Vec3<f64>>,
+    alpha_omega_matrix: Vec<Vec3<f64>>,
+    /// Whether any damping coefficient is positive.
+    damped: bool,
     key: Option<(usize, u64, bool, [EndKind; 2])>,
 }
 
@@ -196,6 +212,8 @@ pub(crate) struct Work {
     lambda_prev: Vec<[f64; 6]>,
     /// Whether every multiplier is zero (the first iteration of a step).
     lambda_zero: bool,
+    /// Constraint values `(Γ, Ω)` at the start of the step (for damping only).
+    c_old: Vec<[f64; 6]>,
     /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (in `f64`); the next
     /// step continues from them when the rod's state is still their rounding to its precision,
     /// so that an `f32` rod is not re-rounded between steps (see [`step_rod_stiff`]).
@@ -389,6 +407,51 @@ impl Consts {
                 Vec3::new(compliance(k.x, l), compliance(k.y, l), compliance(k.z, l))
             })
             .collect();
+        // Internal damping, the XPBD way (Macklin et al. 2016, eq. 26): a constraint `C` with
+        // compliance `α` and a Rayleigh dissipation `½ Ċᵀ β Ċ` solves
+        // `C + α̃ λ + γ (C − C_n) = 0` with `γ = α β / h`, `C_n` its value at the start of the
+        // step: implicit Euler of the elastic force plus the damping force `−Jᵀ β Ċ` with the
+        // rate `Ċ = (C − C_n)/h`. The model's dissipation (`cosserat_model::energy`) is
+        // `½ c_b |ω_b − ω_a|² / l̄` per node, and `Ω̇ = (ω_b − ω_a)/l̄` (body components) to first
+        // order in the relative rotation, so `β_Ω = c_b l̄` on all three rows and
+        // `γ = c_b / (K_k h)`; stretching (extensible mode only, as in the model) is
+        // `½ c_s l0 ε̇²` with `ε̇ = Γ̇₃` to first order in the shear, so `β = c_s l0` on the third
+        // row of `Γ` and `γ = c_s / (K_s h)`. The shear rows carry no damping (the model has
+        // none).
+        // Per row: (γ/(1 + γ), α̃/(1 + γ)) from α̃ and β, finite also for a row without
+        // stiffness (α̃ huge, γ infinite) or an exact constraint (α̃ = 0).
+        let damp = |alpha: f64, beta: f64| -> (f64, f64) {
+            if beta > 0.0 {
+                let g = alpha * h * beta;
+                let frac = if g.is_finite() { g / (1.0 + g) } else { 1.0 };
+                (frac, 1.0 / (1.0 / alpha + h * beta))
+            } else {
+                (0.0, alpha)
+            }
+        };
+        let (mut dg, mut ag) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for j in 0..n {
+            let beta = if extensible {
+                p.stretch_damping[j].to_f64() * self.l0[j]
+            } else {
+                0.0
+            };
+            let a = self.alpha_gamma[j];
+            let (f, m) = damp(a.z, beta);
+            dg.push(Vec3::new(0.0, 0.0, f));
+            ag.push(Vec3::new(a.x, a.y, m));
+        }
+        let (mut dw, mut aw) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for j in 0..n.saturating_sub(1) {
+            let beta = p.bend_damping[j].to_f64() * self.lbar[j];
+            let a = self.alpha_omega[j];
+            let r = [damp(a.x, beta), damp(a.y, beta), damp(a.z, beta)];
+            dw.push(Vec3::new(r[0].0, r[1].0, r[2].0));
+            aw.push(Vec3::new(r[0].1, r[1].1, r[2].1));
+        }
+        self.damped = dg.iter().chain(&dw).any(|d| d.amax() > 0.0);
+        (self.damp_gamma, self.alpha_gamma_matrix) = (dg, ag);
+        (self.damp_omega, self.alpha_omega_matrix) = (dw, aw);
         self.key = Some(key);
     }
 }
@@ -416,6 +479,7 @@ impl Work {
         self.lambda_prev = vec![[0.0; 6]; n];
         self.inv_k = vec![z; n];
         self.rhs = vec![[0.0; 6]; n];
+        self.c_old = vec![[0.0; 6]; n];
         let m = nalgebra::Matrix3::zeros();
         self.ss = vec![
             StretchShear {
@@ -521,30 +585,42 @@ impl Work {
             let to_target = s.imag() * (2.0 * inv_w(&s));
             self.u_th[j] = to_target + self.dtheta[j].component_mul(&self.inv_k[j]);
         }
+        // One pass per element; the largest residual per element first, so that the running
+        // maximum is one dependent operation per element.
         let mut worst: f64 = 0.0;
         for j in 0..n {
             let s = &self.ss[j];
             let ju = s.d_rb * (self.u_x[j + 1] - self.u_x[j]) + s.d_theta * self.u_th[j];
-            let (lam, a) = (&self.lambda[j], &k.alpha_gamma[j]);
+            let (lam, a) = (&self.lambda[j], &k.alpha_gamma_matrix[j]);
             let r = &mut self.rhs[j];
+            let mut local: f64 = 0.0;
             for c in 0..3 {
-                let res = s.value[c] + a[c] * lam[c];
+                let mut res = s.value[c] + a[c] * lam[c];
+                if k.damped {
+                    // (C + α̃λ + γ (C − C_n)) / (1 + γ) = C + α̃λ/(1 + γ) − γ/(1 + γ) C_n: the
+                    // damped residual, its rows scaled as the Newton matrix's (see
+                    // `Consts::rebuild`).
+                    res -= k.damp_gamma[j][c] * self.c_old[j][c];
+                }
                 r[c] = -(res + ju[c]);
-                worst = worst.max(res.abs()).max(ju[c].abs());
+                local = local.max(res.abs()).max(ju[c].abs());
             }
-        }
-        for j in 0..n.saturating_sub(1) {
-            let b = &self.bt[j];
-            let ju = b.d_theta_a * self.u_th[j] + b.d_theta_b * self.u_th[j + 1];
-            let (lam, a) = (&self.lambda[j], &k.alpha_omega[j]);
-            let r = &mut self.rhs[j];
-            for c in 0..3 {
-                let res = b.value[c] + a[c] * lam[3 + c];
-                r[3 + c] = -(res + ju[c]);
-                worst = worst
-                    .max(res.abs() * k.lbar[j])
-                    .max(ju[c].abs() * k.lbar[j]);
+            if j + 1 < n {
+                let b = &self.bt[j];
+                let ju = b.d_theta_a * self.u_th[j] + b.d_theta_b * self.u_th[j + 1];
+                let a = &k.alpha_omega_matrix[j];
+                let mut bend: f64 = 0.0;
+                for c in 0..3 {
+                    let mut res = b.value[c] + a[c] * lam[3 + c];
+                    if k.damped {
+                        res -= k.damp_omega[j][c] * self.c_old[j][3 + c];
+                    }
+                    r[3 + c] = -(res + ju[c]);
+                    bend = bend.max(res.abs()).max(ju[c].abs());
+                }
+                local = local.max(bend * k.lbar[j]);
             }
+            worst = worst.max(local);
         }
         if n > 0 {
             self.rhs[n - 1][3..].fill(0.0);
@@ -616,8 +692,8 @@ fn add_jt(
 /// Uses `rod.state`, `rod.params`, `rod.ends` and `rod.loads` exactly as
 /// [`step_rod_batch`](crate::step_rod_batch) does; `settings.iterations` and
 /// `settings.ordering` are the explicit scheme's and are ignored. `rod.state` is up to date when
-/// this returns, also after a divergence. Bend and stretch damping coefficients are not applied
-/// (see the module docs).
+/// this returns, also after a divergence. Bend and stretch damping are applied by the direct
+/// solver (see the module docs).
 pub fn step_rod_stiff<T: Real>(
     rod: &mut CpuRod<T>,
     settings: &SolverSettings<T>,
@@ -673,6 +749,18 @@ pub fn step_rod_stiff<T: Real>(
         let t = time + step as f64 * h;
         // 1. Prediction: inertial targets x̃, q̃, and the starting guess of the iteration.
         let direct = stiff.scheme == StiffScheme::Direct;
+        if k.damped {
+            // The constraints at the start of the step, for the damping's rate `(C − C_n)/h`.
+            for j in 0..n {
+                let c = &mut w.c_old[j];
+                let g = stretch_shear(&w.x[j], &w.x[j + 1], &w.q[j], k.l0[j]).value;
+                c[..3].copy_from_slice(g.as_slice());
+                if j + 1 < n {
+                    let o = bend_twist(&w.q[j], &w.q[j + 1], &k.rest_u[j], k.lbar[j]).value;
+                    c[3..].copy_from_slice(o.as_slice());
+                }
+            }
+        }
         for i in 0..=n {
             w.x_old[i] = w.x[i];
             // The direct solver starts where the velocities alone lead (the full Newton system
@@ -755,8 +843,8 @@ pub fn step_rod_stiff<T: Real>(
                         let m = Masses {
                             inv_mass: &k.inv_mass,
                             inv_inertia: &w.inv_k,
-                            alpha_gamma: &k.alpha_gamma,
-                            alpha_omega: &k.alpha_omega,
+                            alpha_gamma: &k.alpha_gamma_matrix,
+                            alpha_omega: &k.alpha_omega_matrix,
                         };
                         factor.factor(&w.ss, &w.bt, &m);
                         *factor_valid = true;
@@ -878,3 +966,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod damping_tests;
