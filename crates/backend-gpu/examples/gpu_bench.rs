@@ -213,10 +213,17 @@ fn measure(
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(out_path) = args.get(1).filter(|a| !a.starts_with("--")).cloned() else {
-        eprintln!("usage: gpu_bench OUT.json [--quick]");
+        eprintln!("usage: gpu_bench OUT.json [--quick | --focus]");
         std::process::exit(2);
     };
     let quick = args.iter().any(|a| a == "--quick");
+    if args.iter().any(|a| a == "--focus") {
+        let doc = focus_section();
+        std::fs::write(&out_path, serde_json::to_string_pretty(&doc).expect("json"))
+            .expect("write output");
+        eprintln!("wrote {out_path}");
+        return;
+    }
     let (sizes, ks, rod_counts, rod_sizes): (Vec<usize>, Vec<u32>, Vec<usize>, Vec<usize>) =
         if quick {
             (vec![128, 1000], vec![1, 10], vec![1, 10], vec![64])
@@ -632,4 +639,274 @@ fn variant_section(quick: bool) -> Vec<Value> {
         }
     }
     out
+}
+
+/// The multi-workgroup window shapes and the host readback side by side at 1000 elements (and
+/// a few checks at other sizes): the exploration behind the planner's defaults (`--focus`).
+fn focus_section() -> Value {
+    let base = KernelVariant::default();
+    let fast = |v: KernelVariant| KernelVariant {
+        neighbour_sync: true,
+        register_constants: true,
+        fast_impulse: true,
+        ..v
+    };
+    // (label, elements, rods, path, variant)
+    type Case = (String, usize, usize, KernelPath, KernelVariant);
+    let mut cases: Vec<Case> = Vec::new();
+    let multi = KernelPath::MultiWorkgroup;
+    // Window shapes: (threads, points per thread, shuffle) and steps per exchange.
+    let shapes: [(u32, u32, bool, &[u32]); 6] = [
+        (128, 2, false, &[1, 2, 3, 4]),
+        (96, 2, false, &[1, 2, 3]),
+        (64, 2, false, &[1, 2]),
+        (32, 4, true, &[1, 2]),
+        (32, 6, true, &[1, 2, 3]),
+        (32, 8, true, &[2, 3]),
+    ];
+    for (threads, ept, shuffle, xss) in shapes {
+        for &xs in xss {
+            let v = KernelVariant {
+                multi_threads: threads,
+                multi_points_per_thread: ept,
+                shuffle_windows: shuffle,
+                exchange_steps: xs,
+                ..base.clone()
+            };
+            let name = format!(
+                "{threads}{} x {ept}, {xs} steps/exchange",
+                if shuffle { " (shuffle)" } else { "" }
+            );
+            cases.push((name.clone(), 1000, 1, multi, v.clone()));
+            cases.push((format!("{name}, nbr+regc+fast"), 1000, 1, multi, fast(v)));
+        }
+    }
+    // One factor at a time on two shapes.
+    for (threads, xs) in [(128u32, 2u32), (96, 2)] {
+        let v = KernelVariant {
+            multi_threads: threads,
+            multi_points_per_thread: 2,
+            exchange_steps: xs,
+            ..base.clone()
+        };
+        for (what, w) in [
+            (
+                "nbr",
+                KernelVariant {
+                    neighbour_sync: true,
+                    ..v.clone()
+                },
+            ),
+            (
+                "regc",
+                KernelVariant {
+                    register_constants: true,
+                    ..v.clone()
+                },
+            ),
+            (
+                "fast",
+                KernelVariant {
+                    fast_impulse: true,
+                    ..v.clone()
+                },
+            ),
+            (
+                "regc+fast",
+                KernelVariant {
+                    register_constants: true,
+                    fast_impulse: true,
+                    ..v.clone()
+                },
+            ),
+        ] {
+            cases.push((
+                format!("{threads} x 2, {xs} steps/exchange, {what}"),
+                1000,
+                1,
+                multi,
+                w,
+            ));
+        }
+    }
+    // Single workgroup and subgroup layouts with the register / impulse variants.
+    let workgroup = KernelVariant {
+        subgroups: false,
+        ..base.clone()
+    };
+    for (n, count, v, name) in [
+        (1000usize, 1usize, workgroup.clone(), "single workgroup"),
+        (128, 1, workgroup.clone(), "single workgroup"),
+        (128, 10_000, base.clone(), "subgroup layout"),
+    ] {
+        cases.push((
+            name.to_string(),
+            n,
+            count,
+            KernelPath::SingleWorkgroup,
+            v.clone(),
+        ));
+        cases.push((
+            format!("{name}, regc+fast"),
+            n,
+            count,
+            KernelPath::SingleWorkgroup,
+            KernelVariant {
+                register_constants: true,
+                fast_impulse: true,
+                ..v
+            },
+        ));
+    }
+    // Long rods: the co-residency limit lowers the steps per exchange where needed.
+    for n in [4096usize, 16384] {
+        for (threads, xs) in [(128u32, 1u32), (128, 2), (128, 3), (96, 2)] {
+            let v = KernelVariant {
+                multi_threads: threads,
+                multi_points_per_thread: 2,
+                exchange_steps: xs,
+                ..base.clone()
+            };
+            cases.push((
+                format!("{threads} x 2, {xs} steps/exchange"),
+                n,
+                1,
+                multi,
+                v.clone(),
+            ));
+            cases.push((
+                format!("{threads} x 2, {xs} steps/exchange, nbr+regc+fast"),
+                n,
+                1,
+                multi,
+                fast(v),
+            ));
+        }
+    }
+    println!("| variant | elements | rods | GPU µs/step | kernel | discrepancy |");
+    println!("|---|---|---|---|---|---|");
+    let mut rows = Vec::new();
+    type CpuRun = ((usize, usize), Vec<Vec<Vec3<f32>>>);
+    let mut cpu_cache: Vec<CpuRun> = Vec::new();
+    for (name, n, count, path, variant) in cases {
+        let rods: Vec<GpuRodInput> = (0..count)
+            .map(|i| pendulum(n, i as f64 * 2.399963))
+            .collect();
+        if !cpu_cache.iter().any(|(key, _)| *key == (n, count)) {
+            cpu_cache.push(((n, count), cpu_positions(&rods, CHECK_STEPS)));
+            if cpu_cache.len() > 2 {
+                cpu_cache.remove(0);
+            }
+        }
+        let cpu = &cpu_cache
+            .iter()
+            .find(|(key, _)| *key == (n, count))
+            .expect("cached")
+            .1;
+        // Twice, to see the spread.
+        let mut times = Vec::new();
+        let mut last = None;
+        for _ in 0..2 {
+            match measure(&rods, cpu, path, 100, 2000, 256, &variant, false) {
+                Ok(m) => {
+                    times.push(m.gpu_us_per_step.unwrap_or(f64::NAN));
+                    last = Some(Ok(m));
+                }
+                Err(e) => {
+                    last = Some(Err(e));
+                    break;
+                }
+            }
+        }
+        let row = match last.expect("measured") {
+            Ok(m) => {
+                let t = times.iter().copied().fold(f64::INFINITY, f64::min);
+                let spread = times.iter().copied().fold(0.0, f64::max) - t;
+                println!(
+                    "| {name} | {n} | {count} | {t:.2} (±{spread:.2}) | {} | {:.1e}{} |",
+                    m.kernel,
+                    m.agreement,
+                    if m.pass { "" } else { " FAIL" }
+                );
+                json!({"variant": name, "elements": n, "rods": count, "kernel": m.kernel,
+                       "gpu_us_per_step": times, "cpu_discrepancy_rel": m.agreement, "cpu_agreement_pass": m.pass})
+            }
+            Err(e) => {
+                println!("| {name} | {n} | {count} | error: {e} | | |");
+                json!({"variant": name, "elements": n, "rods": count, "error": e.to_string()})
+            }
+        };
+        rows.push(row);
+    }
+    json!({"focus": rows, "host": host_section()})
+}
+
+/// A single step including readback, host-visible, by way of waiting and submitting.
+fn host_section() -> Value {
+    println!(
+        "\n| path | elements | wait | submission | median µs | min µs | p90 µs | step() µs | GPU µs |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut rows = Vec::new();
+    for n in [1000usize, 128] {
+        let rods = vec![pendulum(n, 0.0)];
+        for path in [
+            KernelPath::SingleWorkgroup,
+            KernelPath::MultiWorkgroup,
+            KernelPath::DispatchPerStep,
+        ] {
+            for (spin, combined) in [(0u32, false), (2000, false), (2000, true), (0, true)] {
+                let opts = GpuOptions {
+                    path,
+                    spin_wait_us: spin,
+                    ..GpuOptions::default()
+                };
+                let Ok(mut sim) = GpuSimulation::with_variant(
+                    rods.clone(),
+                    &settings(),
+                    opts,
+                    KernelVariant::default(),
+                ) else {
+                    continue;
+                };
+                let mut total = Vec::new();
+                let mut submit = Vec::new();
+                for i in 0..260 {
+                    let t = Instant::now();
+                    if combined {
+                        sim.step_and_request(1).expect("submit");
+                    } else {
+                        sim.step(1).expect("submit");
+                    }
+                    let ts = t.elapsed().as_secs_f64() * 1e6;
+                    sim.read_positions().expect("read");
+                    if i >= 10 {
+                        total.push(t.elapsed().as_secs_f64() * 1e6);
+                        submit.push(ts);
+                    }
+                }
+                total.sort_by(f64::total_cmp);
+                let (med, min, p90) = (
+                    total[total.len() / 2],
+                    total[0],
+                    total[total.len() * 9 / 10],
+                );
+                let sub = median(submit);
+                let wait = if spin > 0 { "spin" } else { "block" };
+                let how = if combined {
+                    "step_and_request"
+                } else {
+                    "step + request"
+                };
+                println!(
+                    "| {path} | {n} | {wait} | {how} | {med:.1} | {min:.1} | {p90:.1} | {sub:.1} | |"
+                );
+                rows.push(
+                    json!({"path": path.to_string(), "elements": n, "wait": wait, "submission": how,
+                    "median_us": med, "min_us": min, "p90_us": p90, "step_call_us": sub}),
+                );
+            }
+        }
+    }
+    Value::Array(rows)
 }

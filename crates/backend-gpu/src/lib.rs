@@ -99,6 +99,12 @@ pub struct GpuOptions {
     /// (lavapipe), which silently stop a shader's loops after 65 535 iterations in total, the
     /// backend lowers it further so that no dispatch reaches that cap.
     pub max_steps_per_dispatch: u32,
+    /// How long a read ([`GpuSimulation::read_positions`] and the other blocking reads) polls
+    /// the device in a busy loop before it falls back to a blocking wait, in microseconds. A
+    /// blocking wait sleeps in the driver and wakes up tens of microseconds after the GPU has
+    /// finished; polling returns as soon as the copy is done, at the price of one busy CPU
+    /// core while it waits. 0 always blocks.
+    pub spin_wait_us: u32,
 }
 
 impl Default for GpuOptions {
@@ -110,6 +116,7 @@ impl Default for GpuOptions {
             spin_cap: 1 << 20,
             max_threads: 256,
             max_steps_per_dispatch: 10_000,
+            spin_wait_us: 2_000,
         }
     }
 }
@@ -144,6 +151,26 @@ pub struct KernelVariant {
     /// repeat costs less than the extra latency of wider ones (H200, 1000 elements: 5.5 µs/step
     /// with 128 threads against 6.4 with 256).
     pub multi_threads: u32,
+    /// Points per thread of the multi-workgroup windows; 0 picks the fewest (even) that leave
+    /// each window owning at least two halos and 64 points.
+    pub multi_points_per_thread: u32,
+    /// Steps between halo exchanges of the multi-workgroup paths (the dispatch-per-step path
+    /// then runs this many steps per dispatch). The halo grows to cover them,
+    /// `exchange_steps · (2 · iterations + 1) + 3` points, and the grid barrier is paid once
+    /// per exchange. Lowered where the windows would not all be co-resident.
+    pub exchange_steps: u32,
+    /// Multi-workgroup path: each workgroup waits only for its two neighbours' flags instead of
+    /// a grid-wide arrival counter.
+    pub neighbour_sync: bool,
+    /// Multi-workgroup windows of one subgroup (threads = the adapter's subgroup size) whose
+    /// threads exchange their boundary points by subgroup shuffles instead of workgroup memory.
+    pub shuffle_windows: bool,
+    /// Keep the per-point and per-element parameters in registers for the whole dispatch
+    /// instead of reading them from storage in every step.
+    pub register_constants: bool,
+    /// Constraint impulse from one `inverseSqrt` with the per-constraint factors
+    /// `w / (w_a + w_b) / h` kept in registers (fewer dependent operations per sweep).
+    pub fast_impulse: bool,
 }
 
 impl Default for KernelVariant {
@@ -157,6 +184,12 @@ impl Default for KernelVariant {
             rods_per_workgroup: 4,
             subgroup_points_per_thread: 8,
             multi_threads: 128,
+            multi_points_per_thread: 0,
+            exchange_steps: 1,
+            neighbour_sync: false,
+            shuffle_windows: false,
+            register_constants: false,
+            fast_impulse: false,
         }
     }
 }

@@ -22,7 +22,7 @@ pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 8] = [
+pub(crate) const FLAGS: [&str; 9] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -31,11 +31,21 @@ pub(crate) const FLAGS: [&str; 8] = [
     "GRID",
     "PERSTEP",
     "SUBGROUP",
+    "SHFL",
 ];
 
-/// Measurement-only flags of `rod_step.wgsl` (see [`crate::KernelVariant`]); inextensible only.
+/// Flags of `rod_step.wgsl` chosen by [`crate::KernelVariant`], each validated with every scene
+/// and path combination (`FAST` and the measurement-only `SWEEP_LOADS` / `RSQRT`: inextensible
+/// only; `NBR_SYNC`: with `GRID` only).
 #[cfg(test)]
-pub(crate) const VARIANT_FLAGS: [&str; 2] = ["SWEEP_LOADS", "RSQRT"];
+pub(crate) const VARIANT_FLAGS: [&[&str]; 6] = [
+    &["SWEEP_LOADS"],
+    &["RSQRT"],
+    &["FAST"],
+    &["REGC"],
+    &["FAST", "REGC"],
+    &["FAST", "REGC", "NBR_SYNC"],
+];
 
 /// Compile-time shape and feature set of one step kernel.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -48,6 +58,8 @@ pub(crate) struct KernelConfig {
     pub(crate) iterations: u32,
     /// Halo width in points of the multi-workgroup paths (0 when unused).
     pub(crate) halo: u32,
+    /// Steps between halo exchanges of the multi-workgroup paths (1 otherwise).
+    pub(crate) exchange_steps: u32,
     /// Iteration cap of the grid barrier's spin loop.
     pub(crate) spin_cap: u32,
     /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
@@ -69,11 +81,12 @@ impl KernelConfig {
         // naga 30 takes subgroup built-ins without (and rejects) `enable subgroups;`; the device
         // must have been created with `Features::SUBGROUP`.
         let prelude = format!(
-            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\n",
+            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst XS: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\n",
             self.threads,
             self.per_thread,
             self.iterations,
             self.halo,
+            self.exchange_steps.max(1),
             self.spin_cap,
             self.group.max(1)
         );
@@ -296,6 +309,7 @@ mod tests {
             per_thread: 4,
             iterations: 10,
             halo: 0,
+            exchange_steps: 1,
             spin_cap: 1,
             group: 1,
             unroll: true,
@@ -320,6 +334,7 @@ mod tests {
             per_thread: 2,
             iterations: 10,
             halo: 0,
+            exchange_steps: 1,
             spin_cap: 1,
             group: 1,
             unroll: true,
@@ -346,7 +361,7 @@ mod tests {
         // The subgroup kernel has no workgroup barrier and no workgroup memory at all.
         let cfg = KernelConfig {
             group: 32,
-            flags: vec!["BEND_DAMP", "SUBGROUP"],
+            flags: vec!["BEND_DAMP", "SUBGROUP", "SHFL"],
             ..cfg
         };
         let src = cfg.source();
@@ -417,29 +432,39 @@ mod tests {
                 // Combinations the host never composes.
                 if (has("STRETCH_DAMP") && !has("EXTENSIBLE"))
                     || (has("GRID") && has("PERSTEP"))
-                    || (has("SUBGROUP") && (has("GRID") || has("PERSTEP")))
+                    || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
+                    || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
                 {
                     continue;
                 }
-                // The measurement variants, with every inextensible scene/path combination.
+                // The variant flags, with every scene/path combination they can meet.
                 let mut variants = vec![flags.clone()];
-                if !has("EXTENSIBLE") {
-                    for v in VARIANT_FLAGS {
-                        let mut f = flags.clone();
-                        f.push(v);
-                        variants.push(f);
-                    }
-                }
-                for flags in variants {
-                    let group = if has("SUBGROUP") { 32 } else { 1 };
-                    for (threads, per_thread, unroll) in
-                        [(32, 2, true), (256, 4, true), (64, 6, false)]
+                for v in VARIANT_FLAGS {
+                    let inextensible_only = v.iter().any(|f| *f != "REGC");
+                    if (inextensible_only && has("EXTENSIBLE"))
+                        || (v.contains(&"NBR_SYNC") && !has("GRID"))
                     {
+                        continue;
+                    }
+                    let mut f = flags.clone();
+                    f.extend_from_slice(v);
+                    variants.push(f);
+                }
+                for (v, flags) in variants.into_iter().enumerate() {
+                    let group = if has("SUBGROUP") { 32 } else { 1 };
+                    // Every shape for the scene's own flags, one for each variant on top.
+                    let shapes: &[(u32, u32, bool)] = if v == 0 {
+                        &[(32, 2, true), (256, 4, true), (64, 6, false)]
+                    } else {
+                        &[(32, 2, true)]
+                    };
+                    for &(threads, per_thread, unroll) in shapes {
                         let cfg = KernelConfig {
                             threads,
                             per_thread,
                             iterations: 10,
                             halo: 24,
+                            exchange_steps: 2,
                             spin_cap: 1024,
                             group,
                             unroll,

@@ -15,8 +15,9 @@ use crate::{
 };
 use bytemuck::{Pod, Zeroable};
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -113,6 +114,8 @@ struct StateBuffers {
 struct Pending {
     staging: usize,
     submission: wgpu::SubmissionIndex,
+    /// Set by the map callback.
+    mapped: Arc<AtomicBool>,
 }
 
 /// Rods stepped on the GPU. See the crate docs for the kernel paths.
@@ -144,6 +147,7 @@ pub struct GpuSimulation {
     gpu_time_pending: Vec<wgpu::Buffer>,
     timestamp_period_ns: f64,
     error: Arc<Mutex<Option<String>>>,
+    spin_wait: Duration,
 }
 
 fn round_up(x: u32, m: u32) -> u32 {
@@ -301,6 +305,7 @@ impl GpuSimulation {
             &adapter_summary,
             &limits,
         )?;
+        let spin_wait = Duration::from_micros(options.spin_wait_us as u64);
         Self::build(
             device,
             queue,
@@ -311,6 +316,7 @@ impl GpuSimulation {
             want_ts,
             error,
             &limits,
+            spin_wait,
         )
     }
 
@@ -325,6 +331,7 @@ impl GpuSimulation {
         want_ts: bool,
         error: Arc<Mutex<Option<String>>>,
         limits: &wgpu::Limits,
+        spin_wait: Duration,
     ) -> Result<Self, GpuError> {
         use wgpu::util::DeviceExt;
         let dt = settings.dt as f64;
@@ -454,7 +461,9 @@ impl GpuSimulation {
         }
         let n_items = plan.items.len();
         let status_buf = init("status", &vec![0u8; 16 * n_items], storage);
-        let sync_buf = grid.then(|| init("grid sync", &[0u8; 16], storage));
+        // Word 0: the grid-wide arrival counter; words 1..: per-item flags (NBR_SYNC).
+        let sync_bytes = (4 * (1 + n_items)).div_ceil(16) * 16;
+        let sync_buf = grid.then(|| init("grid sync", &vec![0u8; sync_bytes], storage));
         let xch_words = 2 * n_items * 2 * plan.cfg.halo as usize * 16;
         let xch_buf = grid.then(|| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -700,6 +709,7 @@ impl GpuSimulation {
             gpu_time_pending: Vec::new(),
             timestamp_period_ns,
             error,
+            spin_wait,
         })
     }
 
@@ -727,13 +737,18 @@ impl GpuSimulation {
             String::new()
         };
         format!(
-            "{} kernel: {} workgroups x {} threads{layout} x {} points/thread{}, halo {}, <= {} steps/dispatch, terms [{}]",
+            "{} kernel: {} workgroups x {} threads{layout} x {} points/thread{}, halo {}{}, <= {} steps/dispatch, terms [{}]",
             self.plan.path,
             self.plan.workgroups,
             c.threads,
             c.per_thread,
             if c.unroll { "" } else { " (loops)" },
             c.halo,
+            if c.exchange_steps > 1 {
+                format!(" (exchange every {} steps)", c.exchange_steps)
+            } else {
+                String::new()
+            },
             self.plan.steps_per_dispatch,
             c.flags.join(", ")
         )
@@ -809,7 +824,24 @@ impl GpuSimulation {
     /// they are reported by the next read ([`Self::read_positions`], [`Self::read_state`],
     /// [`Self::check`]).
     pub fn step(&mut self, k: u32) -> Result<(), GpuError> {
+        self.submit_steps(k, false)
+    }
+
+    /// [`Self::step`] followed by [`Self::request_positions`], recorded into one submission:
+    /// a haptic loop's batch with its readback costs one submit instead of two. Read the
+    /// result with [`Self::read_positions`].
+    pub fn step_and_request(&mut self, k: u32) -> Result<(), GpuError> {
+        if k == 0 {
+            return self.request_positions();
+        }
+        self.submit_steps(k, true)
+    }
+
+    fn submit_steps(&mut self, k: u32, readback: bool) -> Result<(), GpuError> {
         self.take_wgpu_error()?;
+        if readback {
+            self.readback_slot()?;
+        }
         if k == 0 {
             return Ok(());
         }
@@ -823,8 +855,9 @@ impl GpuSimulation {
                 .write_buffer(&self.drives_buf, 0, bytemuck::cast_slice(&self.drives));
             self.drives_dirty = false;
         }
+        let xs = self.plan.cfg.exchange_steps.max(1);
         let spd = if self.plan.path == KernelPath::DispatchPerStep {
-            1
+            xs
         } else {
             self.plan.steps_per_dispatch
         };
@@ -835,12 +868,17 @@ impl GpuSimulation {
             let dispatches = this.div_ceil(spd);
             if self.table_key != Some((this, spd)) {
                 let mut table = vec![0u8; (self.table_stride * dispatches as u64) as usize];
+                // Halo exchanges before each dispatch (a dispatch of c steps exchanges at
+                // steps xs, 2 xs, … < c; grid barrier targets count from the submission).
+                let mut exchanges = 0u32;
                 for d in 0..dispatches {
                     let off = d * spd;
                     let count = spd.min(this - off);
                     let at = (self.table_stride * d as u64) as usize;
                     table[at..at + 4].copy_from_slice(&off.to_le_bytes());
                     table[at + 4..at + 8].copy_from_slice(&count.to_le_bytes());
+                    table[at + 8..at + 12].copy_from_slice(&exchanges.to_le_bytes());
+                    exchanges += (count - 1) / xs;
                 }
                 self.queue.write_buffer(&self.table_buf, 0, &table);
                 self.table_key = Some((this, spd));
@@ -902,7 +940,15 @@ impl GpuSimulation {
                 enc.copy_buffer_to_buffer(resolve, 0, &read, 0, 16);
                 self.gpu_time_pending.push(read);
             }
-            self.queue.submit([enc.finish()]);
+            let last = remaining == this as u64;
+            if readback && last {
+                let slot = self.readback_slot()?;
+                self.encode_readback(&mut enc, slot);
+                let submission = self.queue.submit([enc.finish()]);
+                self.map_readback(slot, submission);
+            } else {
+                self.queue.submit([enc.finish()]);
+            }
             self.steps += this as u64;
             remaining -= this as u64;
         }
@@ -913,22 +959,34 @@ impl GpuSimulation {
     /// without waiting. At most two requests may be outstanding; [`Self::read_positions`]
     /// returns the oldest.
     pub fn request_positions(&mut self) -> Result<(), GpuError> {
-        if self.pending.len() >= 2 {
-            return Err(GpuError::InvalidInput(
-                "two position reads are already pending; read one first".into(),
-            ));
-        }
-        let slot = match self.pending.front() {
-            Some(p) => 1 - p.staging,
-            None => 0,
-        };
-        let staging = &self.staging[slot];
-        let pos_bytes = 16 * self.slots;
+        let slot = self.readback_slot()?;
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("readback"),
             });
+        self.encode_readback(&mut enc, slot);
+        let submission = self.queue.submit([enc.finish()]);
+        self.map_readback(slot, submission);
+        Ok(())
+    }
+
+    /// The staging buffer the next position request uses.
+    fn readback_slot(&self) -> Result<usize, GpuError> {
+        if self.pending.len() >= 2 {
+            return Err(GpuError::InvalidInput(
+                "two position reads are already pending; read one first".into(),
+            ));
+        }
+        Ok(match self.pending.front() {
+            Some(p) => 1 - p.staging,
+            None => 0,
+        })
+    }
+
+    fn encode_readback(&self, enc: &mut wgpu::CommandEncoder, slot: usize) {
+        let staging = &self.staging[slot];
+        let pos_bytes = 16 * self.slots;
         enc.copy_buffer_to_buffer(&self.states[self.current].pos, 0, staging, 0, pos_bytes);
         enc.copy_buffer_to_buffer(
             &self.status_buf,
@@ -937,13 +995,44 @@ impl GpuSimulation {
             pos_bytes,
             16 * self.plan.items.len() as u64,
         );
-        let submission = self.queue.submit([enc.finish()]);
-        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+    }
+
+    fn map_readback(&mut self, slot: usize, submission: wgpu::SubmissionIndex) {
+        let mapped = Arc::new(AtomicBool::new(false));
+        let flag = mapped.clone();
+        self.staging[slot].map_async(wgpu::MapMode::Read, .., move |_| {
+            flag.store(true, AtomicOrdering::Release);
+        });
         self.pending.push_back(Pending {
             staging: slot,
             submission,
+            mapped,
         });
-        Ok(())
+    }
+
+    /// Waits until `mapped` is set by its map callback: first by polling the device in a busy
+    /// loop for up to [`GpuOptions::spin_wait_us`], then blocking on `submission`.
+    fn wait_mapped(
+        &self,
+        submission: wgpu::SubmissionIndex,
+        mapped: &AtomicBool,
+    ) -> Result<(), GpuError> {
+        if !self.spin_wait.is_zero() {
+            let start = Instant::now();
+            loop {
+                self.device
+                    .poll(wgpu::PollType::Poll)
+                    .map_err(|e| GpuError::Wgpu(format!("polling the GPU: {e}")))?;
+                if mapped.load(AtomicOrdering::Acquire) {
+                    return self.take_wgpu_error();
+                }
+                if start.elapsed() >= self.spin_wait {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+        }
+        self.wait(submission)
     }
 
     fn wait(&self, submission: wgpu::SubmissionIndex) -> Result<(), GpuError> {
@@ -968,7 +1057,7 @@ impl GpuSimulation {
         let Some(p) = self.pending.pop_front() else {
             unreachable!("a request was just made")
         };
-        self.wait(p.submission)?;
+        self.wait_mapped(p.submission, &p.mapped)?;
         let staging = &self.staging[p.staging];
         let (positions, status) = {
             let view = staging
@@ -1048,8 +1137,12 @@ impl GpuSimulation {
             });
         enc.copy_buffer_to_buffer(buf, 0, &staging, 0, size);
         let submission = self.queue.submit([enc.finish()]);
-        staging.map_async(wgpu::MapMode::Read, .., |_| {});
-        self.wait(submission)?;
+        let mapped = Arc::new(AtomicBool::new(false));
+        let flag = mapped.clone();
+        staging.map_async(wgpu::MapMode::Read, .., move |_| {
+            flag.store(true, AtomicOrdering::Release);
+        });
+        self.wait_mapped(submission, &mapped)?;
         let bytes = staging
             .get_mapped_range(..)
             .map_err(|e| GpuError::Wgpu(format!("mapping a readback: {e}")))?
@@ -1247,16 +1340,52 @@ fn make_plan(
         .filter(|_| variant.subgroups && rods.len() as u32 >= variant.subgroup_min_rods)
         .map(|sg| (sg, round_up(points.div_ceil(sg), 2).max(2)))
         .filter(|&(_, ept)| ept <= variant.subgroup_points_per_thread.max(2));
-    let halo = round_up(2 * iterations + 4, 2);
-    // Chunks for the two multi-workgroup paths: owned points per workgroup at least 2 halos.
-    let multi_threads = (max_threads.min(variant.multi_threads) / 32 * 32).max(32);
-    let multi_ept = (1..=8)
-        .map(|k| 2 * k)
-        .find(|&e| multi_threads * e >= 4 * halo + 64)
-        .unwrap_or(16);
-    let chunk = (multi_threads * multi_ept - 2 * halo) / 2 * 2;
+    // Windows of the two multi-workgroup paths. Information travels `2 · iterations + 1` points
+    // per step (forces 1, each half-sweep 1), so a window whose halo is wider than that times
+    // the steps between exchanges computes its owned points exactly as the whole rod would.
+    let reach = 2 * iterations + 1;
+    let halo_for = |xs: u32| round_up(xs * reach + 3, 2);
+    // Shuffle windows are one subgroup wide (NVIDIA 32, lavapipe 8).
+    let shuffle_sg = adapter
+        .subgroup_size
+        .filter(|&sg| variant.shuffle_windows && sg <= max_threads);
+    let multi_threads = match shuffle_sg {
+        Some(sg) => sg,
+        None => (max_threads.min(variant.multi_threads) / 32 * 32).max(32),
+    };
+    // (points per thread, halo, owned points per window) for `xs` steps between exchanges.
+    let multi_shape = |xs: u32| -> (u32, u32, u32) {
+        let halo = halo_for(xs);
+        let ept = if variant.multi_points_per_thread > 0 {
+            round_up(variant.multi_points_per_thread, 2)
+        } else {
+            (1..=8)
+                .map(|k| 2 * k)
+                .find(|&e| multi_threads * e >= 4 * halo + 64)
+                .unwrap_or(16)
+        };
+        let chunk = (multi_threads * ept).saturating_sub(2 * halo) / 2 * 2;
+        (ept, halo, chunk)
+    };
+    let windows_for = |chunk: u32| -> u32 {
+        rods.iter()
+            .map(|r| (r.state.elements() as u32 + 1).div_ceil(chunk.max(1)))
+            .sum()
+    };
+    let co = adapter.co_resident_workgroups;
+    // Steps between exchanges: as asked, fewer where the windows would own nothing or (grid)
+    // would not all be co-resident.
+    let want_xs = variant.exchange_steps.max(1);
+    let xs_fitting = |need_co: bool| -> Option<u32> {
+        (1..=want_xs).rev().find(|&xs| {
+            let (_, _, chunk) = multi_shape(xs);
+            chunk >= 2 && (!need_co || co.is_some_and(|c| windows_for(chunk) <= c))
+        })
+    };
+    let xs_grid = xs_fitting(true);
+    let xs_perstep = xs_fitting(false).unwrap_or(1);
 
-    let multi_items = || -> Vec<ItemG> {
+    let multi_items = |chunk: u32, halo: u32| -> Vec<ItemG> {
         let mut items = Vec::new();
         let mut base = 0u32;
         for (r, rod) in rods.iter().enumerate() {
@@ -1286,18 +1415,19 @@ fn make_plan(
         }
         items
     };
-    let co = adapter.co_resident_workgroups;
-    let grid_items = multi_items();
-    let grid_ok = match co {
-        None => Err(format!(
+    let grid_ok = match (co, xs_grid) {
+        (None, _) => Err(format!(
             "co-residency of workgroups cannot be established on `{}`",
             adapter.name
         )),
-        Some(c) if grid_items.len() as u32 > c => Err(format!(
-            "{} workgroups needed, at most {c} known to be co-resident",
-            grid_items.len()
-        )),
-        Some(_) => Ok(()),
+        (Some(c), None) => {
+            let (_, _, chunk) = multi_shape(1);
+            Err(format!(
+                "{} workgroups needed, at most {c} known to be co-resident",
+                windows_for(chunk)
+            ))
+        }
+        (Some(_), Some(_)) => Ok(()),
     };
     let path = match options.path {
         KernelPath::Auto => {
@@ -1332,6 +1462,7 @@ fn make_plan(
     }
     let mut group = 1;
     let mut workgroups = None;
+    let mut xs_used = 1;
     let (threads, ept, items, halo_used) = match path {
         KernelPath::SingleWorkgroup => {
             let mut base = 0u32;
@@ -1370,13 +1501,38 @@ fn make_plan(
                 None => (single_threads, single_ept, items, 0),
             }
         }
-        _ => (multi_threads, multi_ept, grid_items, halo),
+        _ => {
+            let xs = if path == KernelPath::MultiWorkgroup {
+                xs_grid.unwrap_or(1)
+            } else {
+                xs_perstep
+            };
+            let (ept, halo, chunk) = multi_shape(xs);
+            if chunk < 2 {
+                return Err(GpuError::PathUnavailable {
+                    path,
+                    reason: format!(
+                        "windows of {multi_threads} threads x {ept} points leave nothing inside a halo of {halo}"
+                    ),
+                });
+            }
+            xs_used = xs;
+            (multi_threads, ept, multi_items(chunk, halo), halo)
+        }
     };
     if path == KernelPath::MultiWorkgroup {
         flags.push("GRID");
+        if variant.neighbour_sync {
+            flags.push("NBR_SYNC");
+        }
     }
     if path == KernelPath::DispatchPerStep {
         flags.push("PERSTEP");
+    }
+    if flags.contains(&"SUBGROUP")
+        || (path != KernelPath::SingleWorkgroup && shuffle_sg == Some(threads))
+    {
+        flags.push("SHFL");
     }
     if variant.sweep_loads && !extensible {
         flags.push("SWEEP_LOADS");
@@ -1384,11 +1540,18 @@ fn make_plan(
     if variant.rsqrt && !extensible {
         flags.push("RSQRT");
     }
+    if variant.fast_impulse && !extensible && !variant.sweep_loads {
+        flags.push("FAST");
+    }
+    if variant.register_constants {
+        flags.push("REGC");
+    }
     let cfg = KernelConfig {
         threads,
         per_thread: ept,
         iterations,
         halo: halo_used,
+        exchange_steps: xs_used,
         spin_cap: options.spin_cap.max(1),
         group,
         unroll: variant.unroll,

@@ -354,6 +354,177 @@ fn every_term_and_end_condition_matches_cpu() {
     }
 }
 
+/// The windows of the multi-workgroup paths with halos for several steps between exchanges,
+/// one-subgroup windows exchanging by shuffles, parameters in registers and the folded impulse,
+/// each with every term and end condition, on the dispatch-per-step path (which runs the same
+/// windows, `exchange_steps` steps per dispatch, and needs no co-residency).
+#[test]
+fn wide_halo_and_shuffle_windows_match_cpu() {
+    let case = busy_case();
+    let base = KernelVariant::default();
+    let variants = [
+        (
+            "2 steps per exchange",
+            KernelVariant {
+                exchange_steps: 2,
+                ..base.clone()
+            },
+        ),
+        (
+            "3 steps per exchange, 4 points/thread, registers, folded impulse",
+            KernelVariant {
+                exchange_steps: 3,
+                multi_points_per_thread: 4,
+                register_constants: true,
+                fast_impulse: true,
+                ..base.clone()
+            },
+        ),
+        (
+            "shuffle windows, 16 points/thread",
+            KernelVariant {
+                shuffle_windows: true,
+                multi_points_per_thread: 16,
+                ..base.clone()
+            },
+        ),
+        (
+            "shuffle windows, 2 steps per exchange, registers, folded impulse",
+            KernelVariant {
+                shuffle_windows: true,
+                multi_points_per_thread: 16,
+                exchange_steps: 2,
+                register_constants: true,
+                fast_impulse: true,
+                ..base.clone()
+            },
+        ),
+    ];
+    for (name, variant) in variants {
+        for ext in [false, true] {
+            let options = GpuOptions {
+                path: KernelPath::DispatchPerStep,
+                max_threads: 64,
+                ..GpuOptions::default()
+            };
+            let what = format!("busy scene, dispatch per step, {name}, extensible={ext}");
+            let Some((kernel, sg)) = run_variant_and_compare(
+                &case,
+                &settings(ext),
+                options,
+                variant.clone(),
+                100,
+                7,
+                &what,
+            ) else {
+                return;
+            };
+            if variant.exchange_steps > 1 {
+                assert!(
+                    kernel.contains(&format!("exchange every {} steps", variant.exchange_steps)),
+                    "{what}: {kernel}"
+                );
+            }
+            if variant.shuffle_windows && sg.is_some_and(|sg| sg <= 64) {
+                assert!(kernel.contains("SHFL"), "{what}: {kernel}");
+            }
+            if variant.fast_impulse && !ext {
+                assert!(kernel.contains("FAST"), "{what}: {kernel}");
+            }
+        }
+    }
+}
+
+/// Halos wide enough for several steps between exchanges compute the owned points exactly as
+/// exchanging every step does: the same windows, the same arithmetic, so the positions agree
+/// to the bit (a halo one step too narrow shows up here, although it stays far inside the CPU
+/// tolerance).
+#[test]
+fn steps_between_exchanges_change_no_bit() {
+    let case = busy_case_sized(&[300, 170]);
+    for ext in [false, true] {
+        let s = settings(ext);
+        let run = |xs: u32, shuffle: bool| -> Option<(Vec<Vec<[f32; 3]>>, String)> {
+            let variant = KernelVariant {
+                exchange_steps: xs,
+                shuffle_windows: shuffle,
+                multi_points_per_thread: 16,
+                multi_threads: 32,
+                ..KernelVariant::default()
+            };
+            let options = GpuOptions {
+                path: KernelPath::DispatchPerStep,
+                ..GpuOptions::default()
+            };
+            let mut sim = gpu_variant(&case, &s, options, variant)?;
+            sim.step(41).expect("submit");
+            let p = sim.read_positions().expect("read");
+            Some((p, sim.kernel_description()))
+        };
+        for shuffle in [false, true] {
+            let Some((reference, k1)) = run(1, shuffle) else {
+                return;
+            };
+            for xs in [2, 3] {
+                let (p, k) = run(xs, shuffle).expect("adapter");
+                let worst = reference
+                    .iter()
+                    .flatten()
+                    .zip(p.iter().flatten())
+                    .map(|(a, b)| (0..3).map(|i| (a[i] - b[i]).abs()).fold(0.0, f32::max))
+                    .fold(0.0, f32::max);
+                eprintln!("extensible={ext}, {xs} steps/exchange: worst {worst:e}\n  {k1}\n  {k}");
+                assert!(
+                    worst == 0.0,
+                    "extensible={ext}, shuffle={shuffle}, {xs} steps per exchange differ by {worst:e} from one: {k}"
+                );
+            }
+        }
+    }
+}
+
+/// `step_and_request` (steps and readback in one submission) gives what `step` and
+/// `read_positions` give.
+#[test]
+fn step_and_request_matches_step_then_read() {
+    let case = Case::pendulums(&[300, 40]);
+    let s = settings(false);
+    let Some(mut a) = gpu(&case, &s, GpuOptions::default()) else {
+        return;
+    };
+    let Some(mut b) = gpu(
+        &case,
+        &s,
+        GpuOptions {
+            spin_wait_us: 0,
+            ..GpuOptions::default()
+        },
+    ) else {
+        return;
+    };
+    for k in [1, 5, 20] {
+        a.step(k).expect("submit");
+        let pa = a.read_positions().expect("read");
+        b.step_and_request(k).expect("submit");
+        let pb = b.read_positions().expect("read");
+        assert_eq!(pa, pb, "after a batch of {k}");
+    }
+    // Pipelined: the next batch submitted before the previous result is read.
+    a.step_and_request(3).expect("submit");
+    a.step_and_request(3).expect("submit");
+    let first = a.read_positions().expect("read");
+    let second = a.read_positions().expect("read");
+    b.step(3).expect("submit");
+    assert_eq!(first, b.read_positions().expect("read"));
+    b.step(3).expect("submit");
+    assert_eq!(second, b.read_positions().expect("read"));
+    assert!(a.step_and_request(1).is_ok() && a.step_and_request(1).is_ok());
+    assert!(matches!(
+        a.step_and_request(1),
+        Err(GpuError::InvalidInput(_))
+    ));
+}
+
 /// The subgroup layout (one rod per subgroup, several rods per workgroup, no workgroup barrier)
 /// with every term and end condition, against the CPU; on an adapter without a fixed subgroup
 /// size the workgroup layout runs instead, and the test says so.
@@ -537,17 +708,32 @@ fn multi_workgroup_path_never_hangs() {
         spin_cap: 2000,
         ..forced
     };
-    let mut sim = GpuSimulation::new(case.gpu_input(), &s, asserted)
-        .expect("grid path with asserted co-residency");
-    assert_eq!(sim.path(), KernelPath::MultiWorkgroup);
-    sim.step(4).expect("submit");
-    match sim.read_positions() {
-        Err(GpuError::GridTimeout) => eprintln!(
-            "grid barrier timed out as expected on {}",
-            sim.adapter().name
-        ),
-        Ok(g) => compare(&case.cpu_run(&s, 4), &g, "multi-workgroup (asserted)"),
-        Err(e) => panic!("unexpected error: {e}"),
+    // Both synchronisation schemes: the grid-wide counter and the neighbours' flags (with
+    // halos for two steps per exchange).
+    for variant in [
+        KernelVariant::default(),
+        KernelVariant {
+            exchange_steps: 2,
+            neighbour_sync: true,
+            register_constants: true,
+            fast_impulse: true,
+            ..KernelVariant::default()
+        },
+    ] {
+        let mut sim =
+            GpuSimulation::with_variant(case.gpu_input(), &s, asserted.clone(), variant.clone())
+                .expect("grid path with asserted co-residency");
+        assert_eq!(sim.path(), KernelPath::MultiWorkgroup);
+        sim.step(5).expect("submit");
+        match sim.read_positions() {
+            Err(GpuError::GridTimeout) => eprintln!(
+                "grid barrier timed out as expected on {} ({})",
+                sim.adapter().name,
+                sim.kernel_description()
+            ),
+            Ok(g) => compare(&case.cpu_run(&s, 5), &g, "multi-workgroup (asserted)"),
+            Err(e) => panic!("unexpected error: {e}"),
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 // The CoRdE time-step (paper Fig. 5 without collisions) for one window of one rod per workgroup,
 // or (SUBGROUP) for one rod per subgroup, several rods per workgroup.
 //
-// Composed by src/shader.rs as: a prelude of constants (WG, EPT, ITER, HALO, SPIN_CAP, SG), then
+// Composed by src/shader.rs as: a prelude of constants (WG, EPT, ITER, HALO, XS, SPIN_CAP, SG), then
 // common.wgsl, then this file, with the `//#if FLAG` / `//#else` / `//#endif` lines resolved
 // on the host so that a scene compiles only the terms it uses. Flags:
 //   EXTENSIBLE    stretch energy instead of distance constraints
@@ -13,6 +13,14 @@
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
 //                 through subgroup shuffles and the kernel has no workgroup barrier at all
+//   SHFL          neighbours exchange through subgroup shuffles (with SUBGROUP, or a workgroup
+//                 that is one subgroup, WG == SG); no workgroup memory for the exchange
+//   NBR_SYNC      (GRID) each workgroup waits only for its two neighbours' per-item flags
+//                 instead of a grid-wide arrival counter
+//   REGC          per-point and per-element parameters kept in registers for the dispatch
+//                 instead of being read from storage in every step
+//   FAST          the impulse from one inverseSqrt with the constants w/(w_a + w_b)/h folded
+//                 into registers: t = l0/|d| - 1, v_a -= d t k_a, v_b += d t k_b
 //   SWEEP_LOADS   (measurement variant) read l0 and the inverse masses from storage in every
 //                 constraint sweep instead of keeping them in registers
 //   RSQRT         (measurement variant) the impulse from one inverseSqrt, (l0/|d| - 1), instead
@@ -52,7 +60,8 @@ struct Chunk {
     // First step of this dispatch relative to base_step, and its number of steps.
     offset: u32,
     count: u32,
-    pad0: u32,
+    // GRID: halo exchanges of the submission's earlier dispatches.
+    sync_base: u32,
     pad1: u32,
 }
 
@@ -121,13 +130,15 @@ struct Drive {
 //#endif
 //#if GRID
 // [0]: arrivals at the grid barrier (low 30 bits), bit 31 abort (divergence), bit 30 timeout.
+// NBR_SYNC: [1 + item]: the item's last published exchange (low 30 bits), bit 31 stopped,
+// bit 30 timed out.
 @group(0) @binding(15) var<storage, read_write> sync: array<atomic<u32>>;
 // Halo exchange: per parity, item and side, HALO points of 16 words (r, v, q, ω). Written and
 // read only through atomics: plain loads of another workgroup's stores can be stale (GPU.md).
 @group(0) @binding(16) var<storage, read_write> xch: array<atomic<u32>>;
 //#endif
 
-//#if !SUBGROUP
+//#if !SHFL
 // Neighbour exchange: 2*lid holds a thread's first point, 2*lid+1 its last.
 var<workgroup> sh_r: array<vec4<f32>, 2 * WG>;
 var<workgroup> sh_q: array<vec4<f32>, 2 * WG>;
@@ -142,6 +153,8 @@ var<workgroup> sh_v: array<vec4<f32>, 4 * WG>;
 var<workgroup> sh_v: array<vec4<f32>, 4 * WG>;
 //#endif
 //#endif
+//#endif
+//#if !SUBGROUP
 // Earliest divergence in this dispatch: (relative step << 16) | (local element << 2) | code.
 var<workgroup> wg_key: atomic<u32>;
 // Nonzero once the workgroup must stop (divergence here or, with GRID, anywhere).
@@ -262,6 +275,27 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
     }
 //#endfor
+//#if FAST
+    // k_a, k_b: the share of the impulse each end takes, w / (w_a + w_b) / h.
+    var cka: array<f32, XP>;
+    var ckb: array<f32, XP>;
+//#for x 0 EPT+1
+    cka[{x}] = wm[{x}] * cinv[{x}] * inv_h;
+    ckb[{x}] = wm[{x+1}] * cinv[{x}] * inv_h;
+//#endfor
+//#endif
+//#endif
+//#if REGC
+    // Parameters of element / node / point x (local index b0 - 1 + x), loaded once.
+    var ks: array<Slot, XP>;
+//#for x 0 EPT+1
+    {
+        let le = b0 + {x};
+        if le >= 1u && it.w0 + le - 1u < it.w1 {
+            ks[{x}] = slots[it.base + it.w0 + le - 1u];
+        }
+    }
+//#endfor
 //#endif
 
 //#if !SUBGROUP
@@ -283,9 +317,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         let step_rel = chunk.offset + s;
         let step = params.base_step + step_rel;
 //#if GRID
-        // Grid barrier: publish owned boundary slabs, wait for every workgroup, read halos.
-        if s > 0u {
-            let par = s & 1u;
+        // Halo exchange every XS steps (a dispatch starts from the whole window, read from the
+        // state buffers): publish the owned boundary slabs, wait, read the halos.
+        if s > 0u && s % XS == 0u {
+            let epoch = chunk.sync_base + s / XS;
+            let par = epoch & 1u;
 //#for e 0 EPT
             {
                 let gp = it.w0 + b0 + {e};
@@ -308,34 +344,63 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 }
             }
 //#endfor
-        }
-        storageBarrier();
-        if lid == 0u {
-            if wg_stop != 0u {
-                atomicOr(&sync[0], 0x80000000u);
-            }
-            // The counter is cleared once per submission and every step of every dispatch
-            // arrives once, so the target counts from the submission's first step. An abort bit
-            // is set before its setter arrives, so whoever sees the target reached sees it too.
-            let goal = params.num_items * (chunk.offset + s + 1u);
-            var seen = atomicAdd(&sync[0], 1u) + 1u;
-            for (var i = 0u; i < SPIN_CAP; i++) {
-                if (seen & 0x3fffffffu) >= goal || (seen & 0xc0000000u) != 0u {
-                    break;
+            storageBarrier();
+            if lid == 0u {
+//#if NBR_SYNC
+                // Publish this item's exchange, then wait for both neighbours to have published
+                // the same one (or to have stopped).
+                atomicStore(&sync[1u + item_index], epoch | select(0u, 0x80000000u, wg_stop != 0u));
+                var fl = select(0u, epoch, it.left == NONE);
+                var fr = select(0u, epoch, it.right == NONE);
+                for (var i = 0u; i < SPIN_CAP; i++) {
+                    if it.left != NONE && (fl & 0x3fffffffu) < epoch && (fl & 0xc0000000u) == 0u {
+                        fl = atomicLoad(&sync[1u + it.left]);
+                    }
+                    if it.right != NONE && (fr & 0x3fffffffu) < epoch && (fr & 0xc0000000u) == 0u {
+                        fr = atomicLoad(&sync[1u + it.right]);
+                    }
+                    if ((fl & 0x3fffffffu) >= epoch || (fl & 0xc0000000u) != 0u)
+                        && ((fr & 0x3fffffffu) >= epoch || (fr & 0xc0000000u) != 0u) {
+                        break;
+                    }
                 }
-                seen = atomicLoad(&sync[0]);
+                let done_l = (fl & 0x3fffffffu) >= epoch || (fl & 0xc0000000u) != 0u;
+                let done_r = (fr & 0x3fffffffu) >= epoch || (fr & 0xc0000000u) != 0u;
+                // Checked after the loop, not by a loop flag (see GPU.md on lavapipe).
+                if !(done_l && done_r) {
+                    atomicOr(&status[item_index * 4u], 0x100u);
+                    atomicOr(&sync[1u + item_index], 0x40000000u);
+                    wg_stop = 1u;
+                }
+                if ((fl | fr) & 0xc0000000u) != 0u {
+                    wg_stop = 1u;
+                }
+//#else
+                if wg_stop != 0u {
+                    atomicOr(&sync[0], 0x80000000u);
+                }
+                // The counter is cleared once per submission and every exchange of every
+                // dispatch arrives once, so the target counts from the submission's first
+                // exchange. An abort bit is set before its setter arrives (or, for a workgroup
+                // that stops between exchanges, when it leaves), so whoever waits sees it.
+                let goal = params.num_items * epoch;
+                var seen = atomicAdd(&sync[0], 1u) + 1u;
+                for (var i = 0u; i < SPIN_CAP; i++) {
+                    if (seen & 0x3fffffffu) >= goal || (seen & 0xc0000000u) != 0u {
+                        break;
+                    }
+                    seen = atomicLoad(&sync[0]);
+                }
+                // Checked after the loop, not by a loop flag: a driver that cuts loops short (see
+                // GPU.md on lavapipe) must still report a timeout, never run on with stale halos.
+                if (seen & 0x3fffffffu) < goal && (seen & 0xc0000000u) == 0u {
+                    seen = atomicOr(&sync[0], 0x40000000u) | 0x40000000u;
+                    atomicOr(&status[item_index * 4u], 0x100u);
+                }
+                wg_stop = select(0u, 1u, (seen & 0xc0000000u) != 0u);
+//#endif
             }
-            // Checked after the loop, not by a loop flag: a driver that cuts loops short (see
-            // GPU.md on lavapipe) must still report a timeout, never run on with stale halos.
-            if (seen & 0x3fffffffu) < goal && (seen & 0xc0000000u) == 0u {
-                seen = atomicOr(&sync[0], 0x40000000u) | 0x40000000u;
-                atomicOr(&status[item_index * 4u], 0x100u);
-            }
-            wg_stop = select(0u, 1u, (seen & 0xc0000000u) != 0u);
-        }
-        storageBarrier();
-        if s > 0u {
-            let par = s & 1u;
+            storageBarrier();
 //#for e 0 EPT
             {
                 let gp = it.w0 + b0 + {e};
@@ -368,6 +433,14 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if subgroupAny(stop) {
             break;
         }
+//#else
+//#if SHFL
+        if workgroupUniformLoad(&wg_stop) != 0u {
+            break;
+        }
+//#endif
+//#endif
+//#if SHFL
         // Neighbours' boundary points by subgroup shuffles (lane 0 / SG - 1 get nothing useful
         // and keep zeros: no constraint or force of theirs reads those entries).
         {
@@ -466,7 +539,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             {
                 let ge = it.w0 + b0 + {e};
                 if ge < end_elem && ge >= it.o0 && ge < it.o1 {
+//#if REGC
+                    let l0 = ks[{e+1}].a.x;
+//#else
                     let l0 = slots[it.base + ge].a.x;
+//#endif
                     let d = rx[{e+2}] - rx[{e+1}];
                     let ratio = dot(d, d) / (l0 * l0);
                     if !(ratio >= params.lo2 && ratio <= params.hi2) {
@@ -499,7 +576,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             let le = b0 + {x};  // local element index + 1
             if le >= 1u && it.w0 + le - 1u < end_elem {
                 let ge = it.w0 + le - 1u;
+//#if REGC
+                let sl = ks[{x}];
+//#else
                 let sl = slots[it.base + ge];
+//#endif
                 let pe = parallel_element(rx[{x}], rx[{x+1}], qx[{x}], sl.a.w, sl.a.x);
                 var f = pe.fb;
 //#if EXTENSIBLE
@@ -532,7 +613,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         {
             let gp = it.w0 + b0 + {e};
             if gp < it.w1 {
+//#if REGC
+                let sl = ks[{e+1}];
+//#else
                 let sl = slots[it.base + gp];
+//#endif
 //#if DRAG
                 var f = (g - vx[{e+1}] * it.drag) * sl.a.z;
 //#else
@@ -607,6 +692,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let ci = cinv[{x}];
 //#endif
                 let d = ed[{x}] + (vx[{x+1}] - vx[{x}]) * h;
+//#if FAST
+                let t = select(0.0, l0 * inverseSqrt(dot(d, d)) - 1.0, cok[{x}]);
+                vx[{x}] -= d * (t * cka[{x}]);
+                vx[{x+1}] += d * (t * ckb[{x}]);
+//#else
 //#if RSQRT
                 let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
 //#else
@@ -615,10 +705,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endif
                 vx[{x}] -= d * (sc * wa);
                 vx[{x+1}] += d * (sc * wb);
+//#endif
             }
 //#endfor
             // Exchange the boundary velocities the red half-sweep changed.
-//#if SUBGROUP
+//#if SHFL
             {
                 let vl = subgroupShuffleUp(vx[EPT], 1u);
                 let vr = subgroupShuffleDown(vx[1], 1u);
@@ -658,6 +749,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let ci = cinv[{x}];
 //#endif
                 let d = ed[{x}] + (vx[{x+1}] - vx[{x}]) * h;
+//#if FAST
+                let t = select(0.0, l0 * inverseSqrt(dot(d, d)) - 1.0, cok[{x}]);
+                vx[{x}] -= d * (t * cka[{x}]);
+                vx[{x+1}] += d * (t * ckb[{x}]);
+//#else
 //#if RSQRT
                 let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
 //#else
@@ -666,6 +762,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endif
                 vx[{x}] -= d * (sc * wa);
                 vx[{x+1}] += d * (sc * wb);
+//#endif
             }
 //#endfor
         }
@@ -709,9 +806,24 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let rn = subgroupShuffleDown(r[0], 1u);
     let stopped = subgroupAny(stop);
 //#else
+//#if SHFL
+    let rn = subgroupShuffleDown(r[0], 1u);
+    let stopped = workgroupUniformLoad(&wg_stop) != 0u;
+//#else
     sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
     let stopped = workgroupUniformLoad(&wg_stop) != 0u;
     let rn = sh_r[2u * lid + 2u].xyz;
+//#endif
+//#endif
+//#if GRID
+    // A workgroup that stopped tells the others, which may be waiting for its next exchange.
+    if lid == 0u && stopped {
+//#if NBR_SYNC
+        atomicOr(&sync[1u + item_index], 0x80000000u);
+//#else
+        atomicOr(&sync[0], 0x80000000u);
+//#endif
+    }
 //#endif
     if steps_done > 0u && !stopped && has_right {
         let ge = it.w0 + b0 + EPT - 1u;
