@@ -86,6 +86,31 @@ pub struct PointResponse {
     pub escaped: bool,
 }
 
+/// The nearest triangle in contact seen so far by a sphere query, and the nearest of all
+/// triangles tested.
+#[derive(Clone, Copy, Debug)]
+struct Nearest2 {
+    /// Squared distance of the nearest triangle in contact.
+    d2: f64,
+    /// Its signed distance.
+    signed: f64,
+    /// Whether its closest feature lies on the mesh boundary.
+    at_boundary: bool,
+    /// Squared distance of the nearest triangle tested, in contact or not.
+    any_d2: f64,
+}
+
+impl Default for Nearest2 {
+    fn default() -> Self {
+        Self {
+            d2: f64::INFINITY,
+            signed: 0.0,
+            at_boundary: false,
+            any_d2: f64::INFINITY,
+        }
+    }
+}
+
 /// Reusable output of [`MeshCollider::detect`]: all contacts, grouped by point, and one response
 /// per point. Clearing keeps the capacity, so after warm-up a detection allocates nothing.
 #[derive(Clone, Debug, Default)]
@@ -349,31 +374,96 @@ impl MeshCollider {
     ) -> PointResponse {
         let first = out.len();
         let pv = Vector3::from(*p);
+        let mut nearest = Nearest2::default();
+        self.bvh.for_each_near(p, r, |slot| {
+            self.test_slot(&pv, r, point, slot, out, &mut nearest);
+        });
+        self.respond(first, &nearest, out)
+    }
+
+    /// The leaf-order slots (see [`Bvh::tri_indices`]) of the triangles closer than `r` to `p`,
+    /// in leaf order, written to `out` (cleared first).
+    ///
+    /// A sphere of radius `r' ≤ r − |p' − p|` around a point `p'` can only touch these
+    /// triangles, so a slowly moving point can query this list ([`Self::query_sphere_among`])
+    /// instead of the tree until it has moved `r − r'`.
+    pub fn near_slots(&self, p: &[f64; 3], r: f64, out: &mut Vec<u32>) {
+        out.clear();
+        let pv = Vector3::from(*p);
         let r2 = r * r;
-        let mut nearest = (f64::INFINITY, 0.0, false);
         self.bvh.for_each_near(p, r, |slot| {
             let t = &self.tris[slot];
-            let (c, feature) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
-            let diff = pv - c;
-            let d2 = diff.norm_squared();
-            if d2 < r2 {
-                let d = d2.sqrt();
-                let n = self.pseudo_normal(slot, feature);
-                let sd = if diff.dot(&n) >= 0.0 { d } else { -d };
-                if d2 < nearest.0 {
-                    nearest = (d2, sd, self.on_boundary(slot, feature));
-                }
-                out.push(Contact {
-                    point,
-                    triangle: self.bvh.tri_indices()[slot],
-                    closest: c.into(),
-                    distance: d,
-                    signed_distance: sd,
-                    depth: r - sd,
-                    normal: n.into(),
-                });
+            let (c, _) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
+            if (pv - c).norm_squared() < r2 {
+                out.push(slot as u32);
             }
         });
+    }
+
+    /// [`Self::query_sphere`] restricted to the triangles in leaf-order `slots` (from
+    /// [`Self::near_slots`]); also returns the distance from `p` to the nearest of them
+    /// (infinite if `slots` is empty). When `slots` holds every triangle within `r` of `p` and
+    /// is in leaf order, the contacts and the response are exactly those of `query_sphere`.
+    pub fn query_sphere_among(
+        &self,
+        p: &[f64; 3],
+        r: f64,
+        point: u32,
+        slots: &[u32],
+        out: &mut Vec<Contact>,
+    ) -> (PointResponse, f64) {
+        let first = out.len();
+        let pv = Vector3::from(*p);
+        let mut nearest = Nearest2::default();
+        for &slot in slots {
+            self.test_slot(&pv, r, point, slot as usize, out, &mut nearest);
+        }
+        (self.respond(first, &nearest, out), nearest.any_d2.sqrt())
+    }
+
+    /// The exact sphere–triangle test of one leaf-order slot: a contact is appended to `out`
+    /// when the triangle is closer than `r`; `nearest` tracks the nearest feature.
+    #[inline(always)]
+    fn test_slot(
+        &self,
+        pv: &Vector3<f64>,
+        r: f64,
+        point: u32,
+        slot: usize,
+        out: &mut Vec<Contact>,
+        nearest: &mut Nearest2,
+    ) {
+        let t = &self.tris[slot];
+        let (c, feature) = closest_point_triangle(pv, &t.a, &t.b, &t.c);
+        let diff = pv - c;
+        let d2 = diff.norm_squared();
+        nearest.any_d2 = nearest.any_d2.min(d2);
+        if d2 < r * r {
+            let d = d2.sqrt();
+            let n = self.pseudo_normal(slot, feature);
+            let sd = if diff.dot(&n) >= 0.0 { d } else { -d };
+            if d2 < nearest.d2 {
+                *nearest = Nearest2 {
+                    d2,
+                    signed: sd,
+                    at_boundary: self.on_boundary(slot, feature),
+                    any_d2: nearest.any_d2,
+                };
+            }
+            out.push(Contact {
+                point,
+                triangle: self.bvh.tri_indices()[slot],
+                closest: c.into(),
+                distance: d,
+                signed_distance: sd,
+                depth: r - sd,
+                normal: n.into(),
+            });
+        }
+    }
+
+    /// The response of the point whose contacts are `out[first..]`.
+    fn respond(&self, first: usize, nearest: &Nearest2, out: &[Contact]) -> PointResponse {
         if out.len() == first {
             return PointResponse {
                 first: first as u32,
@@ -386,7 +476,7 @@ impl MeshCollider {
         // sphere with a depth of 2r in one step, a kick of 2r/h. It stays in the contact list
         // (the geometric query is complete) but not in the response.
         // Behind the rim of an open end is outside the mesh but not through its wall.
-        let escaped = nearest.1 < 0.0 && !nearest.2;
+        let escaped = nearest.signed < 0.0 && !nearest.at_boundary;
         let mut sum_n = Vector3::zeros();
         let (mut sum_w, mut sum_w2, mut max_d) = (0.0, 0.0, 0.0f64);
         for k in out[first..]

@@ -58,35 +58,52 @@ pub struct PointContact<T: Real> {
 }
 
 /// The contacts of one rod for one step, with their accumulated impulses.
+///
+/// Each contact moves only its own point and a point has at most one contact, so the contacts
+/// of a sweep do not interact: a sweep gathers the velocities of the contact points into
+/// contiguous arrays, resolves all contacts in one branch-free loop that the compiler turns
+/// into SIMD code, and scatters the velocities back. The result is that of resolving the
+/// contacts one after another.
 #[derive(Clone, Debug, Default)]
 pub struct ContactSet<T: Real> {
     contacts: Vec<PointContact<T>>,
+    /// Normals, coordinate by coordinate.
+    normal: [Vec<T>; 3],
+    gap: Vec<T>,
     normal_impulse: Vec<T>,
-    tangent_impulse: Vec<Vec3<T>>,
+    /// Accumulated tangential impulses, coordinate by coordinate.
+    tangent_impulse: [Vec<T>; 3],
+    /// Scratch of a sweep: the contact points' velocities and inverse masses.
+    v: [Vec<T>; 3],
+    inv_mass: Vec<T>,
 }
 
 impl<T: Real> ContactSet<T> {
     /// An empty set.
     pub fn new() -> Self {
-        Self {
-            contacts: Vec::new(),
-            normal_impulse: Vec::new(),
-            tangent_impulse: Vec::new(),
-        }
+        Self::default()
     }
 
     /// Removes all contacts, keeping the capacity.
     pub fn clear(&mut self) {
         self.contacts.clear();
+        self.gap.clear();
         self.normal_impulse.clear();
-        self.tangent_impulse.clear();
+        for c in 0..3 {
+            self.normal[c].clear();
+            self.tangent_impulse[c].clear();
+        }
     }
 
     /// Adds a contact with zero accumulated impulse.
     pub fn push(&mut self, c: PointContact<T>) {
         self.contacts.push(c);
+        self.gap.push(c.gap);
         self.normal_impulse.push(T::zero());
-        self.tangent_impulse.push(Vec3::zeros());
+        for k in 0..3 {
+            self.normal[k].push(c.normal[k]);
+            self.tangent_impulse[k].push(T::zero());
+        }
     }
 
     /// The contacts.
@@ -111,28 +128,9 @@ impl<T: Real> ContactSet<T> {
     }
 
     /// Accumulated tangential (friction) impulse of each contact, as a velocity change [m/s].
-    pub fn tangent_impulses(&self) -> &[Vec3<T>] {
-        &self.tangent_impulse
-    }
-
-    /// The velocity of contact `k`'s point after resolving that contact once.
-    #[inline]
-    fn resolve(&mut self, k: usize, mut v: Vec3<T>, h: T, friction: &Friction<T>) -> Vec3<T> {
-        let c = &self.contacts[k];
-        let n = c.normal;
-        // Normal: accumulate and clamp to a push (λ_n ≥ 0).
-        let target = -c.gap / h;
-        let old = self.normal_impulse[k];
-        let acc = (old + (target - n.dot(&v))).max(T::zero());
-        self.normal_impulse[k] = acc;
-        v += n * (acc - old);
-        // Friction: cancel the tangential velocity inside the static cone, else slide.
-        let vt = v - n * n.dot(&v);
-        let old_t = self.tangent_impulse[k];
-        let wanted = old_t - vt;
-        let new_t = friction.clamp(wanted, acc);
-        self.tangent_impulse[k] = new_t;
-        v + (new_t - old_t)
+    pub fn tangent_impulses(&self) -> impl ExactSizeIterator<Item = Vec3<T>> + '_ {
+        let [x, y, z] = &self.tangent_impulse;
+        (0..x.len()).map(|k| Vec3::new(x[k], y[k], z[k]))
     }
 
     /// One sweep over the contacts, on coordinate slices of all points' velocities
@@ -145,13 +143,18 @@ impl<T: Real> ContactSet<T> {
         velocities: [&mut [T]; 3],
     ) {
         let [vx, vy, vz] = velocities;
-        for k in 0..self.contacts.len() {
+        let m = inv_masses.len();
+        let (vx, vy, vz) = (&mut vx[..m], &mut vy[..m], &mut vz[..m]);
+        let n = self.start_sweep();
+        for k in 0..n {
             let i = self.contacts[k].point as usize;
-            if inv_masses[i] <= T::zero() {
-                continue;
-            }
-            let v = self.resolve(k, Vec3::new(vx[i], vy[i], vz[i]), h, friction);
-            (vx[i], vy[i], vz[i]) = (v.x, v.y, v.z);
+            self.inv_mass[k] = inv_masses[i];
+            (self.v[0][k], self.v[1][k], self.v[2][k]) = (vx[i], vy[i], vz[i]);
+        }
+        self.resolve_all(h, friction);
+        for k in 0..n {
+            let i = self.contacts[k].point as usize;
+            (vx[i], vy[i], vz[i]) = (self.v[0][k], self.v[1][k], self.v[2][k]);
         }
     }
 
@@ -166,19 +169,97 @@ impl<T: Real> ContactSet<T> {
         even: &mut [Vec<T>; 3],
         odd: &mut [Vec<T>; 3],
     ) {
-        for k in 0..self.contacts.len() {
+        let (me, mo) = (even_w.len(), odd_w.len());
+        let [ex, ey, ez] = even;
+        let (ex, ey, ez) = (&mut ex[..me], &mut ey[..me], &mut ez[..me]);
+        let [ox, oy, oz] = odd;
+        let (ox, oy, oz) = (&mut ox[..mo], &mut oy[..mo], &mut oz[..mo]);
+        let n = self.start_sweep();
+        for k in 0..n {
             let i = self.contacts[k].point as usize;
-            let (w, buf) = if i.is_multiple_of(2) {
-                (even_w, &mut *even)
-            } else {
-                (odd_w, &mut *odd)
-            };
             let j = i / 2;
-            if w[j] <= T::zero() {
-                continue;
+            let (w, x, y, z) = if i.is_multiple_of(2) {
+                (even_w[j], ex[j], ey[j], ez[j])
+            } else {
+                (odd_w[j], ox[j], oy[j], oz[j])
+            };
+            self.inv_mass[k] = w;
+            (self.v[0][k], self.v[1][k], self.v[2][k]) = (x, y, z);
+        }
+        self.resolve_all(h, friction);
+        for k in 0..n {
+            let i = self.contacts[k].point as usize;
+            let j = i / 2;
+            let v = (self.v[0][k], self.v[1][k], self.v[2][k]);
+            if i.is_multiple_of(2) {
+                (ex[j], ey[j], ez[j]) = v;
+            } else {
+                (ox[j], oy[j], oz[j]) = v;
             }
-            let v = self.resolve(k, Vec3::new(buf[0][j], buf[1][j], buf[2][j]), h, friction);
-            (buf[0][j], buf[1][j], buf[2][j]) = (v.x, v.y, v.z);
+        }
+    }
+
+    /// Sizes the sweep's scratch to the contacts; returns their number.
+    fn start_sweep(&mut self) -> usize {
+        let n = self.contacts.len();
+        self.inv_mass.resize(n, T::zero());
+        for c in &mut self.v {
+            c.resize(n, T::zero());
+        }
+        n
+    }
+
+    /// Resolves every contact once on the gathered velocities.
+    ///
+    /// Normal: the accumulated impulse is clamped to a push (`λ_n ≥ 0`). Friction: the
+    /// tangential velocity is cancelled inside the static cone, else the impulse slides on the
+    /// kinetic cone ([`Friction::clamp`], written here without branches). A kinematic point
+    /// (zero inverse mass) keeps its velocity and its contact's impulses stay zero.
+    fn resolve_all(&mut self, h: T, friction: &Friction<T>) {
+        let n = self.contacts.len();
+        let (mu_s, mu_k) = (friction.static_coefficient, friction.kinetic_coefficient);
+        let zero = T::zero();
+        let one = T::one();
+        let [nx, ny, nz] = &self.normal;
+        let (nx, ny, nz, gap) = (&nx[..n], &ny[..n], &nz[..n], &self.gap[..n]);
+        let inv_mass = &self.inv_mass[..n];
+        let ln = &mut self.normal_impulse[..n];
+        let [tx, ty, tz] = &mut self.tangent_impulse;
+        let (tx, ty, tz) = (&mut tx[..n], &mut ty[..n], &mut tz[..n]);
+        let [vx, vy, vz] = &mut self.v;
+        let (vx, vy, vz) = (&mut vx[..n], &mut vy[..n], &mut vz[..n]);
+        for k in 0..n {
+            let active = inv_mass[k] > zero;
+            let (x, y, z) = (vx[k], vy[k], vz[k]);
+            let (ax, ay, az) = (nx[k], ny[k], nz[k]);
+            // Normal: accumulate and clamp to a push.
+            let target = -gap[k] / h;
+            let old = ln[k];
+            let vn = ax * x + ay * y + az * z;
+            let pushed = (old + (target - vn)).max(zero);
+            let acc = if active { pushed } else { old };
+            ln[k] = acc;
+            let d = acc - old;
+            let (x, y, z) = (x + ax * d, y + ay * d, z + az * d);
+            // Friction: the impulse that would stop the sliding, kept inside the static cone,
+            // else scaled onto the kinetic cone.
+            let vn = ax * x + ay * y + az * z;
+            let (ux, uy, uz) = (x - ax * vn, y - ay * vn, z - az * vn);
+            let (ox, oy, oz) = (tx[k], ty[k], tz[k]);
+            let (wx, wy, wz) = (ox - ux, oy - uy, oz - uz);
+            let norm = (wx * wx + wy * wy + wz * wz).sqrt();
+            let scale = if norm <= mu_s * acc {
+                one
+            } else {
+                mu_k * acc / norm
+            };
+            let (px, py, pz) = if active {
+                (wx * scale, wy * scale, wz * scale)
+            } else {
+                (ox, oy, oz)
+            };
+            (tx[k], ty[k], tz[k]) = (px, py, pz);
+            (vx[k], vy[k], vz[k]) = (x + (px - ox), y + (py - oy), z + (pz - oz));
         }
     }
 }
@@ -203,6 +284,123 @@ mod tests {
             set.sweep_soa(0.01, &f, &[1.0], [&mut x, &mut y, &mut z]);
         }
         (Vec3::new(x[0], y[0], z[0]), set.normal_impulses()[0])
+    }
+
+    /// Resolves the contacts one at a time, written directly from the definition: the oracle
+    /// for the branch-free sweep.
+    fn sequential_sweep(
+        contacts: &[PointContact<f64>],
+        impulses: &mut [(f64, Vec3<f64>)],
+        h: f64,
+        friction: &Friction<f64>,
+        inv_masses: &[f64],
+        v: &mut [Vec3<f64>],
+    ) {
+        for (c, (ln, lt)) in contacts.iter().zip(impulses) {
+            let i = c.point as usize;
+            if inv_masses[i] <= 0.0 {
+                continue;
+            }
+            let n = c.normal;
+            let old = *ln;
+            *ln = (old + (-c.gap / h - n.dot(&v[i]))).max(0.0);
+            v[i] += n * (*ln - old);
+            let vt = v[i] - n * n.dot(&v[i]);
+            let new_t = friction.clamp(*lt - vt, *ln);
+            v[i] += new_t - *lt;
+            *lt = new_t;
+        }
+    }
+
+    #[test]
+    fn the_sweep_matches_resolving_contacts_one_at_a_time() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let friction = Friction {
+            static_coefficient: 0.3,
+            kinetic_coefficient: 0.2,
+        };
+        let h = 1e-4;
+        for trial in 0..20 {
+            let points = 64;
+            let mut inv_masses: Vec<f64> =
+                (0..points).map(|_| rng.random_range(0.5..2.0)).collect();
+            inv_masses[0] = 0.0;
+            inv_masses[points - 1] = 0.0;
+            let mut v: Vec<Vec3<f64>> = (0..points)
+                .map(|_| Vec3::from_fn(|_, _| rng.random_range(-1.0..1.0)))
+                .collect();
+            let mut set = ContactSet::new();
+            for i in 0..points {
+                if rng.random_bool(0.6) {
+                    set.push(PointContact {
+                        point: i as u32,
+                        normal: Vec3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize(),
+                        gap: rng.random_range(-2e-4..1e-4),
+                    });
+                }
+            }
+            let mut expected_v = v.clone();
+            let mut impulses = vec![(0.0, Vec3::zeros()); set.len()];
+            let split = trial % 2 == 1;
+            let (mut even, mut odd) = (
+                [
+                    vec![0.0; points / 2],
+                    vec![0.0; points / 2],
+                    vec![0.0; points / 2],
+                ],
+                [
+                    vec![0.0; points / 2],
+                    vec![0.0; points / 2],
+                    vec![0.0; points / 2],
+                ],
+            );
+            let even_w: Vec<f64> = inv_masses.iter().step_by(2).copied().collect();
+            let odd_w: Vec<f64> = inv_masses.iter().skip(1).step_by(2).copied().collect();
+            for _ in 0..5 {
+                sequential_sweep(
+                    set.contacts(),
+                    &mut impulses,
+                    h,
+                    &friction,
+                    &inv_masses,
+                    &mut expected_v,
+                );
+                if split {
+                    for (i, w) in v.iter().enumerate() {
+                        let buf = if i % 2 == 0 { &mut even } else { &mut odd };
+                        for c in 0..3 {
+                            buf[c][i / 2] = w[c];
+                        }
+                    }
+                    set.sweep_split(h, &friction, &even_w, &odd_w, &mut even, &mut odd);
+                    for (i, w) in v.iter_mut().enumerate() {
+                        let buf = if i % 2 == 0 { &even } else { &odd };
+                        *w = Vec3::new(buf[0][i / 2], buf[1][i / 2], buf[2][i / 2]);
+                    }
+                } else {
+                    let mut x: Vec<f64> = v.iter().map(|w| w.x).collect();
+                    let mut y: Vec<f64> = v.iter().map(|w| w.y).collect();
+                    let mut z: Vec<f64> = v.iter().map(|w| w.z).collect();
+                    set.sweep_soa(h, &friction, &inv_masses, [&mut x, &mut y, &mut z]);
+                    for (i, w) in v.iter_mut().enumerate() {
+                        *w = Vec3::new(x[i], y[i], z[i]);
+                    }
+                }
+                // Move the velocities a little, as the distance constraints would.
+                for w in v.iter_mut().chain(expected_v.iter_mut()) {
+                    *w *= 0.97;
+                }
+            }
+            for (a, b) in v.iter().zip(&expected_v) {
+                assert!((a - b).norm() <= 1e-12 * (1.0 + b.norm()), "{a:?} vs {b:?}");
+            }
+            for (k, ((ln, lt), t)) in impulses.iter().zip(set.tangent_impulses()).enumerate() {
+                assert!((set.normal_impulses()[k] - ln).abs() <= 1e-12 * (1.0 + ln.abs()));
+                assert!((t - lt).norm() <= 1e-12 * (1.0 + lt.norm()));
+            }
+            assert!(impulses.iter().any(|(ln, lt)| *ln > 0.0 && lt.norm() > 0.0));
+        }
     }
 
     #[test]
