@@ -2,7 +2,7 @@
 //! other in one process: the bench's rod (nitinol, 1 m, 1000 elements, pendulum, dt 1e-3).
 //!
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_profile -- [f32|f64] [STEPS]`;
-//! `ITERS`, `TOL` override the stiff settings (default settings otherwise).
+//! `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`step`, `lag`) override the stiff settings (default settings otherwise).
 
 use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings};
 use backend_cpu::{step_rod, step_rod_stiff};
@@ -38,6 +38,14 @@ fn run<T: Real>(steps: u64) {
     if let Some(t) = env("TOL") {
         st.tolerance = t;
     }
+    if let Some(g) = env("GEOM") {
+        st.geometric = g;
+    }
+    match std::env::var("REFACTOR").as_deref() {
+        Ok("step") => st.refactor = backend_cpu::Refactor::EveryStep,
+        Ok("lag") => st.refactor = backend_cpu::Refactor::Lagged,
+        _ => {}
+    }
     let n = 1000;
     let mut times = Vec::new();
     let mut r = rod::<T>(n);
@@ -59,20 +67,26 @@ fn run<T: Real>(steps: u64) {
     }
     let stiff = summary(&mut times);
     let it = scratch.report().total_iterations as f64 / steps as f64;
+    let fac = scratch.report().factorisations as f64 / steps as f64;
+    println!("factorisations per step {fac:.3}");
     println!(
-        "{}: explicit median {:.1} min {:.1} us; stiff median {:.1} min {:.1} us ({it:.2} it/step); ratio of medians {:.2}",
+        "{}: explicit median {:.1} min {:.1} mean {:.1} us; stiff median {:.1} min {:.1} mean {:.1} us ({it:.2} it/step); ratio of means {:.2}",
         std::any::type_name::<T>(),
         explicit.0,
         explicit.1,
+        explicit.2,
         stiff.0,
         stiff.1,
-        stiff.0 / explicit.0
+        stiff.2,
+        stiff.2 / explicit.2
     );
 }
 
-fn summary(t: &mut [f64]) -> (f64, f64) {
+/// Median, minimum and mean of per-step times.
+fn summary(t: &mut [f64]) -> (f64, f64, f64) {
+    let mean = t.iter().sum::<f64>() / t.len() as f64;
     t.sort_by(f64::total_cmp);
-    (t[t.len() / 2], t[0])
+    (t[t.len() / 2], t[0], mean)
 }
 
 fn main() {

@@ -25,7 +25,7 @@ use cosserat_model::Vec3;
 use nalgebra::Matrix3;
 
 /// `a diag(w) bᵀ`.
-#[inline(always)]
+#[cfg(test)]
 fn awbt(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> M3 {
     let mut c = [[0.0; 3]; 3];
     for r in 0..3 {
@@ -38,7 +38,7 @@ fn awbt(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> M3 {
 }
 
 /// `c + a diag(w) aᵀ` (symmetric: the upper triangle, mirrored).
-#[inline(always)]
+#[cfg(test)]
 fn add_awat(c: &mut M3, a: &Matrix3<f64>, w: &Vec3<f64>) {
     for r in 0..3 {
         let aw = [a[(r, 0)] * w[0], a[(r, 1)] * w[1], a[(r, 2)] * w[2]];
@@ -138,8 +138,9 @@ fn inverse_spd(a: &M3) -> M3 {
 }
 
 /// Block row `k` of `J K⁻¹ Jᵀ + α̃` in the ordering `(λ_Γ0, λ_Ω0, λ_Γ1, …)`: the diagonal
-/// block and the blocks in columns `k + 1` and `k + 2` (zero past the end).
-#[inline(always)]
+/// block and the blocks in columns `k + 1` and `k + 2` (zero past the end). The direct
+/// products of the Jacobians, kept as the reference of [`blocks4`].
+#[cfg(test)]
 fn blocks(
     k: usize,
     ss: &[StretchShear<f64>],
@@ -248,6 +249,85 @@ fn tmul4(c: Option<&B4>, a: &B4, b: &B4) -> B4 {
     out
 }
 
+/// `a diag(w) bᵀ` as padded rows: row `r` is `Σ_i a[r][i] w_i · column_i(b)`, and nalgebra
+/// stores `b` by columns.
+#[inline(always)]
+fn awbt4(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> B4 {
+    let col = |i: usize| -> R4 { [b[(0, i)], b[(1, i)], b[(2, i)], 0.0] };
+    let (b0, b1, b2) = (col(0), col(1), col(2));
+    let mut out = [[0.0; 4]; 3];
+    for (r, o) in out.iter_mut().enumerate() {
+        let first = scale4(&b0, a[(r, 0)] * w[0]);
+        *o = axpy(axpy(first, a[(r, 1)] * w[1], &b1), a[(r, 2)] * w[2], &b2);
+    }
+    out
+}
+
+/// Block row `k` of `J K⁻¹ Jᵀ + α̃` (as [`blocks`]), with the off-diagonal blocks as padded
+/// rows and the diagonal blocks in closed form:
+/// - `Γ_j`: `[g]× W_j [g]×ᵀ + ((w_j + w_{j+1}) / l0²) I + α̃` (`∂Γ/∂r = ±Rᵀ/l0`);
+/// - `Ω_j`, with `∂Ω/∂θ_a = [c]× − a I`, `∂Ω/∂θ_b = [c]× + a I` (`a = s_w / l̄`,
+///   `c = s_v / l̄`): `[c]× (W_a + W_b) [c]×ᵀ + a S(c, W_b − W_a) + a² (W_a + W_b) + α̃` with
+///   `S(c, W)_{rk} = [c]×_{rk} (W_k − W_r)` (from `[c]× W + W [c]×ᵀ`, as `[c]×ᵀ = −[c]×`).
+#[inline(always)]
+fn blocks4(
+    k: usize,
+    ss: &[StretchShear<f64>],
+    bt: &[BendTwist<f64>],
+    m: &Masses<'_>,
+) -> (M3, B4, B4) {
+    let zero = [[0.0; 4]; 3];
+    let j = k / 2;
+    if k.is_multiple_of(2) {
+        let s = &ss[j];
+        let wj = &m.inv_inertia[j];
+        let g = s.value + Vec3::z();
+        let mut gg = cross_w_cross(&g, wj);
+        let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
+        for c in 0..3 {
+            gg[c][c] += m.alpha_gamma[j][c] + wsum;
+        }
+        if j < bt.len() {
+            let a1 = awbt4(&s.d_theta, wj, &bt[j].d_theta_a);
+            let w = Vec3::repeat(-m.inv_mass[j + 1]);
+            let a2 = awbt4(&s.d_rb, &w, &ss[j + 1].d_rb);
+            (gg, a1, a2)
+        } else {
+            (gg, zero, zero)
+        }
+    } else {
+        let b = &bt[j];
+        let (wa, wb) = (&m.inv_inertia[j], &m.inv_inertia[j + 1]);
+        let db = &b.d_theta_b;
+        let a = db[(0, 0)];
+        let c = Vec3::new(db[(2, 1)], db[(0, 2)], db[(1, 0)]);
+        let wsum = wa + wb;
+        let wdiff = wb - wa;
+        let mut oo = cross_w_cross(&c, &wsum);
+        // a S(c, W_b − W_a): off-diagonal only ([c]× has a zero diagonal).
+        let s01 = a * (-c.z) * (wdiff.y - wdiff.x);
+        let s02 = a * c.y * (wdiff.z - wdiff.x);
+        let s12 = a * (-c.x) * (wdiff.z - wdiff.y);
+        oo[0][1] += s01;
+        oo[1][0] += s01;
+        oo[0][2] += s02;
+        oo[2][0] += s02;
+        oo[1][2] += s12;
+        oo[2][1] += s12;
+        let a2w = a * a;
+        for r in 0..3 {
+            oo[r][r] += a2w * wsum[r] + m.alpha_omega[j][r];
+        }
+        let a1 = awbt4(db, wb, &ss[j + 1].d_theta);
+        let a2 = if j + 1 < bt.len() {
+            awbt4(db, wb, &bt[j + 1].d_theta_a)
+        } else {
+            zero
+        };
+        (oo, a1, a2)
+    }
+}
+
 /// One eliminated 3×3 block row: `P⁻¹` and `P⁻¹ A_{k,k+1}`, `P⁻¹ A_{k,k+2}` (padded rows).
 #[derive(Clone, Copy, Debug, Default)]
 struct Pivot {
@@ -291,20 +371,16 @@ impl BlockTridiagonal {
         // Amounts still to subtract from the next two diagonal blocks and the block between.
         let (mut s11, mut s12, mut s22) = (zero, zero, zero);
         for (k, out) in self.piv.iter_mut().enumerate() {
-            let (mut d, a1, a2) = blocks(k, ss, bt, m);
+            let (mut d, mut a1, a2) = blocks4(k, ss, bt, m);
             // Updates from the blocks eliminated before.
             for r in 0..3 {
                 for c in 0..3 {
                     d[r][c] -= s11[r][c];
                 }
-            }
-            let mut a1 = pad(&a1);
-            for r in 0..3 {
                 for c in 0..4 {
                     a1[r][c] -= s12[r][c];
                 }
             }
-            let a2 = pad(&a2);
             // The pivot's adjugate and determinant (`d` is symmetric). The products with the
             // adjugate do not wait for the division, and the Schur complement on the next
             // diagonal block — the only quantity on the dependency chain from one block to
@@ -372,16 +448,21 @@ impl BlockTridiagonal {
         };
         // Forward: z_k = b_k − Y_{k−1}ᵀ z_{k−1} − Z_{k−2}ᵀ z_{k−2}; then w_k = P_k⁻¹ z_k
         // (`Yᵀ z = Σ_i z_i · row_i(Y)`; `P⁻¹` is symmetric).
+        // The term of block k − 2 is subtracted first: only the term of block k − 1 is on the
+        // dependency chain from one block to the next.
         let (mut z1, mut z2) = ([0.0; 4], [0.0; 4]);
         for k in 0..blocks {
             let mut b = get(x, k);
-            if k >= 1 {
-                let y = &self.piv[k - 1].y;
-                b = axpy(axpy(axpy(b, -z1[0], &y[0]), -z1[1], &y[1]), -z1[2], &y[2]);
-            }
             if k >= 2 {
                 let z = &self.piv[k - 2].z;
                 b = axpy(axpy(axpy(b, -z2[0], &z[0]), -z2[1], &z[1]), -z2[2], &z[2]);
+            }
+            if k >= 1 {
+                let y = &self.piv[k - 1].y;
+                let t = axpy(axpy(scale4(&y[0], z1[0]), z1[1], &y[1]), z1[2], &y[2]);
+                for (bl, tl) in b.iter_mut().zip(t) {
+                    *bl -= tl;
+                }
             }
             z2 = z1;
             z1 = b;
@@ -396,9 +477,9 @@ impl BlockTridiagonal {
             let pv = &self.piv[k];
             for r in 0..3 {
                 let (y, z) = (&pv.y[r], &pv.z[r]);
-                let t = fma(y[0], x1[0], fma(y[1], x1[1], y[2] * x1[2]));
                 let u = fma(z[0], x2[0], fma(z[1], x2[1], z[2] * x2[2]));
-                v[r] -= t + u;
+                let t = y[0] * x1[0] + y[1] * x1[1] + y[2] * x1[2];
+                v[r] = (v[r] - u) - t;
             }
             x2 = x1;
             x1 = v;
@@ -418,7 +499,7 @@ impl BlockTridiagonal {
         let n = ss.len();
         let mut a = vec![vec![0.0; 6 * n]; 6 * n];
         for k in 0..2 * n - 1 {
-            let (d, a1, a2) = blocks(k, ss, bt, m);
+            let (d, a1, a2) = blocks4(k, ss, bt, m);
             for r in 0..3 {
                 for c in 0..3 {
                     a[3 * k + r][3 * k + c] = d[r][c];
@@ -528,6 +609,26 @@ mod tests {
                 }
             })
             .collect();
+        // The closed-form assembly equals the direct products of the Jacobians.
+        for k in 0..2 * n - 1 {
+            let (d, a1, a2) = blocks(k, &ss, &bt, &m);
+            let (d4, b1, b2) = blocks4(k, &ss, &bt, &m);
+            let scale = d.iter().flatten().fold(1.0_f64, |s, v| s.max(v.abs()));
+            for r in 0..3 {
+                for c in 0..3 {
+                    for (x, y) in [
+                        (d[r][c], d4[r][c]),
+                        (a1[r][c], b1[r][c]),
+                        (a2[r][c], b2[r][c]),
+                    ] {
+                        assert!(
+                            (x - y).abs() < 1e-13 * scale,
+                            "block {k} ({r}, {c}): {x} vs {y}"
+                        );
+                    }
+                }
+            }
+        }
         let a = BlockTridiagonal::dense(&ss, &bt, &m);
         let mut worst: f64 = 0.0;
         let scale = a.iter().flatten().fold(0.0_f64, |s, v| s.max(v.abs()));
