@@ -7,7 +7,8 @@
 //! - `collides-false`: the simulation has the default procedural vessel (~26 000 triangles) but
 //!   the rod is built with `RodBuilder::collides(false)`, so it carries no mesh contact;
 //! - `far-away`: the rod collides with the vessel but swings more than 1 m away from every triangle, so
-//!   detection runs every step (AABB tree, contact buffer) and finds nothing.
+//!   detection runs every step and finds nothing (each point's clearance from the mesh's bounding
+//!   box keeps it from querying the tree).
 //!
 //! The rod hangs at the same place in all three, so the physics is the same.
 //!

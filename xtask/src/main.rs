@@ -10,6 +10,8 @@
 //!   `docs/benchmarks/`.
 //! - `cargo xtask bench` — the criterion CPU benches with accuracy beside them, into
 //!   `docs/benchmarks/cpu.md`, and the insertion benchmark into `docs/benchmarks/insertion.md`.
+//! - `cargo xtask bench --insertion` — only the insertion and free-space benchmarks, into
+//!   `docs/benchmarks/insertion.md`.
 //! - `cargo xtask bench --gpu` — the GPU backend's benchmark on this machine's adapter.
 //!
 //! The flag parser is deliberately small: a handful of commands and flags, no dependency.
@@ -88,7 +90,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --gpu]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --gpu]".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -102,9 +104,11 @@ fn run() -> Result<bool, String> {
             validate::run(args.option("only"))
         }
         "bench" => {
-            args.reject_unknown(&["pareto", "gpu"])?;
+            args.reject_unknown(&["pareto", "insertion", "gpu"])?;
             if args.flag("pareto") {
                 pareto::run()
+            } else if args.flag("insertion") {
+                bench::insertion_only()
             } else if args.flag("gpu") {
                 bench_gpu()
             } else {

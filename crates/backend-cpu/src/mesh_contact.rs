@@ -12,7 +12,8 @@
 //! point gets a clearance: its distance to the nearest triangle (searched up to
 //! [`CLEARANCE_LOOKAHEAD`]) minus the query radius. Until the point has moved that far in total
 //! it cannot touch the mesh, so it is not queried; the contacts found are exactly those of a full
-//! query every step.
+//! query every step. A point outside the mesh's bounding box takes its distance to the box as
+//! clearance, so a rod far from the mesh costs one distance per point and step.
 //!
 //! **Near lists.** A point close to a wall (most of a wire pressed along a vessel) is queried
 //! every step, and a tree walk from the root visits every leaf box near it. Instead, such a point
@@ -119,6 +120,7 @@ impl<T: Real> RodMeshContact<T> {
         let reach = radius + margin;
         let collider = &self.settings.collider;
         let skin = NEAR_SKIN * reach;
+        let root = &collider.bvh().nodes()[0];
         let n = self.points.len();
         if self.last.len() != n {
             self.last = self.points.clone();
@@ -152,14 +154,19 @@ impl<T: Real> RodMeshContact<T> {
             self.clearance[i] = if r.count > 0 {
                 0.0
             } else {
-                // The list holds every triangle closer than `horizon`; beyond it, ask the tree.
+                // The list holds every triangle closer than `horizon`; beyond it, the mesh's
+                // bounding box bounds the distance from below, and else the tree is asked.
                 let horizon = reach + skin - from_anchor;
+                let lookahead = reach + CLEARANCE_LOOKAHEAD;
+                let outside = root.distance_squared(p).sqrt();
                 let d = if nearest < horizon {
                     nearest
+                } else if outside >= lookahead {
+                    outside
                 } else {
                     collider
-                        .nearest(p, reach + CLEARANCE_LOOKAHEAD)
-                        .map_or(reach + CLEARANCE_LOOKAHEAD, |n| n.distance)
+                        .nearest(p, lookahead)
+                        .map_or(lookahead, |n| n.distance)
                 };
                 // Rounding of the distances above must not open a gap.
                 d - reach - 1e-9
