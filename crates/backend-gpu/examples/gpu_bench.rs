@@ -382,7 +382,16 @@ fn main() {
 fn variant_section(quick: bool) -> Vec<Value> {
     let k = if quick { 10 } else { 100 };
     let budget = if quick { 20 } else { 1000 };
-    let base = KernelVariant::default();
+    // The kernel before the current defaults (halo exchange every step through a grid-wide
+    // counter, parameters read every step, the CPU's impulse formula), against which the
+    // structural variants below are measured; the current default gets rows of its own.
+    let base = KernelVariant {
+        exchange_steps: 1,
+        neighbour_sync: false,
+        register_constants: false,
+        fast_impulse: false,
+        ..KernelVariant::default()
+    };
     let workgroup = KernelVariant {
         subgroups: false,
         ..base.clone()
@@ -498,6 +507,106 @@ fn variant_section(quick: bool) -> Vec<Value> {
                 },
             ));
         }
+    }
+    // The current defaults and the steps between them and the previous kernel.
+    let current = KernelVariant::default();
+    for (name, n, path, v) in [
+        (
+            "default",
+            1000usize,
+            KernelPath::MultiWorkgroup,
+            current.clone(),
+        ),
+        (
+            "default, 96 threads",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                multi_threads: 96,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, exchange every step",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                exchange_steps: 1,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, grid-wide counter",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                neighbour_sync: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, parameters from storage",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                register_constants: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, CPU impulse formula",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                fast_impulse: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, exchange by atomic words",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                coherent_exchange: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default, 2 steps per exchange",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                exchange_steps: 2,
+                ..current.clone()
+            },
+        ),
+        (
+            "default (workgroup layout)",
+            1000,
+            KernelPath::SingleWorkgroup,
+            KernelVariant {
+                subgroups: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default (workgroup layout)",
+            128,
+            KernelPath::SingleWorkgroup,
+            KernelVariant {
+                subgroups: false,
+                ..current.clone()
+            },
+        ),
+        ("default", 4096, KernelPath::MultiWorkgroup, current.clone()),
+        (
+            "default",
+            16384,
+            KernelPath::MultiWorkgroup,
+            current.clone(),
+        ),
+    ] {
+        cases.push((name.to_string(), n, 1, path, 256, v));
     }
     cases.push((
         "single workgroup, 1024 threads".into(),
@@ -645,143 +754,44 @@ fn variant_section(quick: bool) -> Vec<Value> {
 /// a few checks at other sizes): the exploration behind the planner's defaults (`--focus`).
 fn focus_section() -> Value {
     let base = KernelVariant::default();
-    let fast = |v: KernelVariant| KernelVariant {
-        neighbour_sync: true,
-        register_constants: true,
-        fast_impulse: true,
-        ..v
-    };
     // (label, elements, rods, path, variant)
     type Case = (String, usize, usize, KernelPath, KernelVariant);
     let mut cases: Vec<Case> = Vec::new();
     let multi = KernelPath::MultiWorkgroup;
-    // Window shapes: (threads, points per thread, shuffle) and steps per exchange.
-    let shapes: [(u32, u32, bool, &[u32]); 6] = [
-        (128, 2, false, &[1, 2, 3, 4]),
-        (96, 2, false, &[1, 2, 3]),
-        (64, 2, false, &[1, 2]),
-        (32, 4, true, &[1, 2]),
-        (32, 6, true, &[1, 2, 3]),
-        (32, 8, true, &[2, 3]),
-    ];
-    for (threads, ept, shuffle, xss) in shapes {
-        for &xs in xss {
-            let v = KernelVariant {
-                multi_threads: threads,
-                multi_points_per_thread: ept,
-                shuffle_windows: shuffle,
-                exchange_steps: xs,
-                ..base.clone()
-            };
-            let name = format!(
-                "{threads}{} x {ept}, {xs} steps/exchange",
-                if shuffle { " (shuffle)" } else { "" }
-            );
-            cases.push((name.clone(), 1000, 1, multi, v.clone()));
-            cases.push((format!("{name}, nbr+regc+fast"), 1000, 1, multi, fast(v)));
+    for n in [1000usize, 4096, 16384] {
+        for (threads, xs) in [(128u32, 2u32), (96, 2), (128, 3), (160, 3), (128, 1)] {
+            if n > 1000 && !(threads == 128 && xs == 2) {
+                continue;
+            }
+            for coherent in [false, true] {
+                let v = KernelVariant {
+                    multi_threads: threads,
+                    exchange_steps: xs,
+                    coherent_exchange: coherent,
+                    ..base.clone()
+                };
+                let name = format!(
+                    "{threads} threads, {xs} steps/exchange{}",
+                    if coherent { ", coherent" } else { "" }
+                );
+                cases.push((name, n, 1, multi, v));
+            }
         }
     }
-    // One factor at a time on two shapes.
-    for (threads, xs) in [(128u32, 2u32), (96, 2)] {
-        let v = KernelVariant {
-            multi_threads: threads,
-            multi_points_per_thread: 2,
-            exchange_steps: xs,
-            ..base.clone()
-        };
-        for (what, w) in [
-            (
-                "nbr",
-                KernelVariant {
-                    neighbour_sync: true,
-                    ..v.clone()
-                },
-            ),
-            (
-                "regc",
-                KernelVariant {
-                    register_constants: true,
-                    ..v.clone()
-                },
-            ),
-            (
-                "fast",
-                KernelVariant {
-                    fast_impulse: true,
-                    ..v.clone()
-                },
-            ),
-            (
-                "regc+fast",
-                KernelVariant {
-                    register_constants: true,
-                    fast_impulse: true,
-                    ..v.clone()
-                },
-            ),
-        ] {
-            cases.push((
-                format!("{threads} x 2, {xs} steps/exchange, {what}"),
-                1000,
-                1,
-                multi,
-                w,
-            ));
-        }
-    }
-    // Single workgroup and subgroup layouts with the register / impulse variants.
-    let workgroup = KernelVariant {
-        subgroups: false,
-        ..base.clone()
-    };
-    for (n, count, v, name) in [
-        (1000usize, 1usize, workgroup.clone(), "single workgroup"),
-        (128, 1, workgroup.clone(), "single workgroup"),
-        (128, 10_000, base.clone(), "subgroup layout"),
-    ] {
-        cases.push((
-            name.to_string(),
-            n,
-            count,
-            KernelPath::SingleWorkgroup,
-            v.clone(),
-        ));
-        cases.push((
-            format!("{name}, regc+fast"),
-            n,
-            count,
-            KernelPath::SingleWorkgroup,
+    for (name, v) in [
+        ("default", base.clone()),
+        (
+            "default, previous kernel",
             KernelVariant {
-                register_constants: true,
-                fast_impulse: true,
-                ..v
-            },
-        ));
-    }
-    // Long rods: the co-residency limit lowers the steps per exchange where needed.
-    for n in [4096usize, 16384] {
-        for (threads, xs) in [(128u32, 1u32), (128, 2), (128, 3), (96, 2)] {
-            let v = KernelVariant {
-                multi_threads: threads,
-                multi_points_per_thread: 2,
-                exchange_steps: xs,
+                exchange_steps: 1,
+                neighbour_sync: false,
+                register_constants: false,
+                fast_impulse: false,
                 ..base.clone()
-            };
-            cases.push((
-                format!("{threads} x 2, {xs} steps/exchange"),
-                n,
-                1,
-                multi,
-                v.clone(),
-            ));
-            cases.push((
-                format!("{threads} x 2, {xs} steps/exchange, nbr+regc+fast"),
-                n,
-                1,
-                multi,
-                fast(v),
-            ));
-        }
+            },
+        ),
+    ] {
+        cases.push((name.to_string(), 1000, 1, KernelPath::Auto, v));
     }
     println!("| variant | elements | rods | GPU µs/step | kernel | discrepancy |");
     println!("|---|---|---|---|---|---|");

@@ -20,10 +20,11 @@
 //! and that, not synchronisation, was what made the earlier kernel slow.
 //! - **multi-workgroup (grid)**: a rod too long for one workgroup is cut into chunks, each
 //!   stepped by a co-resident workgroup on a window that overlaps its neighbours by a halo wider
-//!   than the information travels in one step. One grid barrier per step (spin on a storage
-//!   atomic, capped, with a timeout reported as an error) exchanges the halos through atomics.
-//! - **dispatch per step**: the same chunks and halos, one dispatch per step, for adapters on
-//!   which co-residency cannot be established (lavapipe, unknown GPUs).
+//!   than the information travels in a few steps (3 by default). Every few steps the windows
+//!   exchange halos (through atomics, or vec4s in a `@coherent` buffer) and wait for their
+//!   neighbours (a spin on storage flags, capped, with a timeout reported as an error).
+//! - **dispatch per step**: the same chunks and halos, one dispatch per exchange period, for
+//!   adapters on which co-residency cannot be established (lavapipe, unknown GPUs).
 //!
 //! The host uploads everything once; afterwards a batch sends only its step range and any
 //! changed end motion, and positions are read back only when asked, into one of two staging
@@ -152,7 +153,7 @@ pub struct KernelVariant {
     /// with 128 threads against 6.4 with 256).
     pub multi_threads: u32,
     /// Points per thread of the multi-workgroup windows; 0 picks the fewest (even) that leave
-    /// each window owning at least two halos and 64 points.
+    /// each window owning at least one halo and 64 points.
     pub multi_points_per_thread: u32,
     /// Steps between halo exchanges of the multi-workgroup paths (the dispatch-per-step path
     /// then runs this many steps per dispatch). The halo grows to cover them,
@@ -162,6 +163,9 @@ pub struct KernelVariant {
     /// Multi-workgroup path: each workgroup waits only for its two neighbours' flags instead of
     /// a grid-wide arrival counter.
     pub neighbour_sync: bool,
+    /// Multi-workgroup path: exchange halos as vec4s through a `@coherent` buffer where the
+    /// adapter has `MEMORY_DECORATION_COHERENT`, instead of single words through atomics.
+    pub coherent_exchange: bool,
     /// Multi-workgroup windows of one subgroup (threads = the adapter's subgroup size) whose
     /// threads exchange their boundary points by subgroup shuffles instead of workgroup memory.
     pub shuffle_windows: bool,
@@ -185,11 +189,12 @@ impl Default for KernelVariant {
             subgroup_points_per_thread: 8,
             multi_threads: 128,
             multi_points_per_thread: 0,
-            exchange_steps: 1,
-            neighbour_sync: false,
+            exchange_steps: 3,
+            neighbour_sync: true,
+            coherent_exchange: true,
             shuffle_windows: false,
-            register_constants: false,
-            fast_impulse: false,
+            register_constants: true,
+            fast_impulse: true,
         }
     }
 }

@@ -38,13 +38,14 @@ pub(crate) const FLAGS: [&str; 9] = [
 /// and path combination (`FAST` and the measurement-only `SWEEP_LOADS` / `RSQRT`: inextensible
 /// only; `NBR_SYNC`: with `GRID` only).
 #[cfg(test)]
-pub(crate) const VARIANT_FLAGS: [&[&str]; 6] = [
+pub(crate) const VARIANT_FLAGS: [&[&str]; 7] = [
     &["SWEEP_LOADS"],
     &["RSQRT"],
     &["FAST"],
     &["REGC"],
     &["FAST", "REGC"],
     &["FAST", "REGC", "NBR_SYNC"],
+    &["FAST", "REGC", "NBR_SYNC", "COHERENT"],
 ];
 
 /// Compile-time shape and feature set of one step kernel.
@@ -442,7 +443,7 @@ mod tests {
                 for v in VARIANT_FLAGS {
                     let inextensible_only = v.iter().any(|f| *f != "REGC");
                     if (inextensible_only && has("EXTENSIBLE"))
-                        || (v.contains(&"NBR_SYNC") && !has("GRID"))
+                        || ((v.contains(&"NBR_SYNC") || v.contains(&"COHERENT")) && !has("GRID"))
                     {
                         continue;
                     }

@@ -27,6 +27,8 @@ struct ParamsU {
     hi2: f32,
     base_step: u32,
     num_items: u32,
+    epoch0: u32,
+    pad: [u32; 3],
 }
 
 #[repr(C)]
@@ -91,6 +93,9 @@ pub struct AdapterSummary {
     /// The subgroup size, when the adapter has subgroup operations and one fixed size (the
     /// subgroup layout for short rods needs both).
     pub subgroup_size: Option<u32>,
+    /// Whether storage buffers can be declared `@coherent` (the multi-workgroup halo exchange
+    /// then moves vec4s through one instead of single words through atomics).
+    pub coherent: bool,
 }
 
 /// The plan a simulation runs: path, kernel shape and the work items (one per workgroup).
@@ -130,6 +135,10 @@ pub struct GpuSimulation {
     table_buf: wgpu::Buffer,
     table_stride: u64,
     table_key: Option<(u32, u32)>,
+    /// Halo exchanges of one submission with the cached table.
+    table_exchanges: u32,
+    /// Halo exchanges since the grid's synchronisation words were cleared.
+    epochs: u32,
     states: Vec<StateBuffers>,
     current: usize,
     status_buf: wgpu::Buffer,
@@ -251,12 +260,16 @@ impl GpuSimulation {
         let limits = adapter.limits();
         let want_ts = options.timestamps && features.contains(wgpu::Features::TIMESTAMP_QUERY);
         let has_subgroups = features.contains(wgpu::Features::SUBGROUP);
+        let has_coherent = features.contains(wgpu::Features::MEMORY_DECORATION_COHERENT);
         let mut required_features = wgpu::Features::empty();
         if want_ts {
             required_features |= wgpu::Features::TIMESTAMP_QUERY;
         }
         if has_subgroups {
             required_features |= wgpu::Features::SUBGROUP;
+        }
+        if has_coherent {
+            required_features |= wgpu::Features::MEMORY_DECORATION_COHERENT;
         }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("cosserat-backend-gpu"),
@@ -295,6 +308,7 @@ impl GpuSimulation {
                 && info.subgroup_min_size == info.subgroup_max_size
                 && info.subgroup_min_size >= 4)
                 .then_some(info.subgroup_min_size),
+            coherent: has_coherent,
         };
 
         let plan = make_plan(
@@ -692,6 +706,8 @@ impl GpuSimulation {
             table_buf,
             table_stride,
             table_key: None,
+            table_exchanges: 0,
+            epochs: 0,
             states,
             current: 0,
             status_buf,
@@ -882,6 +898,15 @@ impl GpuSimulation {
                 }
                 self.queue.write_buffer(&self.table_buf, 0, &table);
                 self.table_key = Some((this, spd));
+                self.table_exchanges = exchanges;
+            }
+            // The synchronisation words count exchanges across submissions (30 bits); they are
+            // cleared only before the grid-wide counter could overflow.
+            let n_items = self.plan.items.len() as u64;
+            let clear = self.sync_buf.is_some()
+                && (self.epochs as u64 + self.table_exchanges as u64 + 1) * n_items >= 1 << 29;
+            if clear {
+                self.epochs = 0;
             }
             let s = &self.settings;
             let (lo, hi) = (1.0 - s.divergence_strain, 1.0 + s.divergence_strain);
@@ -891,7 +916,10 @@ impl GpuSimulation {
                 hi2: hi * hi,
                 base_step: self.steps as u32,
                 num_items: self.plan.items.len() as u32,
+                epoch0: self.epochs,
+                pad: [0; 3],
             };
+            self.epochs += self.table_exchanges;
             self.queue
                 .write_buffer(&self.params_buf, 0, bytemuck::bytes_of(&params));
             let mut enc = self
@@ -899,7 +927,7 @@ impl GpuSimulation {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("steps"),
                 });
-            if let Some(sync) = &self.sync_buf {
+            if let Some(sync) = self.sync_buf.as_ref().filter(|_| clear) {
                 enc.clear_buffer(sync, 0, None);
             }
             {
@@ -1361,7 +1389,7 @@ fn make_plan(
         } else {
             (1..=8)
                 .map(|k| 2 * k)
-                .find(|&e| multi_threads * e >= 4 * halo + 64)
+                .find(|&e| multi_threads * e >= 2 * halo + halo.max(64))
                 .unwrap_or(16)
         };
         let chunk = (multi_threads * ept).saturating_sub(2 * halo) / 2 * 2;
@@ -1378,8 +1406,9 @@ fn make_plan(
     let want_xs = variant.exchange_steps.max(1);
     let xs_fitting = |need_co: bool| -> Option<u32> {
         (1..=want_xs).rev().find(|&xs| {
-            let (_, _, chunk) = multi_shape(xs);
-            chunk >= 2 && (!need_co || co.is_some_and(|c| windows_for(chunk) <= c))
+            // Each halo comes from the direct neighbour, so a window owns at least one halo.
+            let (_, halo, chunk) = multi_shape(xs);
+            chunk >= halo.max(2) && (!need_co || co.is_some_and(|c| windows_for(chunk) <= c))
         })
     };
     let xs_grid = xs_fitting(true);
@@ -1508,7 +1537,7 @@ fn make_plan(
                 xs_perstep
             };
             let (ept, halo, chunk) = multi_shape(xs);
-            if chunk < 2 {
+            if chunk < halo.max(2) {
                 return Err(GpuError::PathUnavailable {
                     path,
                     reason: format!(
@@ -1524,6 +1553,9 @@ fn make_plan(
         flags.push("GRID");
         if variant.neighbour_sync {
             flags.push("NBR_SYNC");
+        }
+        if variant.coherent_exchange && adapter.coherent {
+            flags.push("COHERENT");
         }
     }
     if path == KernelPath::DispatchPerStep {

@@ -385,14 +385,15 @@ fn wide_halo_and_shuffle_windows_match_cpu() {
             KernelVariant {
                 shuffle_windows: true,
                 multi_points_per_thread: 16,
+                exchange_steps: 1,
                 ..base.clone()
             },
         ),
         (
-            "shuffle windows, 2 steps per exchange, registers, folded impulse",
+            "shuffle windows, 24 points/thread, 2 steps per exchange, registers, folded impulse",
             KernelVariant {
                 shuffle_windows: true,
-                multi_points_per_thread: 16,
+                multi_points_per_thread: 24,
                 exchange_steps: 2,
                 register_constants: true,
                 fast_impulse: true,

@@ -19,6 +19,8 @@
 //                 instead of a grid-wide arrival counter
 //   REGC          per-point and per-element parameters kept in registers for the dispatch
 //                 instead of being read from storage in every step
+//   COHERENT      (GRID) halos exchanged as vec4s through a `@coherent` buffer instead of
+//                 single words through atomics
 //   FAST          the impulse from one inverseSqrt with the constants w/(w_a + w_b)/h folded
 //                 into registers: t = l0/|d| - 1, v_a -= d t k_a, v_b += d t k_b
 //   SWEEP_LOADS   (measurement variant) read l0 and the inverse masses from storage in every
@@ -53,6 +55,11 @@ struct Params {
     base_step: u32,
     // Number of work items in this dispatch.
     num_items: u32,
+    // GRID: halo exchanges since the synchronisation words were last cleared.
+    epoch0: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // One 256-byte entry per dispatch of a submission (dynamic uniform offset).
@@ -133,9 +140,17 @@ struct Drive {
 // NBR_SYNC: [1 + item]: the item's last published exchange (low 30 bits), bit 31 stopped,
 // bit 30 timed out.
 @group(0) @binding(15) var<storage, read_write> sync: array<atomic<u32>>;
-// Halo exchange: per parity, item and side, HALO points of 16 words (r, v, q, ω). Written and
-// read only through atomics: plain loads of another workgroup's stores can be stale (GPU.md).
+// Halo exchange: per parity, item and side, a slab of HALO points. Component-major, so that
+// the threads of a warp touch consecutive addresses: component c of slab point k at
+// slab * 13 * HALO + c * HALO + k (words r.xyz, v.xyz, q.xyzw, ω.xyz), written and read only
+// through atomics, since plain loads of another workgroup's stores can be stale (GPU.md); with
+// COHERENT, vec4 r, v, q, ω at slab * 4 * HALO + c * HALO + k in a `@coherent` buffer, whose
+// loads bypass the incoherent L1 (GPU.md: no stale read in 2.7·10⁹).
+//#if COHERENT
+@coherent @group(0) @binding(16) var<storage, read_write> xch: array<vec4<f32>>;
+//#else
 @group(0) @binding(16) var<storage, read_write> xch: array<atomic<u32>>;
+//#endif
 //#endif
 
 //#if !SHFL
@@ -169,25 +184,49 @@ fn key_of(rel_step: u32, local_elem: u32, code: u32) -> u32 {
 }
 
 //#if GRID
+//#if COHERENT
+const XCH_COMPONENTS: u32 = 4u;
+//#else
+const XCH_COMPONENTS: u32 = 13u;
+//#endif
+
+// First entry of point k of a slab; component c is at + c * HALO.
 fn xch_index(parity: u32, item: u32, side: u32, k: u32) -> u32 {
-    return (((parity * params.num_items + item) * 2u + side) * HALO + k) * 16u;
+    return ((parity * params.num_items + item) * 2u + side) * XCH_COMPONENTS * HALO + k;
 }
 
-fn xch_store4(i: u32, x: vec4<f32>) {
-    atomicStore(&xch[i], bitcast<u32>(x.x));
-    atomicStore(&xch[i + 1u], bitcast<u32>(x.y));
-    atomicStore(&xch[i + 2u], bitcast<u32>(x.z));
-    atomicStore(&xch[i + 3u], bitcast<u32>(x.w));
+//#if COHERENT
+fn xch_store(i: u32, r: vec3<f32>, v: vec3<f32>, q: vec4<f32>, w: vec3<f32>) {
+    xch[i] = vec4<f32>(r, 0.0);
+    xch[i + HALO] = vec4<f32>(v, 0.0);
+    xch[i + 2u * HALO] = q;
+    xch[i + 3u * HALO] = vec4<f32>(w, 0.0);
+}
+//#else
+fn xch_put(i: u32, x: f32) {
+    atomicStore(&xch[i], bitcast<u32>(x));
 }
 
-fn xch_load4(i: u32) -> vec4<f32> {
-    return vec4<f32>(
-        bitcast<f32>(atomicLoad(&xch[i])),
-        bitcast<f32>(atomicLoad(&xch[i + 1u])),
-        bitcast<f32>(atomicLoad(&xch[i + 2u])),
-        bitcast<f32>(atomicLoad(&xch[i + 3u])),
-    );
+fn xch_get(i: u32) -> f32 {
+    return bitcast<f32>(atomicLoad(&xch[i]));
 }
+
+fn xch_store(i: u32, r: vec3<f32>, v: vec3<f32>, q: vec4<f32>, w: vec3<f32>) {
+    xch_put(i, r.x);
+    xch_put(i + HALO, r.y);
+    xch_put(i + 2u * HALO, r.z);
+    xch_put(i + 3u * HALO, v.x);
+    xch_put(i + 4u * HALO, v.y);
+    xch_put(i + 5u * HALO, v.z);
+    xch_put(i + 6u * HALO, q.x);
+    xch_put(i + 7u * HALO, q.y);
+    xch_put(i + 8u * HALO, q.z);
+    xch_put(i + 9u * HALO, q.w);
+    xch_put(i + 10u * HALO, w.x);
+    xch_put(i + 11u * HALO, w.y);
+    xch_put(i + 12u * HALO, w.z);
+}
+//#endif
 //#endif
 
 @compute @workgroup_size(WG)
@@ -320,27 +359,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         // Halo exchange every XS steps (a dispatch starts from the whole window, read from the
         // state buffers): publish the owned boundary slabs, wait, read the halos.
         if s > 0u && s % XS == 0u {
-            let epoch = chunk.sync_base + s / XS;
+            let epoch = params.epoch0 + chunk.sync_base + s / XS;
             let par = epoch & 1u;
 //#for e 0 EPT
             {
+                // A point may belong to both slabs when the window owns fewer than 2 HALO.
                 let gp = it.w0 + b0 + {e};
-                var side = NONE;
-                var k = 0u;
                 if it.left != NONE && gp >= it.o0 && gp < it.o0 + HALO {
-                    side = 0u;
-                    k = gp - it.o0;
+                    xch_store(xch_index(par, item_index, 0u, gp - it.o0), r[{e}], v[{e}], q[{e}], w[{e}]);
                 }
                 if it.right != NONE && gp + HALO >= it.o1 && gp < it.o1 {
-                    side = 1u;
-                    k = gp + HALO - it.o1;
-                }
-                if side != NONE {
-                    let i = xch_index(par, item_index, side, k);
-                    xch_store4(i, vec4<f32>(r[{e}], 0.0));
-                    xch_store4(i + 4u, vec4<f32>(v[{e}], 0.0));
-                    xch_store4(i + 8u, q[{e}]);
-                    xch_store4(i + 12u, vec4<f32>(w[{e}], 0.0));
+                    xch_store(xch_index(par, item_index, 1u, gp + HALO - it.o1), r[{e}], v[{e}], q[{e}], w[{e}]);
                 }
             }
 //#endfor
@@ -379,10 +408,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 if wg_stop != 0u {
                     atomicOr(&sync[0], 0x80000000u);
                 }
-                // The counter is cleared once per submission and every exchange of every
-                // dispatch arrives once, so the target counts from the submission's first
-                // exchange. An abort bit is set before its setter arrives (or, for a workgroup
-                // that stops between exchanges, when it leaves), so whoever waits sees it.
+                // Every exchange of every dispatch arrives once, and the host counts the
+                // exchanges since it last cleared the counter (epoch0), so the target is a
+                // multiple of the items. An abort bit is set before its setter arrives (or, for
+                // a workgroup that stops between exchanges, when it leaves), so whoever waits
+                // sees it.
                 let goal = params.num_items * epoch;
                 var seen = atomicAdd(&sync[0], 1u) + 1u;
                 for (var i = 0u; i < SPIN_CAP; i++) {
@@ -412,10 +442,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     i = xch_index(par, it.right, 0u, gp - it.o1);
                 }
                 if i != NONE {
-                    r[{e}] = xch_load4(i).xyz;
-                    v[{e}] = xch_load4(i + 4u).xyz;
-                    q[{e}] = xch_load4(i + 8u);
-                    w[{e}] = xch_load4(i + 12u).xyz;
+//#if COHERENT
+                    r[{e}] = xch[i].xyz;
+                    v[{e}] = xch[i + HALO].xyz;
+                    q[{e}] = xch[i + 2u * HALO];
+                    w[{e}] = xch[i + 3u * HALO].xyz;
+//#else
+                    r[{e}] = vec3<f32>(xch_get(i), xch_get(i + HALO), xch_get(i + 2u * HALO));
+                    v[{e}] = vec3<f32>(xch_get(i + 3u * HALO), xch_get(i + 4u * HALO), xch_get(i + 5u * HALO));
+                    q[{e}] = vec4<f32>(xch_get(i + 6u * HALO), xch_get(i + 7u * HALO), xch_get(i + 8u * HALO), xch_get(i + 9u * HALO));
+                    w[{e}] = vec3<f32>(xch_get(i + 10u * HALO), xch_get(i + 11u * HALO), xch_get(i + 12u * HALO));
+//#endif
                 }
             }
 //#endfor
