@@ -1,7 +1,8 @@
 //! GPU benchmark: the paper's free-space test (section 3.1) and a many-rods throughput test, with
 //! the agreement with the CPU backend measured next to every figure.
 //!
-//! Usage: `gpu_bench OUT.json [--quick]`. The free-space test is a straight horizontal rod of
+//! Usage: `gpu_bench OUT.json [--quick | --focus | --host]` (`--host`: only the single step with
+//! readback, three rounds). The free-space test is a straight horizontal rod of
 //! 1 cm elements pinned at one end, released swinging at 1 rad/s about the pin under gravity,
 //! 10 red–black constraint iterations per step, dt = 20 µs. (A release from rest moves the rod
 //! by only a few f32 ulps in the 100 steps compared with the CPU; the swing makes that
@@ -213,10 +214,25 @@ fn measure(
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(out_path) = args.get(1).filter(|a| !a.starts_with("--")).cloned() else {
-        eprintln!("usage: gpu_bench OUT.json [--quick | --focus]");
+        eprintln!("usage: gpu_bench OUT.json [--quick | --focus | --host]");
         std::process::exit(2);
     };
     let quick = args.iter().any(|a| a == "--quick");
+    if args.iter().any(|a| a == "--host") {
+        // The single step with readback only, three rounds in a row to show the spread.
+        let rounds: Vec<Value> = (0..3)
+            .map(|round| {
+                println!("\nround {}", round + 1);
+                host_section()
+            })
+            .collect();
+        let doc =
+            json!({"host_rounds": rounds, "date": std::env::var("BENCH_DATE").unwrap_or_default()});
+        std::fs::write(&out_path, serde_json::to_string_pretty(&doc).expect("json"))
+            .expect("write output");
+        eprintln!("wrote {out_path}");
+        return;
+    }
     if args.iter().any(|a| a == "--focus") {
         let doc = focus_section();
         std::fs::write(&out_path, serde_json::to_string_pretty(&doc).expect("json"))
@@ -865,7 +881,16 @@ fn host_section() -> Value {
             KernelPath::MultiWorkgroup,
             KernelPath::DispatchPerStep,
         ] {
-            for (spin, combined) in [(0u32, false), (2000, false), (2000, true), (0, true)] {
+            // (spin µs, submission): "request" = step + request_positions + read_positions,
+            // "combined" = step_and_request + read_positions, "state" = step + read_state (what
+            // the facade's `Simulation::step` does).
+            for (spin, how) in [
+                (0u32, "step + request"),
+                (2000, "step + request"),
+                (2000, "step_and_request"),
+                (0, "step_and_request"),
+                (2000, "step + read_state"),
+            ] {
                 let opts = GpuOptions {
                     path,
                     spin_wait_us: spin,
@@ -883,13 +908,17 @@ fn host_section() -> Value {
                 let mut submit = Vec::new();
                 for i in 0..260 {
                     let t = Instant::now();
-                    if combined {
+                    if how == "step_and_request" {
                         sim.step_and_request(1).expect("submit");
                     } else {
                         sim.step(1).expect("submit");
                     }
                     let ts = t.elapsed().as_secs_f64() * 1e6;
-                    sim.read_positions().expect("read");
+                    if how == "step + read_state" {
+                        sim.read_state().expect("read");
+                    } else {
+                        sim.read_positions().expect("read");
+                    }
                     if i >= 10 {
                         total.push(t.elapsed().as_secs_f64() * 1e6);
                         submit.push(ts);
@@ -903,11 +932,6 @@ fn host_section() -> Value {
                 );
                 let sub = median(submit);
                 let wait = if spin > 0 { "spin" } else { "block" };
-                let how = if combined {
-                    "step_and_request"
-                } else {
-                    "step + request"
-                };
                 println!(
                     "| {path} | {n} | {wait} | {how} | {med:.1} | {min:.1} | {p90:.1} | {sub:.1} | |"
                 );

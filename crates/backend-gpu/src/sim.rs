@@ -116,6 +116,16 @@ struct StateBuffers {
     omg: wgpu::Buffer,
 }
 
+/// A device buffer a blocking read copies from.
+#[derive(Clone, Copy, Debug)]
+enum Part {
+    Positions,
+    Velocities,
+    Frames,
+    AngularVelocities,
+    Status,
+}
+
 struct Pending {
     staging: usize,
     submission: wgpu::SubmissionIndex,
@@ -149,6 +159,9 @@ pub struct GpuSimulation {
     rods: Vec<(u32, u32)>,
     slots: u64,
     staging: [wgpu::Buffer; 2],
+    /// Staging buffer of blocking reads ([`Self::check`], [`Self::read_state`]), made on first
+    /// use and kept.
+    read_staging: Option<wgpu::Buffer>,
     pending: VecDeque<Pending>,
     settings: SolverSettings<f32>,
     steps: u64,
@@ -718,6 +731,7 @@ impl GpuSimulation {
             rods: rod_layout,
             slots: slots_n as u64,
             staging,
+            read_staging: None,
             pending: VecDeque::new(),
             settings: *settings,
             steps: 0,
@@ -1147,55 +1161,82 @@ impl GpuSimulation {
 
     /// Waits for all submitted work and reports divergence or a grid timeout, if any.
     pub fn check(&mut self) -> Result<(), GpuError> {
-        let status = self.read_buffer(&self.status_buf, 16 * self.plan.items.len() as u64)?;
+        let size = 16 * self.plan.items.len() as u64;
+        let status = self.read_buffers(&[(Part::Status, size)])?;
         self.status_error(bytemuck::cast_slice(&status))
     }
 
-    fn read_buffer(&self, buf: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("read"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+    /// Copies `parts` (each from offset 0) one after another into the read staging buffer in one
+    /// submission, waits for it, and returns the bytes: one round trip whatever the number of
+    /// parts.
+    fn read_buffers(&mut self, parts: &[(Part, u64)]) -> Result<Vec<u8>, GpuError> {
+        let total: u64 = parts.iter().map(|p| p.1).sum();
+        if self.read_staging.as_ref().is_none_or(|b| b.size() < total) {
+            self.read_staging = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("read"),
+                size: total,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let Some(staging) = self.read_staging.as_ref() else {
+            unreachable!("made above")
+        };
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("read"),
             });
-        enc.copy_buffer_to_buffer(buf, 0, &staging, 0, size);
+        let st = &self.states[self.current];
+        let mut offset = 0;
+        for &(part, size) in parts {
+            let source = match part {
+                Part::Positions => &st.pos,
+                Part::Velocities => &st.vel,
+                Part::Frames => &st.frm,
+                Part::AngularVelocities => &st.omg,
+                Part::Status => &self.status_buf,
+            };
+            enc.copy_buffer_to_buffer(source, 0, staging, offset, size);
+            offset += size;
+        }
         let submission = self.queue.submit([enc.finish()]);
         let mapped = Arc::new(AtomicBool::new(false));
         let flag = mapped.clone();
-        staging.map_async(wgpu::MapMode::Read, .., move |_| {
+        staging.map_async(wgpu::MapMode::Read, ..total, move |_| {
             flag.store(true, AtomicOrdering::Release);
         });
         self.wait_mapped(submission, &mapped)?;
         let bytes = staging
-            .get_mapped_range(..)
+            .get_mapped_range(..total)
             .map_err(|e| GpuError::Wgpu(format!("mapping a readback: {e}")))?
             .to_vec();
         staging.unmap();
         Ok(bytes)
     }
 
-    /// The full state of every rod (blocking). Fails like [`Self::read_positions`].
+    /// The full state of every rod (blocking, one round trip). Fails like
+    /// [`Self::read_positions`].
     pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
         use cosserat_model::{Quat, RodState, Vec3};
         let bytes = 16 * self.slots;
-        let st = &self.states[self.current];
+        let status_bytes = 16 * self.plan.items.len() as u64;
+        let all = self.read_buffers(&[
+            (Part::Positions, bytes),
+            (Part::Velocities, bytes),
+            (Part::Frames, bytes),
+            (Part::AngularVelocities, bytes),
+            (Part::Status, status_bytes),
+        ])?;
+        let b = bytes as usize;
+        self.status_error(bytemuck::cast_slice(&all[4 * b..]))?;
+        let floats: &[f32] = bytemuck::cast_slice(&all[..4 * b]);
+        let quarter = b / 4;
         let (p, v, q, w) = (
-            self.read_buffer(&st.pos, bytes)?,
-            self.read_buffer(&st.vel, bytes)?,
-            self.read_buffer(&st.frm, bytes)?,
-            self.read_buffer(&st.omg, bytes)?,
-        );
-        self.check()?;
-        let (p, v, q, w): (&[f32], &[f32], &[f32], &[f32]) = (
-            bytemuck::cast_slice(&p),
-            bytemuck::cast_slice(&v),
-            bytemuck::cast_slice(&q),
-            bytemuck::cast_slice(&w),
+            &floats[..quarter],
+            &floats[quarter..2 * quarter],
+            &floats[2 * quarter..3 * quarter],
+            &floats[3 * quarter..],
         );
         let v3 = |a: &[f32], i: usize| Vec3::new(a[4 * i], a[4 * i + 1], a[4 * i + 2]);
         Ok(self
