@@ -268,11 +268,13 @@ fn insertion(docs: &Path) -> Result<bool, String> {
 }
 
 /// `cargo xtask bench --gpu`.
-pub(crate) fn gpu() -> Result<bool, String> {
+pub(crate) fn gpu(quick: bool) -> Result<bool, String> {
     println!("building and running the GPU benchmark (crates/backend-gpu/examples/gpu_bench.rs)…");
-    let out = root().join("docs/benchmarks/gpu-local.json");
+    let docs = root().join("docs/benchmarks");
+    std::fs::create_dir_all(&docs).map_err(|e| e.to_string())?;
+    let out = docs.join("gpu-local.json");
     let out_s = out.to_string_lossy().into_owned();
-    let text = cargo(&[
+    let mut args = vec![
         "run",
         "--release",
         "-p",
@@ -281,11 +283,22 @@ pub(crate) fn gpu() -> Result<bool, String> {
         "gpu_bench",
         "--",
         &out_s,
-        "--quick",
-    ])?;
+    ];
+    if quick {
+        args.push("--quick");
+    }
+    let text = cargo(&args)?;
+    let md = format!(
+        "# GPU benchmark on this machine's adapter\n\nMachine: {}; {}. Command: `cargo xtask bench --gpu{}` (raw data: `gpu-local.json`). The committed H100 and H200 tables are [`gpu-h100.md`](gpu-h100.md) and [`gpu.md`](gpu.md).\n\n{text}",
+        machine(),
+        conditions(),
+        if quick { " --quick" } else { "" }
+    );
+    std::fs::write(docs.join("gpu-local.md"), &md)
+        .map_err(|e| format!("docs/benchmarks/gpu-local.md: {e}"))?;
     print!("{text}");
     println!(
-        "\nwrote {} (this machine's adapter; the committed H100/H200 tables are in docs/benchmarks/gpu.md)",
+        "\nwrote {} and gpu-local.md (this machine's adapter)",
         out.display()
     );
     Ok(true)

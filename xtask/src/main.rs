@@ -12,7 +12,10 @@
 //!   `docs/benchmarks/cpu.md`, and the insertion benchmark into `docs/benchmarks/insertion.md`.
 //! - `cargo xtask bench --insertion` — only the insertion and free-space benchmarks, into
 //!   `docs/benchmarks/insertion.md`.
-//! - `cargo xtask bench --gpu` — the GPU backend's benchmark on this machine's adapter.
+//! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
+//!   into `docs/benchmarks/gpu-local.{md,json}` (`--quick`: two sizes, for software adapters). On
+//!   a GPU host without a Rust toolchain, build the example here and run it there
+//!   (`docs/benchmarks/gpu-h100.md` says how the committed tables were made).
 //!
 //! The flag parser is deliberately small: a handful of commands and flags, no dependency.
 
@@ -90,7 +93,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --gpu]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --gpu [--quick]]".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -104,13 +107,13 @@ fn run() -> Result<bool, String> {
             validate::run(args.option("only"))
         }
         "bench" => {
-            args.reject_unknown(&["pareto", "insertion", "gpu"])?;
+            args.reject_unknown(&["pareto", "insertion", "gpu", "quick"])?;
             if args.flag("pareto") {
                 pareto::run()
             } else if args.flag("insertion") {
                 bench::insertion_only()
             } else if args.flag("gpu") {
-                bench_gpu()
+                bench::gpu(args.flag("quick"))
             } else {
                 bench_criterion()
             }
@@ -126,11 +129,6 @@ fn run() -> Result<bool, String> {
 /// `cargo xtask bench` without flags: the criterion benches into `docs/benchmarks/`.
 fn bench_criterion() -> Result<bool, String> {
     bench::criterion()
-}
-
-/// `cargo xtask bench --gpu`: the GPU backend's benchmark on this machine's adapter.
-fn bench_gpu() -> Result<bool, String> {
-    bench::gpu()
 }
 
 fn main() -> ExitCode {
