@@ -63,7 +63,20 @@ struct ItemG {
 struct DriveG {
     v: [f32; 4],
     w: [f32; 4],
+    /// Steps `[window[0], window[1])` of the motion; `window[2]`: the step `origin` is before.
     window: [u32; 4],
+    /// Position of the held point before step `window[2]` (see [`EndTrack`]).
+    origin: [f32; 4],
+}
+
+/// The path of a held end point, tracked in `f64` on the host: its position before step
+/// `reference`. The kernel places the point at `origin + (steps moved) h v` rather than
+/// integrating it in `f32`, and a new motion starts from the tracked position, so rounding does
+/// not accumulate over a long push (the CPU backend's `HeldPath` does the same).
+#[derive(Clone, Copy, Debug, Default)]
+struct EndTrack {
+    origin: [f64; 3],
+    reference: u64,
 }
 
 const NONE: u32 = u32::MAX;
@@ -155,6 +168,8 @@ pub struct GpuSimulation {
     sync_buf: Option<wgpu::Buffer>,
     drives_buf: wgpu::Buffer,
     drives: Vec<DriveG>,
+    /// One per entry of `drives`.
+    tracks: Vec<EndTrack>,
     drives_dirty: bool,
     rods: Vec<(u32, u32)>,
     slots: u64,
@@ -211,6 +226,7 @@ fn drive_of(m: Option<&PrescribedMotion<f32>>, dt: f64) -> DriveG {
                 0,
                 0,
             ],
+            origin: [0.0; 4],
         },
     }
 }
@@ -378,6 +394,7 @@ impl GpuSimulation {
         let mut omg = vec![[0f32; 4]; slots_n];
         let mut loads = vec![[0f32; 4]; slots_n];
         let mut drives = Vec::with_capacity(2 * rods.len());
+        let mut tracks = Vec::with_capacity(2 * rods.len());
         for (rod, &(base, n)) in rods.iter().zip(&rod_layout) {
             let (b, n) = (base as usize, n as usize);
             let p = &rod.params;
@@ -424,8 +441,17 @@ impl GpuSimulation {
                 l[1] += load.force.y;
                 l[2] += load.force.z;
             }
-            drives.push(drive_of(rod.ends[0].motion.as_ref(), dt));
-            drives.push(drive_of(rod.ends[1].motion.as_ref(), dt));
+            for (end, point) in [(0, 0), (1, n)] {
+                let p = s.positions[point];
+                let origin = [f64::from(p.x), f64::from(p.y), f64::from(p.z)];
+                let mut d = drive_of(rod.ends[end].motion.as_ref(), dt);
+                d.origin = [p.x, p.y, p.z, 0.0];
+                drives.push(d);
+                tracks.push(EndTrack {
+                    origin,
+                    reference: 0,
+                });
+            }
         }
         let has_loads = plan.cfg.flags.contains(&"LOADS");
         let perstep = plan.path == KernelPath::DispatchPerStep;
@@ -727,6 +753,7 @@ impl GpuSimulation {
             sync_buf,
             drives_buf,
             drives,
+            tracks,
             drives_dirty: false,
             rods: rod_layout,
             slots: slots_n as u64,
@@ -810,9 +837,33 @@ impl GpuSimulation {
         if rod >= self.rods.len() || end > 1 {
             return Err(GpuError::InvalidInput(format!("no end {end} of rod {rod}")));
         }
-        self.drives[2 * rod + end] = drive_of(motion.as_ref(), self.settings.dt as f64);
-        self.drives_dirty = true;
+        self.replace_drive(
+            2 * rod + end,
+            drive_of(motion.as_ref(), self.settings.dt as f64),
+        );
         Ok(())
+    }
+
+    /// Where held end `i` (an index into `drives`) is before step `step`, in `f64`.
+    fn end_position(&self, i: usize, step: u64) -> [f64; 3] {
+        let (d, t) = (&self.drives[i], &self.tracks[i]);
+        let lo = t.reference.max(u64::from(d.window[0]));
+        let hi = step.min(u64::from(d.window[1]));
+        let moved = hi.saturating_sub(lo) as f64 * self.settings.dt as f64;
+        std::array::from_fn(|c| t.origin[c] + moved * f64::from(d.v[c]))
+    }
+
+    /// Installs `drive` for held end `i` from the next step on, starting from where the end is.
+    fn replace_drive(&mut self, i: usize, mut drive: DriveG) {
+        let here = self.end_position(i, self.steps);
+        self.tracks[i] = EndTrack {
+            origin: here,
+            reference: self.steps,
+        };
+        drive.window[2] = self.steps as u32;
+        drive.origin = [here[0] as f32, here[1] as f32, here[2] as f32, 0.0];
+        self.drives[i] = drive;
+        self.drives_dirty = true;
     }
 
     /// Drives end `end` of rod `rod` with a constant velocity and angular velocity (world frame)
@@ -827,17 +878,20 @@ impl GpuSimulation {
         if rod >= self.rods.len() || end > 1 {
             return Err(GpuError::InvalidInput(format!("no end {end} of rod {rod}")));
         }
-        self.drives[2 * rod + end] = DriveG {
-            v: [velocity[0], velocity[1], velocity[2], 0.0],
-            w: [
-                angular_velocity[0],
-                angular_velocity[1],
-                angular_velocity[2],
-                0.0,
-            ],
-            window: [0, u32::MAX, 0, 0],
-        };
-        self.drives_dirty = true;
+        self.replace_drive(
+            2 * rod + end,
+            DriveG {
+                v: [velocity[0], velocity[1], velocity[2], 0.0],
+                w: [
+                    angular_velocity[0],
+                    angular_velocity[1],
+                    angular_velocity[2],
+                    0.0,
+                ],
+                window: [0, u32::MAX, 0, 0],
+                origin: [0.0; 4],
+            },
+        );
         Ok(())
     }
 

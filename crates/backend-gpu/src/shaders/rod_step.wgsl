@@ -108,10 +108,15 @@ struct Item {
 }
 
 // Prescribed motion of one end: velocity, angular velocity (world), active steps [x, y).
+// A held end's prescribed motion: velocity `v` and angular velocity `w` during steps
+// [window.x, window.y); the point's position after step s is `origin` plus `v h` times the steps
+// of the window in [window.z, s] (`origin`: its position before step window.z, tracked in f64
+// by the host).
 struct Drive {
     v: vec4<f32>,
     w: vec4<f32>,
     window: vec4<u32>,
+    origin: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -812,6 +817,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             if gp < it.w1 {
                 v[{e}] = vx[{e+1}];
                 r[{e}] = r[{e}] + v[{e}] * h;
+                // A held point is placed on its path, not integrated: adding h v to a
+                // coordinate ~10⁵ times larger in f32 would drift by up to half an ulp per step.
+                if (gp == 0u && (it.flags & 1u) != 0u) || (gp == it.n && (it.flags & 4u) != 0u) {
+                    let dr = drives[it.rod * 2u + select(0u, 1u, gp != 0u)];
+                    let lo = max(dr.window.z, dr.window.x);
+                    let hi = min(step + 1u, dr.window.y);
+                    let count = select(0u, hi - lo, hi > lo);
+                    r[{e}] = dr.origin.xyz + f32(count) * (h * dr.v.xyz);
+                }
                 if gp < end_elem {
                     let qn = q[{e}] + quat_mul(q[{e}], vec4<f32>(w[{e}] * (h * 0.5), 0.0));
                     let n2 = dot(qn, qn);
