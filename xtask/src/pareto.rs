@@ -10,10 +10,17 @@
 //!
 //! The direct solver is not wired into the facade yet; it runs through the stand-alone loop of
 //! `tests/support/direct_stepper.rs`, the same Fig. 5 step with the constraint solve replaced.
+//!
+//! The stiff scheme (`solver.scheme = "stiff"`, `docs/stiff-solver.md`: XPBD compliant
+//! constraints, direct banded solve, implicit Euler) joins both diagrams with its default
+//! settings. It has no stability limit on `dt`, so its points sweep `dt` up to 1e-3 s on the
+//! pendulum and up to a tenth of the first bending period's `1/ω₁` on the cantilever; a run that
+//! fails is reported and left out.
 
 use crate::support::cases::{pendulum, pendulum_spec, workspace_file};
 use crate::support::direct_stepper::DirectRod;
 use crate::support::reference::elastica_tip;
+use cosserat::backend_cpu::StiffSettings;
 use cosserat::cosserat_model::rod::straight_polyline;
 use cosserat::cosserat_model::stability::{StabilityInput, stable_step};
 use cosserat::cosserat_model::{Material, Real, Vec3};
@@ -44,6 +51,8 @@ enum Solver {
     Iterative(usize),
     Direct,
     Extensible,
+    /// The stiff scheme (XPBD, direct banded solve), default settings.
+    Stiff,
 }
 
 impl Solver {
@@ -52,6 +61,7 @@ impl Solver {
             Solver::Iterative(k) => format!("iterative GS {k}"),
             Solver::Direct => "direct".into(),
             Solver::Extensible => "extensible".into(),
+            Solver::Stiff => "stiff (XPBD direct)".into(),
         }
     }
 }
@@ -95,12 +105,13 @@ fn pendulum_run(
                 go::<f32>(&spec.points, &spec.spec, ends, g, dt, steps)
             }
         }
-        Solver::Iterative(_) | Solver::Extensible => {
+        Solver::Iterative(_) | Solver::Extensible | Solver::Stiff => {
             let (mode, sweeps) = match solver {
                 Solver::Iterative(k) => ("inextensible", k),
+                Solver::Stiff => ("inextensible", 10),
                 _ => ("extensible", 0),
             };
-            let b = pendulum(&[
+            let mut overrides = vec![
                 ("rod.0.elements", n.to_string()),
                 ("solver.dt", format!("{dt:e}")),
                 (
@@ -110,7 +121,11 @@ fn pendulum_run(
                 ("solver.iterations", sweeps.to_string()),
                 ("solver.mode", mode.into()),
                 ("solver.ordering", "gauss-seidel".into()),
-            ])?;
+            ];
+            if solver == Solver::Stiff {
+                overrides.push(("solver.scheme", "stiff".into()));
+            }
+            let b = pendulum(&overrides)?;
             let mut sim = b.build().map_err(|e| e.to_string())?;
             let t = Instant::now();
             sim.run(steps).map_err(|e| e.to_string())?;
@@ -139,10 +154,17 @@ fn pendulum_sweep() -> Result<Vec<Point>, String> {
                 solver == Solver::Extensible,
             ))
             .max_dt;
-            if dt > limit {
+            if dt > limit && solver != Solver::Stiff {
                 return Ok(());
             }
-            let (tip, wall) = pendulum_run(solver, double, n, dt)?;
+            let (tip, wall) = match pendulum_run(solver, double, n, dt) {
+                Ok(r) => r,
+                Err(e) if solver == Solver::Stiff => {
+                    eprintln!("  {family}, N {n}, dt {dt:e}: {e} (left out)");
+                    return Ok(());
+                }
+                Err(e) => return Err(e),
+            };
             out.push(Point {
                 problem: "pendulum",
                 family: family.into(),
@@ -174,6 +196,11 @@ fn pendulum_sweep() -> Result<Vec<Point>, String> {
                 }
             }
         }
+        for n in [25, 50, 100, 200] {
+            for dt in [1e-3, 2e-4, 4e-5, 1e-5] {
+                push(&format!("stiff, {p}"), Solver::Stiff, double, n, dt)?;
+            }
+        }
         for k in [1, 3, 30, 100] {
             push(
                 &format!("GS sweeps 1–100 (N 100, dt 2e-5), {p}"),
@@ -188,7 +215,14 @@ fn pendulum_sweep() -> Result<Vec<Point>, String> {
 }
 
 /// Static tip deflection y/L at α = 2: runs until the tip moves less than 1e-8 L per 1/ω₁.
-fn cantilever_run(solver: Solver, double: bool, n: usize) -> Result<(f64, f64, f64), String> {
+/// `stiff_dt` is the stiff scheme's step as a multiple of `1/ω₁` (the others run at half their
+/// stable step).
+fn cantilever_run(
+    solver: Solver,
+    double: bool,
+    n: usize,
+    stiff_dt: f64,
+) -> Result<(f64, f64, f64), String> {
     let (length, material) = (1.0, Material::new(1e6, 1e6 / 3.0, 1000.0, 0.02));
     let ei = material.bend_twist_stiffness()[0];
     let alpha = 2.0;
@@ -198,7 +232,11 @@ fn cantilever_run(solver: Solver, double: bool, n: usize) -> Result<(f64, f64, f
     let drag = 2.0 * w1;
     let mut input = StabilityInput::new(&material, length / n as f64, solver == Solver::Extensible);
     input.drag = drag;
-    let dt = 0.5 * stable_step(&input).critical_dt;
+    let dt = if solver == Solver::Stiff {
+        stiff_dt / w1
+    } else {
+        0.5 * stable_step(&input).critical_dt
+    };
     let chunk = (1.0 / (w1 * dt)).ceil() as u64;
     let max_chunks = 80;
     match solver {
@@ -260,6 +298,7 @@ fn cantilever_run(solver: Solver, double: bool, n: usize) -> Result<(f64, f64, f
                 .load(n, [0.0, 0.0, -force]);
             let mut sim = SimulationBuilder::new()
                 .check_stability(false)
+                .stiff_solver((solver == Solver::Stiff).then(StiffSettings::default))
                 .dt(dt)
                 .iterations(sweeps)
                 .ordering(Ordering::GaussSeidel)
@@ -298,7 +337,7 @@ fn cantilever_sweep() -> Result<Vec<Point>, String> {
             ("extensible", Solver::Extensible),
         ] {
             for n in [8, 16, 32, 64] {
-                let (y, wall, dt) = cantilever_run(solver, double, n)?;
+                let (y, wall, dt) = cantilever_run(solver, double, n, 0.0)?;
                 out.push(Point {
                     problem: "cantilever",
                     family: format!("{name}, {p}"),
@@ -315,6 +354,26 @@ fn cantilever_sweep() -> Result<Vec<Point>, String> {
                     wall_s: wall,
                     error: ((y - y_ref) / y_ref).abs(),
                 });
+            }
+        }
+        for stiff_dt in [0.1, 0.01] {
+            for n in [8, 16, 32, 64] {
+                let family = format!("stiff (dt {stiff_dt}/ω₁), {p}");
+                match cantilever_run(Solver::Stiff, double, n, stiff_dt) {
+                    Ok((y, wall, dt)) => out.push(Point {
+                        problem: "cantilever",
+                        family,
+                        solver: Solver::Stiff.name(),
+                        sweeps: 0,
+                        extensible: false,
+                        precision: p,
+                        elements: n,
+                        dt,
+                        wall_s: wall,
+                        error: ((y - y_ref) / y_ref).abs(),
+                    }),
+                    Err(e) => eprintln!("  {family}, N {n}: {e} (left out)"),
+                }
             }
         }
     }
@@ -453,7 +512,17 @@ fn guidance(problem: &str, points: &[&Point]) -> String {
     s
 }
 
+/// The 1-, 5- and 15-minute load averages (`/proc/loadavg`), where the system has them: the
+/// machine may be shared, and the wall times are only comparable within one run.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|| "unknown".into())
+}
+
 pub(crate) fn run() -> Result<bool, String> {
+    let load_before = load_average();
     let dir = workspace_file("docs/benchmarks");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     eprintln!("pendulum sweep ...");
@@ -466,7 +535,12 @@ pub(crate) fn run() -> Result<bool, String> {
     )
     .map_err(|e| e.to_string())?;
     let mut md = String::from(
-        "Work-precision measurements (`cargo xtask bench --pareto`, release build, serial, one core of this machine). Errors: pendulum — tip distance after 0.2 s from a direct-solver f64 run with N = 400, dt = 2.5e-6, divided by the length; cantilever — relative error of the static tip deflection at α = FL²/EI = 2 against the shearable elastica. Settings outside the estimated stable region are skipped. Data: `docs/benchmarks/pareto.json`; diagrams: `pareto-pendulum.{png,svg}`, `pareto-cantilever.{png,svg}`.\n",
+        "Work-precision measurements (`cargo xtask bench --pareto`, release build, serial, one core of this machine). Errors: pendulum — tip distance after 0.2 s from a direct-solver f64 run with N = 400, dt = 2.5e-6, divided by the length; cantilever — relative error of the static tip deflection at α = FL²/EI = 2 against the shearable elastica. Settings of the explicit scheme outside its estimated stable region are skipped. The stiff scheme (`solver.scheme = \"stiff\"`, default settings, `docs/stiff-solver.md`) has no such limit: its pendulum points sweep dt = 1e-3 … 1e-5 s, its cantilever points run at dt = 0.1/ω₁ and 0.01/ω₁ (ω₁ the first bending frequency). Data: `docs/benchmarks/pareto.json`; diagrams: `pareto-pendulum.{png,svg}`, `pareto-cantilever.{png,svg}`.\n",
+    );
+    let _ = writeln!(
+        md,
+        "\nLoad average (1, 5, 15 min) of the machine before the sweeps: {load_before}; after: {}. Wall times are comparable within one run only.",
+        load_average()
     );
     for (problem, title) in [
         ("pendulum", "Pendulum (free-space test), tip after 0.2 s"),
