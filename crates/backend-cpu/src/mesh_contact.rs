@@ -210,24 +210,8 @@ mod tests {
 
     /// A 1 m square floor at z = 0 of 2·20² triangles, normals +z.
     fn floor() -> Arc<MeshCollider> {
-        let n = 20;
-        let mut v = Vec::new();
-        let mut t = Vec::new();
-        for i in 0..=n {
-            for j in 0..=n {
-                v.push([i as f64 / n as f64, j as f64 / n as f64, 0.0]);
-            }
-        }
-        let id = |i: usize, j: usize| (i * (n + 1) + j) as u32;
-        for i in 0..n {
-            for j in 0..n {
-                t.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
-                t.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        Arc::new(MeshCollider::new(
-            TriMesh::new(v, t, "floor").expect("valid").0,
-        ))
+        let mesh = TriMesh::patch([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 20, "floor");
+        Arc::new(MeshCollider::new(mesh.expect("valid")))
     }
 
     #[test]

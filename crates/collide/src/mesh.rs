@@ -168,6 +168,34 @@ impl TriMesh {
         build(vertices, &tris, None, name, 0)
     }
 
+    /// A flat parallelogram `corner + s u + t v` (`s, t ∈ [0, 1]`) of `2 n²` triangles whose
+    /// normals point along `u × v`: a floor, a wall or an incline. Fails like [`Self::new`] for
+    /// a degenerate patch (parallel or zero `u`, `v`, non-finite input, `n = 0`).
+    pub fn patch(
+        corner: [f64; 3],
+        u: [f64; 3],
+        v: [f64; 3],
+        n: usize,
+        name: &str,
+    ) -> Result<Self, MeshError> {
+        let mut vertices = Vec::with_capacity((n + 1) * (n + 1));
+        for i in 0..=n {
+            for j in 0..=n {
+                let (s, t) = (i as f64 / n.max(1) as f64, j as f64 / n.max(1) as f64);
+                vertices.push(std::array::from_fn(|c| corner[c] + s * u[c] + t * v[c]));
+            }
+        }
+        let id = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        let mut triangles = Vec::with_capacity(2 * n * n);
+        for i in 0..n {
+            for j in 0..n {
+                triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        Self::new(vertices, triangles, name).map(|(mesh, _)| mesh)
+    }
+
     /// The vertices.
     pub fn vertices(&self) -> &[Vector3<f64>] {
         &self.vertices

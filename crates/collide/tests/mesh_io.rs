@@ -370,3 +370,18 @@ fn real_phantom_obj_loads() {
 fn real_carotids_stl_loads() {
     check_real(CAROTIDS, 2289);
 }
+
+#[test]
+fn a_patch_spans_its_parallelogram_with_normals_along_u_cross_v() {
+    let (u, v) = ([0.3, 0.0, 0.1], [0.0, 0.2, 0.0]);
+    let mesh = TriMesh::patch([1.0, 2.0, 3.0], u, v, 5, "incline").expect("valid");
+    assert_eq!(mesh.triangles().len(), 2 * 5 * 5);
+    let n = nalgebra::Vector3::from(u).cross(&nalgebra::Vector3::from(v));
+    assert!((mesh.area() - n.norm()).abs() < 1e-12 * n.norm());
+    for t in 0..mesh.triangles().len() {
+        assert!((mesh.face_normal(t) - n.normalize()).norm() < 1e-12);
+    }
+    // Parallel edges span nothing: an error naming the patch, not a panic.
+    let err = TriMesh::patch([0.0; 3], u, u, 3, "flat").unwrap_err();
+    assert!(err.to_string().contains("flat"), "{err}");
+}
