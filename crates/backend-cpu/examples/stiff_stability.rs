@@ -11,7 +11,8 @@
 //! `docs/stiff-solver.md`: `GEOM` (geometric multiplier), `ITERS`, `TOL`, `REFACTOR`
 //! (`it`, `step`, `lag`), `FLOOR` (inertia floor); of the scenarios: `PUSH` [m/s], `TWIST`
 //! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `ONLY` (preset names), `DTS`
-//! (comma-separated steps), `PUSHED_ONLY`.
+//! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
+//! 500).
 
 use backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
@@ -229,7 +230,7 @@ fn stability() {
 
 /// Whether the explicit scheme survives `steps` steps of `dt` on the pendulum.
 fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
-    let mut r = scenario(p, 1.0, 500, false);
+    let mut r = scenario(p, 1.0, elements(), false);
     let mut s = settings(dt);
     s.divergence_strain = 0.05;
     step_rod_batch(&mut r, &s, 0.0, 0, 0, steps).is_ok()
@@ -237,6 +238,14 @@ fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
             .frames
             .iter()
             .all(|q| q.coords.iter().all(|c| c.is_finite()))
+}
+
+/// Element count of the `bisect` runs: `ELEMENTS` or 500.
+fn elements() -> usize {
+    std::env::var("ELEMENTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(500)
 }
 
 fn bisect() {
@@ -256,7 +265,7 @@ fn bisect() {
                 hi = mid;
             }
         }
-        let mut r = scenario(p, 1.0, 500, false);
+        let mut r = scenario(p, 1.0, elements(), false);
         let mut s = settings(1e-2);
         s.divergence_strain = 1e-3;
         let ok = step_rod_stiff(
