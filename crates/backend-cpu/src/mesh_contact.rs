@@ -10,10 +10,11 @@
 //! **Clearance.** Most points of a wire inside a vessel are millimetres from any wall, and a
 //! tree walk per point per step finds nothing for them. After a query that finds no contact, a
 //! point gets a clearance: its distance to the nearest triangle (searched up to
-//! [`CLEARANCE_LOOKAHEAD`]) minus the query radius. Until the point has moved that far in total
-//! it cannot touch the mesh, so it is not queried; the contacts found are exactly those of a full
-//! query every step. A point outside the mesh's bounding box takes its distance to the box as
-//! clearance, so a rod far from the mesh costs one distance per point and step.
+//! [`CLEARANCE_LOOKAHEAD`]) minus the query radius. While the point stays closer than that to
+//! where it was measured it cannot touch the mesh, so it is not queried; the contacts found are
+//! exactly those of a full query every step. A point outside the mesh's bounding box takes its
+//! distance to the box as clearance, so a rod far from the mesh costs one squared distance per
+//! point and step (a loop the compiler vectorises).
 //!
 //! **Near lists.** A point close to a wall (most of a wire pressed along a vessel) is queried
 //! every step, and a tree walk from the root visits every leaf box near it. Instead, such a point
@@ -23,7 +24,7 @@
 //! exactly those of the tree query. The skin is half the query radius: a wire sliding at
 //! 0.2 m/s with steps of a few microseconds remakes its lists every few hundred steps.
 
-use collide::{Contact, MeshCollider, PointResponse};
+use collide::{Contact, MeshCollider};
 use constraints::{ContactSet, Friction, PointContact};
 use cosserat_model::{Real, Vec3};
 use std::sync::Arc;
@@ -68,18 +69,19 @@ const NEAR_SKIN: f64 = 0.5;
 pub(crate) struct RodMeshContact<T: Real> {
     pub(crate) settings: MeshContactSettings,
     pub(crate) friction: Friction<T>,
-    points: Vec<[f64; 3]>,
-    /// Distance each point may still move before it can touch the mesh (see the module docs).
-    clearance: Vec<f64>,
-    /// Positions at the last detection.
-    last: Vec<[f64; 3]>,
+    /// Per point, where its clearance was measured (coordinate by coordinate) and the squared
+    /// clearance; a point closer than that to where it was measured cannot touch the mesh (see
+    /// the module docs). Negative: query the point at the next step.
+    clear_at: [Vec<f64>; 3],
+    clear2: Vec<f64>,
+    /// Scratch: the points queried this step.
+    due: Vec<u32>,
     /// Per point, the leaf-order slots of the triangles within `reach + skin` of `anchor`, and
     /// whether that list exists.
     near: Vec<Vec<u32>>,
     anchor: Vec<[f64; 3]>,
     has_near: Vec<bool>,
     found: Vec<Contact>,
-    responses: Vec<PointResponse>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -93,14 +95,13 @@ impl<T: Real> RodMeshContact<T> {
         Self {
             settings,
             friction,
-            points: Vec::new(),
-            clearance: Vec::new(),
-            last: Vec::new(),
+            clear_at: [Vec::new(), Vec::new(), Vec::new()],
+            clear2: Vec::new(),
+            due: Vec::new(),
             near: Vec::new(),
             anchor: Vec::new(),
             has_near: Vec::new(),
             found: Vec::new(),
-            responses: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
@@ -109,89 +110,90 @@ impl<T: Real> RodMeshContact<T> {
     /// Detects contacts of the points `(x, y, z)` as spheres of `radius`.
     pub(crate) fn detect(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
         let t0 = std::time::Instant::now();
-        self.points.clear();
-        self.points.extend(
-            x.iter()
-                .zip(y)
-                .zip(z)
-                .map(|((a, b), c)| [a.to_f64(), b.to_f64(), c.to_f64()]),
-        );
         let margin = self.settings.margin;
         let reach = radius + margin;
-        let collider = &self.settings.collider;
+        let collider = Arc::clone(&self.settings.collider);
         let skin = NEAR_SKIN * reach;
         let root = &collider.bvh().nodes()[0];
-        let n = self.points.len();
-        if self.last.len() != n {
-            self.last = self.points.clone();
-            self.clearance = vec![0.0; n];
+        let n = x.len().min(y.len()).min(z.len());
+        if self.clear2.len() != n {
+            self.clear2 = vec![-1.0; n];
+            self.clear_at = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
             self.near = vec![Vec::new(); n];
-            self.anchor = self.points.clone();
+            self.anchor = vec![[0.0; 3]; n];
             self.has_near = vec![false; n];
         }
+        // Which points may touch the mesh: one squared distance each.
+        self.due.clear();
+        let [cx, cy, cz] = &self.clear_at;
+        let (cx, cy, cz, c2) = (&cx[..n], &cy[..n], &cz[..n], &self.clear2[..n]);
+        for i in 0..n {
+            let d2 = (x[i].to_f64() - cx[i]).powi(2)
+                + (y[i].to_f64() - cy[i]).powi(2)
+                + (z[i].to_f64() - cz[i]).powi(2);
+            if !(d2 < c2[i]) {
+                self.due.push(i as u32);
+            }
+        }
         self.found.clear();
-        self.responses.clear();
+        self.contacts.clear();
+        let mut escaped = 0;
         let distance = |a: &[f64; 3], b: &[f64; 3]| {
             ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
         };
-        for i in 0..n {
-            let p = &self.points[i];
-            self.clearance[i] -= distance(p, &self.last[i]);
-            self.last[i] = *p;
-            if self.clearance[i] > 0.0 {
-                self.responses.push(PointResponse::default());
-                continue;
-            }
-            let mut from_anchor = distance(p, &self.anchor[i]);
+        for k in 0..self.due.len() {
+            let i = self.due[k] as usize;
+            let p = [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
+            let mut from_anchor = distance(&p, &self.anchor[i]);
             if !self.has_near[i] || from_anchor > skin {
-                collider.near_slots(p, reach + skin, &mut self.near[i]);
-                self.anchor[i] = *p;
+                collider.near_slots(&p, reach + skin, &mut self.near[i]);
+                self.anchor[i] = p;
                 self.has_near[i] = true;
                 from_anchor = 0.0;
             }
             let (r, nearest) =
-                collider.query_sphere_among(p, reach, i as u32, &self.near[i], &mut self.found);
-            self.clearance[i] = if r.count > 0 {
-                0.0
-            } else {
+                collider.query_sphere_among(&p, reach, i as u32, &self.near[i], &mut self.found);
+            if r.count == 0 {
                 // The list holds every triangle closer than `horizon`; beyond it, the mesh's
                 // bounding box bounds the distance from below, and else the tree is asked.
                 let horizon = reach + skin - from_anchor;
                 let lookahead = reach + CLEARANCE_LOOKAHEAD;
-                let outside = root.distance_squared(p).sqrt();
+                let outside = root.distance_squared(&p).sqrt();
                 let d = if nearest < horizon {
                     nearest
                 } else if outside >= lookahead {
                     outside
                 } else {
                     collider
-                        .nearest(p, lookahead)
+                        .nearest(&p, lookahead)
                         .map_or(lookahead, |n| n.distance)
                 };
                 // Rounding of the distances above must not open a gap.
-                d - reach - 1e-9
-            };
-            self.responses.push(r);
-        }
-        self.contacts.clear();
-        let mut escaped = 0;
-        for (i, r) in self.responses.iter().enumerate() {
-            if r.count == 0 {
+                let clearance = d - reach - 1e-9;
+                self.clear2[i] = if clearance > 0.0 {
+                    clearance * clearance
+                } else {
+                    -1.0
+                };
+                for c in 0..3 {
+                    self.clear_at[c][i] = p[c];
+                }
                 continue;
             }
+            self.clear2[i] = -1.0;
             escaped += usize::from(r.escaped);
-            let n = Vec3::from(r.direction);
-            let len = n.norm();
+            let dir = Vec3::from(r.direction);
+            let len = dir.norm();
             if !(len > 0.0) {
                 continue;
             }
             // Depths are measured against the inflated sphere; remove the margin again.
             let penetration = r.max_depth - margin;
             self.stats.max_penetration = self.stats.max_penetration.max(penetration);
-            let n = n / len;
+            let dir = dir / len;
             self.contacts.push(PointContact {
                 point: i as u32,
-                normal: Vec3::new(T::lit(n.x), T::lit(n.y), T::lit(n.z)),
+                normal: Vec3::new(T::lit(dir.x), T::lit(dir.y), T::lit(dir.z)),
                 gap: T::lit(-penetration),
             });
         }
@@ -254,10 +256,9 @@ mod tests {
                     },
                 );
             rmc.detect(&x, &y, &z, radius);
-            skipped_some |= rmc.clearance.iter().any(|&c| c > 0.0);
-            reused_list |= (0..40).any(|i| {
-                rmc.clearance[i] <= 0.0 && rmc.has_near[i] && rmc.anchor[i] != rmc.last[i]
-            });
+            skipped_some |= rmc.clear2.iter().any(|&c| c > 0.0);
+            reused_list |=
+                (0..40).any(|i| rmc.clear2[i] <= 0.0 && rmc.has_near[i] && rmc.anchor[i] != pts[i]);
             collider.detect(&pts, radius + margin, &mut full);
             let expected: Vec<(u32, f64, Vec3<f64>)> = full
                 .responses()
