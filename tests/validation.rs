@@ -80,6 +80,11 @@ fn pendulum_energy_convergence_and_inextensibility() {
 }
 
 #[test]
+fn stiff_scheme_statics_and_frequencies() {
+    check("stiff scheme", cases::stiff_scheme(Size::Ci));
+}
+
+#[test]
 fn references_are_self_consistent() {
     support::reference::self_check();
 }

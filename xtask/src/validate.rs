@@ -22,6 +22,7 @@ fn case_list() -> Vec<Case> {
         ("intrinsic helix", || cases::intrinsic_helix(Size::Full)),
         ("frequencies", || cases::frequencies(Size::Full)),
         ("pendulum", || cases::pendulum_cases(Size::Full)),
+        ("stiff scheme", || cases::stiff_scheme(Size::Full)),
         ("long runs", cases::long_runs),
         ("stability map", stability_map::rows),
     ]
@@ -44,6 +45,10 @@ pub(crate) fn table(rows: &[Row]) -> String {
         let (err, reference) = match r.check {
             Check::Relative => (format!("{:.2e}", r.error()), fmt_num(r.reference)),
             Check::Bound => ("(bound)".into(), fmt_num(r.reference)),
+            // A reported quantity with a reference shows its error.
+            Check::Info if r.reference.is_finite() && r.reference != 0.0 => {
+                (format!("{:.2e}", r.error()), fmt_num(r.reference))
+            }
             Check::Info => ("—".into(), "—".into()),
         };
         let tol = if r.tolerance.is_nan() {
