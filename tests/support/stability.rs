@@ -31,6 +31,8 @@ pub struct TrialRod {
     pub double: bool,
     /// Seed of the initial perturbation.
     pub seed: u64,
+    /// Step with the stiff solver (default settings) instead of the explicit scheme.
+    pub stiff: bool,
 }
 
 impl TrialRod {
@@ -47,6 +49,7 @@ impl TrialRod {
             driven_start: None,
             double: true,
             seed: 1,
+            stiff: false,
         }
     }
 
@@ -123,8 +126,12 @@ impl TrialRod {
         // a stable stiff rod with elements much shorter than its radius (E 2e11, r 5 mm,
         // l 0.1 mm) spins its frames' surfaces faster than that check's 1000 m/s while it
         // oscillates from the initial kinks.
+        let stiff = self
+            .stiff
+            .then(cosserat::backend_cpu::StiffSettings::default);
         let mut sim = SimulationBuilder::new()
             .check_stability(false)
+            .stiff_solver(stiff)
             .divergence_speed(f64::INFINITY)
             .dt(dt)
             .iterations(10)

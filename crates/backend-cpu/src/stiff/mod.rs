@@ -128,6 +128,12 @@ pub struct StiffSettings {
     /// it steers the iteration only, the converged step does not depend on it. Measured in
     /// `docs/stiff-solver.md`: half the iterations for the same tolerance.
     pub geometric: f64,
+    /// How many times a step that diverges may be split in two halves (recursively) before
+    /// the divergence is reported; 0 reports it at once. A rod released far from its rest
+    /// shape (a J-tip wire built straight: 0.3 rad of rest turn per 1 mm element of nitinol)
+    /// moves so far in its first 1 ms step that the linearised step overshoots; its first steps
+    /// are then taken in halves, quarters, …, and the rest at the full step.
+    pub max_halvings: u32,
 }
 
 impl Default for StiffSettings {
@@ -142,6 +148,7 @@ impl Default for StiffSettings {
             refactor: Refactor::EveryIteration,
             inertia_floor: 0.0,
             geometric: 1.0,
+            max_halvings: 8,
         }
     }
 }
@@ -706,7 +713,124 @@ fn add_jt(
 /// `settings.ordering` are the explicit scheme's and are ignored. `rod.state` is up to date when
 /// this returns, also after a divergence. Bend and stretch damping are applied by the direct
 /// solver (see the module docs).
+///
+/// A step that diverges is taken again as two half steps, recursively up to
+/// [`StiffSettings::max_halvings`] times; the batch then continues at the full step. Only a
+/// step that still diverges at the finest split is reported.
 pub fn step_rod_stiff<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    stiff: &StiffSettings,
+    scratch: &mut StiffScratch,
+    time: f64,
+    rod_index: usize,
+    first_step: u64,
+    steps: u64,
+) -> Result<StepStats, Divergence> {
+    if stiff.max_halvings == 0 || steps == 0 {
+        return step_fixed(
+            rod, settings, stiff, scratch, time, rod_index, first_step, steps,
+        );
+    }
+    let start = rod.state.clone();
+    let d = match step_fixed(
+        rod, settings, stiff, scratch, time, rod_index, first_step, steps,
+    ) {
+        Ok(stats) => return Ok(stats),
+        Err(d) => d,
+    };
+    // Back to the start of the batch, then the steps before the failed one as they were run.
+    let failed = d.step.saturating_sub(first_step).min(steps - 1);
+    rod.state = start;
+    let h = settings.dt.to_f64();
+    let mut stats = StepStats {
+        min_stretch: f64::MAX,
+        max_stretch: 0.0,
+    };
+    let mut merge = |s: StepStats| {
+        stats.min_stretch = stats.min_stretch.min(s.min_stretch);
+        stats.max_stretch = stats.max_stretch.max(s.max_stretch);
+    };
+    if failed > 0 {
+        merge(step_rod_stiff(
+            rod, settings, stiff, scratch, time, rod_index, first_step, failed,
+        )?);
+    }
+    let t = time + failed as f64 * h;
+    merge(step_in_halves(
+        rod,
+        settings,
+        stiff,
+        scratch,
+        t,
+        rod_index,
+        first_step + failed,
+        1,
+    )?);
+    let rest = steps - failed - 1;
+    if rest > 0 {
+        merge(step_rod_stiff(
+            rod,
+            settings,
+            stiff,
+            scratch,
+            t + h,
+            rod_index,
+            first_step + failed + 1,
+            rest,
+        )?);
+    }
+    Ok(stats)
+}
+
+/// One step of `settings.dt` taken as two halves, each split again if it diverges, down to
+/// `2^-max_halvings` of the step. A divergence is reported at step `step`.
+fn step_in_halves<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    stiff: &StiffSettings,
+    scratch: &mut StiffScratch,
+    time: f64,
+    rod_index: usize,
+    step: u64,
+    depth: u32,
+) -> Result<StepStats, Divergence> {
+    let half = SolverSettings {
+        dt: settings.dt / T::lit(2.0),
+        ..*settings
+    };
+    let start = rod.state.clone();
+    let relabel = |mut d: Divergence| {
+        d.step = step;
+        d
+    };
+    match step_fixed(rod, &half, stiff, scratch, time, rod_index, step, 2) {
+        Ok(stats) => Ok(stats),
+        Err(d) if depth >= stiff.max_halvings => Err(relabel(d)),
+        Err(_) => {
+            rod.state = start;
+            let h = half.dt.to_f64();
+            let a = step_in_halves(rod, &half, stiff, scratch, time, rod_index, step, depth + 1)?;
+            let b = step_in_halves(
+                rod,
+                &half,
+                stiff,
+                scratch,
+                time + h,
+                rod_index,
+                step,
+                depth + 1,
+            )?;
+            Ok(StepStats {
+                min_stretch: a.min_stretch.min(b.min_stretch),
+                max_stretch: a.max_stretch.max(b.max_stretch),
+            })
+        }
+    }
+}
+
+/// [`step_rod_stiff`] at the fixed step `settings.dt`.
+fn step_fixed<T: Real>(
     rod: &mut CpuRod<T>,
     settings: &SolverSettings<T>,
     stiff: &StiffSettings,
