@@ -55,6 +55,14 @@ fn bench_precision<T: Real>(c: &mut Criterion, name: &str) {
     let variants = [
         ("stiff", StiffSettings::default()),
         (
+            // What the retry of diverging steps costs a step that does not diverge.
+            "stiff_no_halving",
+            StiffSettings {
+                max_halvings: 0,
+                ..StiffSettings::default()
+            },
+        ),
+        (
             "stiff_1_iteration",
             StiffSettings {
                 iterations: 1,
