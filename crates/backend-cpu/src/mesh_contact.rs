@@ -112,7 +112,7 @@ impl<T: Real> RodMeshContact<T> {
         let t0 = std::time::Instant::now();
         let margin = self.settings.margin;
         let reach = radius + margin;
-        let collider = Arc::clone(&self.settings.collider);
+        let collider = &self.settings.collider;
         let skin = NEAR_SKIN * reach;
         let root = &collider.bvh().nodes()[0];
         let n = x.len().min(y.len()).min(z.len());
@@ -273,7 +273,6 @@ mod tests {
             let got: Vec<(u32, f64, Vec3<f64>)> = rmc
                 .contacts
                 .contacts()
-                .iter()
                 .map(|c| (c.point, c.gap, c.normal))
                 .collect();
             assert_eq!(got, expected, "step {step}");

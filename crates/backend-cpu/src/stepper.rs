@@ -323,6 +323,22 @@ pub struct StepStats {
 }
 
 impl StepStats {
+    /// The statistics of no step (the identity of [`Self::merged`]).
+    pub fn none() -> Self {
+        Self {
+            min_stretch: f64::MAX,
+            max_stretch: 0.0,
+        }
+    }
+
+    /// The statistics of two runs together.
+    pub fn merged(self, other: Self) -> Self {
+        Self {
+            min_stretch: self.min_stretch.min(other.min_stretch),
+            max_stretch: self.max_stretch.max(other.max_stretch),
+        }
+    }
+
     /// Largest `|l / l0 − 1|`.
     pub fn max_strain(&self) -> f64 {
         (self.max_stretch - 1.0).max(1.0 - self.min_stretch)

@@ -158,7 +158,6 @@ fn pushed_end_reaction_balances_contact_and_friction() {
     let contact_force = |r: &CpuRod<f64>| -> Vec3<f64> {
         let set = r.contacts().unwrap();
         set.contacts()
-            .iter()
             .zip(set.normal_impulses().iter().zip(set.tangent_impulses()))
             .map(|(c, (ln, lt))| (c.normal * *ln + lt) * (r.params.masses[c.point as usize] / s.dt))
             .sum()

@@ -66,7 +66,8 @@ pub struct PointContact<T: Real> {
 /// contacts one after another.
 #[derive(Clone, Debug, Default)]
 pub struct ContactSet<T: Real> {
-    contacts: Vec<PointContact<T>>,
+    /// The point of each contact.
+    point: Vec<u32>,
     /// Normals, coordinate by coordinate.
     normal: [Vec<T>; 3],
     gap: Vec<T>,
@@ -86,7 +87,7 @@ impl<T: Real> ContactSet<T> {
 
     /// Removes all contacts, keeping the capacity.
     pub fn clear(&mut self) {
-        self.contacts.clear();
+        self.point.clear();
         self.gap.clear();
         self.normal_impulse.clear();
         for c in 0..3 {
@@ -97,7 +98,7 @@ impl<T: Real> ContactSet<T> {
 
     /// Adds a contact with zero accumulated impulse.
     pub fn push(&mut self, c: PointContact<T>) {
-        self.contacts.push(c);
+        self.point.push(c.point);
         self.gap.push(c.gap);
         self.normal_impulse.push(T::zero());
         for k in 0..3 {
@@ -106,19 +107,24 @@ impl<T: Real> ContactSet<T> {
         }
     }
 
-    /// The contacts.
-    pub fn contacts(&self) -> &[PointContact<T>] {
-        &self.contacts
+    /// The contacts, in the order they were pushed.
+    pub fn contacts(&self) -> impl ExactSizeIterator<Item = PointContact<T>> + '_ {
+        let [x, y, z] = &self.normal;
+        (0..self.point.len()).map(|k| PointContact {
+            point: self.point[k],
+            normal: Vec3::new(x[k], y[k], z[k]),
+            gap: self.gap[k],
+        })
     }
 
     /// Number of contacts.
     pub fn len(&self) -> usize {
-        self.contacts.len()
+        self.point.len()
     }
 
     /// Whether there are no contacts.
     pub fn is_empty(&self) -> bool {
-        self.contacts.is_empty()
+        self.point.is_empty()
     }
 
     /// Accumulated normal impulse of each contact, as a velocity change [m/s]; multiply by the
@@ -147,13 +153,13 @@ impl<T: Real> ContactSet<T> {
         let (vx, vy, vz) = (&mut vx[..m], &mut vy[..m], &mut vz[..m]);
         let n = self.start_sweep();
         for k in 0..n {
-            let i = self.contacts[k].point as usize;
+            let i = self.point[k] as usize;
             self.inv_mass[k] = inv_masses[i];
             (self.v[0][k], self.v[1][k], self.v[2][k]) = (vx[i], vy[i], vz[i]);
         }
         self.resolve_all(h, friction);
         for k in 0..n {
-            let i = self.contacts[k].point as usize;
+            let i = self.point[k] as usize;
             (vx[i], vy[i], vz[i]) = (self.v[0][k], self.v[1][k], self.v[2][k]);
         }
     }
@@ -176,7 +182,7 @@ impl<T: Real> ContactSet<T> {
         let (ox, oy, oz) = (&mut ox[..mo], &mut oy[..mo], &mut oz[..mo]);
         let n = self.start_sweep();
         for k in 0..n {
-            let i = self.contacts[k].point as usize;
+            let i = self.point[k] as usize;
             let j = i / 2;
             let (w, x, y, z) = if i.is_multiple_of(2) {
                 (even_w[j], ex[j], ey[j], ez[j])
@@ -188,7 +194,7 @@ impl<T: Real> ContactSet<T> {
         }
         self.resolve_all(h, friction);
         for k in 0..n {
-            let i = self.contacts[k].point as usize;
+            let i = self.point[k] as usize;
             let j = i / 2;
             let v = (self.v[0][k], self.v[1][k], self.v[2][k]);
             if i.is_multiple_of(2) {
@@ -201,7 +207,7 @@ impl<T: Real> ContactSet<T> {
 
     /// Sizes the sweep's scratch to the contacts; returns their number.
     fn start_sweep(&mut self) -> usize {
-        let n = self.contacts.len();
+        let n = self.point.len();
         self.inv_mass.resize(n, T::zero());
         for c in &mut self.v {
             c.resize(n, T::zero());
@@ -216,7 +222,7 @@ impl<T: Real> ContactSet<T> {
     /// kinetic cone ([`Friction::clamp`], written here without branches). A kinematic point
     /// (zero inverse mass) keeps its velocity and its contact's impulses stay zero.
     fn resolve_all(&mut self, h: T, friction: &Friction<T>) {
-        let n = self.contacts.len();
+        let n = self.point.len();
         let (mu_s, mu_k) = (friction.static_coefficient, friction.kinetic_coefficient);
         let zero = T::zero();
         let one = T::one();
@@ -359,7 +365,7 @@ mod tests {
             let odd_w: Vec<f64> = inv_masses.iter().skip(1).step_by(2).copied().collect();
             for _ in 0..5 {
                 sequential_sweep(
-                    set.contacts(),
+                    &set.contacts().collect::<Vec<_>>(),
                     &mut impulses,
                     h,
                     &friction,

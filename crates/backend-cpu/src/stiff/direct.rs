@@ -137,6 +137,20 @@ fn inverse_spd(a: &M3) -> M3 {
     out
 }
 
+/// The diagonal block of the stretch–shear constraint `Γ_j` (points `j`, `j + 1`, frame `j`):
+/// `∂Γ/∂θ = [g]×` with `g = Γ + e3` gives `[g]× W_j [g]×ᵀ`; `∂Γ/∂r = ±Rᵀ/l0` gives
+/// `(w_j + w_{j+1}) / l0² I` (the squared norm of a row); plus the compliance `α̃`.
+#[inline(always)]
+fn gamma_diagonal(j: usize, s: &StretchShear<f64>, m: &Masses<'_>) -> M3 {
+    let g = s.value + Vec3::z();
+    let mut gg = cross_w_cross(&g, &m.inv_inertia[j]);
+    let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
+    for c in 0..3 {
+        gg[c][c] += m.alpha_gamma[j][c] + wsum;
+    }
+    gg
+}
+
 /// Block row `k` of `J K⁻¹ Jᵀ + α̃` in the ordering `(λ_Γ0, λ_Ω0, λ_Γ1, …)`: the diagonal
 /// block and the blocks in columns `k + 1` and `k + 2` (zero past the end). The direct
 /// products of the Jacobians, kept as the reference of [`blocks4`].
@@ -150,16 +164,10 @@ fn blocks(
     let zero = [[0.0; 3]; 3];
     let j = k / 2;
     if k.is_multiple_of(2) {
-        // Γ_j: points j, j + 1 and frame j; ∂Γ/∂θ = [g]× with g = Γ + e3.
+        // Γ_j: points j, j + 1 and frame j.
         let s = &ss[j];
         let wj = &m.inv_inertia[j];
-        let g = s.value + Vec3::z();
-        let mut gg = cross_w_cross(&g, wj);
-        // ∂Γ/∂r = Rᵀ / l0, so (∂Γ/∂r)(∂Γ/∂r)ᵀ = I / l0² (the squared norm of a row).
-        let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
-        for c in 0..3 {
-            gg[c][c] += m.alpha_gamma[j][c] + wsum;
-        }
+        let gg = gamma_diagonal(j, s, m);
         if j < bt.len() {
             let a1 = awbt(&s.d_theta, wj, &bt[j].d_theta_a);
             let w = Vec3::repeat(-m.inv_mass[j + 1]);
@@ -281,12 +289,7 @@ fn blocks4(
     if k.is_multiple_of(2) {
         let s = &ss[j];
         let wj = &m.inv_inertia[j];
-        let g = s.value + Vec3::z();
-        let mut gg = cross_w_cross(&g, wj);
-        let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
-        for c in 0..3 {
-            gg[c][c] += m.alpha_gamma[j][c] + wsum;
-        }
+        let gg = gamma_diagonal(j, s, m);
         if j < bt.len() {
             let a1 = awbt4(&s.d_theta, wj, &bt[j].d_theta_a);
             let w = Vec3::repeat(-m.inv_mass[j + 1]);

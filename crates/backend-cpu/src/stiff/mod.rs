@@ -727,119 +727,124 @@ pub fn step_rod_stiff<T: Real>(
     first_step: u64,
     steps: u64,
 ) -> Result<StepStats, Divergence> {
-    if stiff.max_halvings == 0 || steps == 0 {
-        return step_fixed(
-            rod, settings, stiff, scratch, time, rod_index, first_step, steps,
-        );
-    }
-    let start = rod.state.clone();
-    let d = match step_fixed(
-        rod, settings, stiff, scratch, time, rod_index, first_step, steps,
-    ) {
-        Ok(stats) => return Ok(stats),
-        Err(d) => d,
-    };
-    // Back to the start of the batch, then the steps before the failed one as they were run.
-    let failed = d.step.saturating_sub(first_step).min(steps - 1);
-    rod.state = start;
-    let h = settings.dt.to_f64();
-    let mut stats = StepStats {
-        min_stretch: f64::MAX,
-        max_stretch: 0.0,
-    };
-    let mut merge = |s: StepStats| {
-        stats.min_stretch = stats.min_stretch.min(s.min_stretch);
-        stats.max_stretch = stats.max_stretch.max(s.max_stretch);
-    };
-    if failed > 0 {
-        merge(step_rod_stiff(
-            rod, settings, stiff, scratch, time, rod_index, first_step, failed,
-        )?);
-    }
-    let t = time + failed as f64 * h;
-    merge(step_in_halves(
-        rod,
-        settings,
-        stiff,
-        scratch,
-        t,
+    let window = Window {
+        time,
         rod_index,
-        first_step + failed,
-        1,
-    )?);
-    let rest = steps - failed - 1;
+        first_step,
+        steps,
+    };
+    step_with_retries(rod, settings, stiff, scratch, window)
+}
+
+/// The steps of a call to [`step_rod_stiff`]: from `time`, step indices `first_step…` (which
+/// only label a [`Divergence`]), `steps` of them.
+#[derive(Clone, Copy, Debug)]
+struct Window {
+    time: f64,
+    rod_index: usize,
+    first_step: u64,
+    steps: u64,
+}
+
+impl Window {
+    /// `count` steps of `h` starting `skip` steps into this window.
+    fn part(self, skip: u64, count: u64, h: f64) -> Self {
+        Self {
+            time: self.time + skip as f64 * h,
+            first_step: self.first_step + skip,
+            steps: count,
+            ..self
+        }
+    }
+}
+
+/// [`step_rod_stiff`]: a batch that diverges is retaken from its start, the steps before the
+/// failed one as before, the failed one in halves, the rest at the full step again.
+fn step_with_retries<T: Real>(
+    rod: &mut CpuRod<T>,
+    settings: &SolverSettings<T>,
+    stiff: &StiffSettings,
+    scratch: &mut StiffScratch,
+    window: Window,
+) -> Result<StepStats, Divergence> {
+    let retry = stiff.max_halvings > 0 && window.steps > 0;
+    let d = match step_fixed(rod, settings, stiff, scratch, window, retry) {
+        Err(d) if retry => d,
+        other => return other,
+    };
+    let failed = d
+        .step
+        .saturating_sub(window.first_step)
+        .min(window.steps - 1);
+    let h = settings.dt.to_f64();
+    let mut stats = StepStats::none();
+    if failed > 0 {
+        let before = window.part(0, failed, h);
+        stats = stats.merged(step_with_retries(rod, settings, stiff, scratch, before)?);
+    }
+    let at = window.part(failed, 1, h);
+    stats = stats.merged(step_in_halves(rod, settings, stiff, scratch, at, 1)?);
+    let rest = window.steps - failed - 1;
     if rest > 0 {
-        merge(step_rod_stiff(
-            rod,
-            settings,
-            stiff,
-            scratch,
-            t + h,
-            rod_index,
-            first_step + failed + 1,
-            rest,
-        )?);
+        let after = window.part(failed + 1, rest, h);
+        stats = stats.merged(step_with_retries(rod, settings, stiff, scratch, after)?);
     }
     Ok(stats)
 }
 
-/// One step of `settings.dt` taken as two halves, each split again if it diverges, down to
-/// `2^-max_halvings` of the step. A divergence is reported at step `step`.
+/// The one step of `window` (of `settings.dt`) taken as two halves, each split again if it
+/// diverges, down to `2^-max_halvings` of the step. A divergence is reported at the step's
+/// index.
 fn step_in_halves<T: Real>(
     rod: &mut CpuRod<T>,
     settings: &SolverSettings<T>,
     stiff: &StiffSettings,
     scratch: &mut StiffScratch,
-    time: f64,
-    rod_index: usize,
-    step: u64,
+    window: Window,
     depth: u32,
 ) -> Result<StepStats, Divergence> {
     let half = SolverSettings {
         dt: settings.dt / T::lit(2.0),
         ..*settings
     };
-    let start = rod.state.clone();
-    let relabel = |mut d: Divergence| {
-        d.step = step;
-        d
-    };
-    match step_fixed(rod, &half, stiff, scratch, time, rod_index, step, 2) {
-        Ok(stats) => Ok(stats),
-        Err(d) if depth >= stiff.max_halvings => Err(relabel(d)),
-        Err(_) => {
-            rod.state = start;
-            let h = half.dt.to_f64();
-            let a = step_in_halves(rod, &half, stiff, scratch, time, rod_index, step, depth + 1)?;
-            let b = step_in_halves(
-                rod,
-                &half,
-                stiff,
-                scratch,
-                time + h,
-                rod_index,
-                step,
-                depth + 1,
-            )?;
-            Ok(StepStats {
-                min_stretch: a.min_stretch.min(b.min_stretch),
-                max_stretch: a.max_stretch.max(b.max_stretch),
-            })
+    let last = depth >= stiff.max_halvings;
+    let both = Window { steps: 2, ..window };
+    match step_fixed(rod, &half, stiff, scratch, both, !last) {
+        Err(mut d) if last => {
+            d.step = window.first_step;
+            Err(d)
         }
+        Err(_) => {
+            let h = half.dt.to_f64();
+            let a = step_in_halves(rod, &half, stiff, scratch, window, depth + 1)?;
+            let later = Window {
+                time: window.time + h,
+                ..window
+            };
+            let b = step_in_halves(rod, &half, stiff, scratch, later, depth + 1)?;
+            Ok(a.merged(b))
+        }
+        ok => ok,
     }
 }
 
-/// [`step_rod_stiff`] at the fixed step `settings.dt`.
+/// [`step_rod_stiff`] at the fixed step `settings.dt`. With `keep_start_on_divergence`, a
+/// batch that diverges leaves `rod.state` as it was at its start (the state is written back
+/// only at the end of a batch), so that it can be retaken without a copy.
 fn step_fixed<T: Real>(
     rod: &mut CpuRod<T>,
     settings: &SolverSettings<T>,
     stiff: &StiffSettings,
     scratch: &mut StiffScratch,
-    time: f64,
-    rod_index: usize,
-    first_step: u64,
-    steps: u64,
+    window: Window,
+    keep_start_on_divergence: bool,
 ) -> Result<StepStats, Divergence> {
+    let Window {
+        time,
+        rod_index,
+        first_step,
+        steps,
+    } = window;
     let h = settings.dt.to_f64();
     let n = rod.elements();
     scratch
@@ -875,10 +880,7 @@ fn step_fixed<T: Real>(
     let precision = T::default_epsilon().to_f64();
     let drag = 1.0 / (1.0 + h * rod.params.drag.to_f64());
     let limit = settings.divergence_strain.to_f64();
-    let mut stats = StepStats {
-        min_stretch: f64::MAX,
-        max_stretch: 0.0,
-    };
+    let mut stats = StepStats::none();
     let mut result = Ok(());
     let held_points = [(0, &rod.ends[0]), (n, &rod.ends[1])];
     let held_frames = [(0, &rod.ends[0]), (n - 1, &rod.ends[1])];
@@ -1064,6 +1066,11 @@ fn step_fixed<T: Real>(
         }
         stats.min_stretch = stats.min_stretch.min(lo);
         stats.max_stretch = stats.max_stretch.max(hi);
+    }
+    if result.is_err() && keep_start_on_divergence {
+        // The caller retakes the batch from its start, which `rod.state` still holds.
+        w.shadow = false;
+        return result.map(|()| stats);
     }
     for i in 0..=n {
         rod.state.positions[i] = vt(&w.x[i]);
