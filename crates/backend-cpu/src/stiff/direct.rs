@@ -20,8 +20,11 @@
 //! Everything here is `f64`: with frame inverse inertias near 1e12 and compliances near 1e-11
 //! the matrix spans more than `f32` can resolve.
 
+#[cfg(test)]
 use super::constraints::{BendTwist, StretchShear};
+use super::lanes::V3s;
 use cosserat_model::Vec3;
+#[cfg(test)]
 use nalgebra::Matrix3;
 
 /// `a diag(w) bᵀ`.
@@ -52,7 +55,7 @@ fn add_awat(c: &mut M3, a: &Matrix3<f64>, w: &Vec3<f64>) {
 }
 
 /// `[g]× diag(w) [g]×ᵀ` in closed form.
-#[inline(always)]
+#[cfg(test)]
 fn cross_w_cross(g: &Vec3<f64>, w: &Vec3<f64>) -> M3 {
     let (x, y, z) = (g.x, g.y, g.z);
     let (o01, o02, o12) = (-w[2] * x * y, -w[1] * x * z, -w[0] * y * z);
@@ -64,11 +67,12 @@ fn cross_w_cross(g: &Vec3<f64>, w: &Vec3<f64>) -> M3 {
 }
 
 /// What the assembly needs to know about one rod besides its current constraint Jacobians.
+#[cfg(test)]
 pub(crate) struct Masses<'a> {
     /// Inverse point masses (zero for held points).
     pub(crate) inv_mass: &'a [f64],
     /// Inverse principal inertias of the frames (zero for held frames).
-    pub(crate) inv_inertia: &'a [Vec3<f64>],
+    pub(crate) inv_inertia: &'a V3s,
     /// `α̃ = α / h²` of each stretch–shear constraint.
     pub(crate) alpha_gamma: &'a [Vec3<f64>],
     /// `α̃` of each bend–twist constraint.
@@ -140,11 +144,10 @@ fn inverse_spd(a: &M3) -> M3 {
 /// The diagonal block of the stretch–shear constraint `Γ_j` (points `j`, `j + 1`, frame `j`):
 /// `∂Γ/∂θ = [g]×` with `g = Γ + e3` gives `[g]× W_j [g]×ᵀ`; `∂Γ/∂r = ±Rᵀ/l0` gives
 /// `(w_j + w_{j+1}) / l0² I` (the squared norm of a row); plus the compliance `α̃`.
-#[inline(always)]
-fn gamma_diagonal(j: usize, s: &StretchShear<f64>, m: &Masses<'_>) -> M3 {
-    let g = s.value + Vec3::z();
-    let mut gg = cross_w_cross(&g, &m.inv_inertia[j]);
-    let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * s.d_rb.row(0).norm_squared();
+#[cfg(test)]
+fn gamma_diagonal(j: usize, g: &Vec3<f64>, d_rb: &Matrix3<f64>, m: &Masses<'_>) -> M3 {
+    let mut gg = cross_w_cross(g, &m.inv_inertia.get(j));
+    let wsum = (m.inv_mass[j] + m.inv_mass[j + 1]) * d_rb.row(0).norm_squared();
     for c in 0..3 {
         gg[c][c] += m.alpha_gamma[j][c] + wsum;
     }
@@ -153,9 +156,9 @@ fn gamma_diagonal(j: usize, s: &StretchShear<f64>, m: &Masses<'_>) -> M3 {
 
 /// Block row `k` of `J K⁻¹ Jᵀ + α̃` in the ordering `(λ_Γ0, λ_Ω0, λ_Γ1, …)`: the diagonal
 /// block and the blocks in columns `k + 1` and `k + 2` (zero past the end). The direct
-/// products of the Jacobians, kept as the reference of [`blocks4`].
+/// products of the Jacobians: the reference of the assembly in `work.rs`.
 #[cfg(test)]
-fn blocks(
+pub(crate) fn blocks(
     k: usize,
     ss: &[StretchShear<f64>],
     bt: &[BendTwist<f64>],
@@ -166,8 +169,8 @@ fn blocks(
     if k.is_multiple_of(2) {
         // Γ_j: points j, j + 1 and frame j.
         let s = &ss[j];
-        let wj = &m.inv_inertia[j];
-        let gg = gamma_diagonal(j, s, m);
+        let wj = &m.inv_inertia.get(j);
+        let gg = gamma_diagonal(j, &(s.value + Vec3::z()), &s.d_rb, m);
         if j < bt.len() {
             let a1 = awbt(&s.d_theta, wj, &bt[j].d_theta_a);
             let w = Vec3::repeat(-m.inv_mass[j + 1]);
@@ -179,12 +182,12 @@ fn blocks(
     } else {
         // Ω_j: frames j and j + 1.
         let b = &bt[j];
-        let wb = &m.inv_inertia[j + 1];
+        let wb = &m.inv_inertia.get(j + 1);
         let mut oo = zero;
         for c in 0..3 {
             oo[c][c] = m.alpha_omega[j][c];
         }
-        add_awat(&mut oo, &b.d_theta_a, &m.inv_inertia[j]);
+        add_awat(&mut oo, &b.d_theta_a, &m.inv_inertia.get(j));
         add_awat(&mut oo, &b.d_theta_b, wb);
         let a1 = awbt(&b.d_theta_b, wb, &ss[j + 1].d_theta);
         let a2 = if j + 1 < bt.len() {
@@ -257,77 +260,72 @@ fn tmul4(c: Option<&B4>, a: &B4, b: &B4) -> B4 {
     out
 }
 
-/// `a diag(w) bᵀ` as padded rows: row `r` is `Σ_i a[r][i] w_i · column_i(b)`, and nalgebra
-/// stores `b` by columns.
-#[inline(always)]
-fn awbt4(a: &Matrix3<f64>, w: &Vec3<f64>, b: &Matrix3<f64>) -> B4 {
-    let col = |i: usize| -> R4 { [b[(0, i)], b[(1, i)], b[(2, i)], 0.0] };
-    let (b0, b1, b2) = (col(0), col(1), col(2));
-    let mut out = [[0.0; 4]; 3];
-    for (r, o) in out.iter_mut().enumerate() {
-        let first = scale4(&b0, a[(r, 0)] * w[0]);
-        *o = axpy(axpy(first, a[(r, 1)] * w[1], &b1), a[(r, 2)] * w[2], &b2);
-    }
-    out
+/// The blocks of `J K⁻¹ Jᵀ + α̃` of one rod, assembled four elements at a time (`work.rs`),
+/// one record per element: the stretch–shear block row (`Γ_j`) then the bend–twist block row
+/// (`Ω_j`), each as the upper triangle of its diagonal block (entries 00, 01, 02, 11, 12, 22,
+/// then two unused) and its blocks in block columns `k + 1` and `k + 2` as rows padded to four
+/// (zero past the end of the rod).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Assembled {
+    /// Elements.
+    n: usize,
+    /// One record per element, and padding.
+    pub(crate) records: Vec<[f64; Assembled::ENTRIES]>,
 }
 
-/// Block row `k` of `J K⁻¹ Jᵀ + α̃` (as [`blocks`]), with the off-diagonal blocks as padded
-/// rows and the diagonal blocks in closed form:
-/// - `Γ_j`: `[g]× W_j [g]×ᵀ + ((w_j + w_{j+1}) / l0²) I + α̃` (`∂Γ/∂r = ±Rᵀ/l0`);
-/// - `Ω_j`, with `∂Ω/∂θ_a = [c]× − a I`, `∂Ω/∂θ_b = [c]× + a I` (`a = s_w / l̄`,
-///   `c = s_v / l̄`): `[c]× (W_a + W_b) [c]×ᵀ + a S(c, W_b − W_a) + a² (W_a + W_b) + α̃` with
-///   `S(c, W)_{rk} = [c]×_{rk} (W_k − W_r)` (from `[c]× W + W [c]×ᵀ`, as `[c]×ᵀ = −[c]×`).
-#[inline(always)]
-fn blocks4(
-    k: usize,
-    ss: &[StretchShear<f64>],
-    bt: &[BendTwist<f64>],
-    m: &Masses<'_>,
-) -> (M3, B4, B4) {
-    let zero = [[0.0; 4]; 3];
-    let j = k / 2;
-    if k.is_multiple_of(2) {
-        let s = &ss[j];
-        let wj = &m.inv_inertia[j];
-        let gg = gamma_diagonal(j, s, m);
-        if j < bt.len() {
-            let a1 = awbt4(&s.d_theta, wj, &bt[j].d_theta_a);
-            let w = Vec3::repeat(-m.inv_mass[j + 1]);
-            let a2 = awbt4(&s.d_rb, &w, &ss[j + 1].d_rb);
-            (gg, a1, a2)
-        } else {
-            (gg, zero, zero)
+impl Assembled {
+    /// Entries per element: two block rows of 8 + 12 + 12.
+    pub(crate) const ENTRIES: usize = 64;
+    /// Offset of the bend–twist row's entries.
+    pub(crate) const BEND: usize = 32;
+    /// Offsets of the off-diagonal blocks' rows within a block row.
+    pub(crate) const NEXT: usize = 8;
+    pub(crate) const SECOND: usize = 20;
+
+    /// Sizes the records for `n` elements and `len ≥ n` records.
+    pub(crate) fn resize(&mut self, n: usize, len: usize) {
+        self.n = n;
+        self.records.resize(len, [0.0; Self::ENTRIES]);
+    }
+
+    /// Block row `k` of the unknowns' order `(λ_Γ0, λ_Ω0, λ_Γ1, …)`.
+    #[inline(always)]
+    fn block_row(&self, k: usize) -> (M3, B4, B4) {
+        let base = if k.is_multiple_of(2) { 0 } else { Self::BEND };
+        let e = &self.records[k / 2][base..base + Self::BEND];
+        let d = [[e[0], e[1], e[2]], [e[1], e[3], e[4]], [e[2], e[4], e[5]]];
+        let row = |o: usize| -> R4 { e[o..o + 4].try_into().expect("four entries") };
+        let (a, b) = (Self::NEXT, Self::SECOND);
+        (
+            d,
+            [row(a), row(a + 4), row(a + 8)],
+            [row(b), row(b + 4), row(b + 8)],
+        )
+    }
+
+    /// The records of the blocks `f(k)` of a rod of `n` elements (tests).
+    #[cfg(test)]
+    pub(crate) fn from_blocks(n: usize, f: impl Fn(usize) -> (M3, M3, M3)) -> Self {
+        let mut a = Self::default();
+        a.resize(n, n);
+        for k in 0..2 * n - 1 {
+            let (d, a1, a2) = f(k);
+            let base = if k % 2 == 0 { 0 } else { Self::BEND };
+            let e = &mut a.records[k / 2][base..];
+            for (i, (r, c)) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+                .into_iter()
+                .enumerate()
+            {
+                e[i] = d[r][c];
+            }
+            for r in 0..3 {
+                for c in 0..3 {
+                    e[Self::NEXT + 4 * r + c] = a1[r][c];
+                    e[Self::SECOND + 4 * r + c] = a2[r][c];
+                }
+            }
         }
-    } else {
-        let b = &bt[j];
-        let (wa, wb) = (&m.inv_inertia[j], &m.inv_inertia[j + 1]);
-        let db = &b.d_theta_b;
-        let a = db[(0, 0)];
-        let c = Vec3::new(db[(2, 1)], db[(0, 2)], db[(1, 0)]);
-        let wsum = wa + wb;
-        let wdiff = wb - wa;
-        let mut oo = cross_w_cross(&c, &wsum);
-        // a S(c, W_b − W_a): off-diagonal only ([c]× has a zero diagonal).
-        let s01 = a * (-c.z) * (wdiff.y - wdiff.x);
-        let s02 = a * c.y * (wdiff.z - wdiff.x);
-        let s12 = a * (-c.x) * (wdiff.z - wdiff.y);
-        oo[0][1] += s01;
-        oo[1][0] += s01;
-        oo[0][2] += s02;
-        oo[2][0] += s02;
-        oo[1][2] += s12;
-        oo[2][1] += s12;
-        let a2w = a * a;
-        for r in 0..3 {
-            oo[r][r] += a2w * wsum[r] + m.alpha_omega[j][r];
-        }
-        let a1 = awbt4(db, wb, &ss[j + 1].d_theta);
-        let a2 = if j + 1 < bt.len() {
-            awbt4(db, wb, &bt[j + 1].d_theta_a)
-        } else {
-            zero
-        };
-        (oo, a1, a2)
+        a
     }
 }
 
@@ -355,15 +353,9 @@ pub(crate) struct BlockTridiagonal {
 }
 
 impl BlockTridiagonal {
-    /// Assembles `J K⁻¹ Jᵀ + α̃` at the configuration the Jacobians were evaluated at and
-    /// factorises it.
-    pub(crate) fn factor(
-        &mut self,
-        ss: &[StretchShear<f64>],
-        bt: &[BendTwist<f64>],
-        m: &Masses<'_>,
-    ) {
-        let n = ss.len();
+    /// Factorises the assembled `J K⁻¹ Jᵀ + α̃`.
+    pub(crate) fn factor(&mut self, blocks: &Assembled) {
+        let n = blocks.n;
         if n == 0 {
             self.piv.clear();
             return;
@@ -374,7 +366,7 @@ impl BlockTridiagonal {
         // Amounts still to subtract from the next two diagonal blocks and the block between.
         let (mut s11, mut s12, mut s22) = (zero, zero, zero);
         for (k, out) in self.piv.iter_mut().enumerate() {
-            let (mut d, mut a1, a2) = blocks4(k, ss, bt, m);
+            let (mut d, mut a1, a2) = blocks.block_row(k);
             // Updates from the blocks eliminated before.
             for r in 0..3 {
                 for c in 0..3 {
@@ -433,21 +425,23 @@ impl BlockTridiagonal {
 
     /// Solves the factorised system in place: `x` holds the right-hand side on entry and the
     /// solution on return (the bend–twist entries of the last element are set to zero).
-    pub(crate) fn solve(&self, x: &mut [[f64; 6]]) {
-        let n = x.len();
-        if n == 0 {
+    /// The stretch–shear blocks are in `x[0]`, the bend–twist ones in `x[1]`, one entry per
+    /// element.
+    pub(crate) fn solve(&self, x: &mut [V3s; 2]) {
+        let blocks = self.piv.len();
+        if blocks == 0 {
             return;
         }
-        let blocks = 2 * n - 1;
-        debug_assert_eq!(self.piv.len(), blocks);
-        let get = |x: &[[f64; 6]], k: usize| -> R4 {
-            let o = 3 * (k % 2);
-            let e = &x[k / 2];
-            [e[o], e[o + 1], e[o + 2], 0.0]
+        let n = blocks.div_ceil(2);
+        let get = |x: &[V3s; 2], k: usize| -> R4 {
+            let c = &x[k % 2];
+            let j = k / 2;
+            [c.x[j], c.y[j], c.z[j], 0.0]
         };
-        let set = |x: &mut [[f64; 6]], k: usize, v: &R4| {
-            let o = 3 * (k % 2);
-            x[k / 2][o..o + 3].copy_from_slice(&v[..3]);
+        let set = |x: &mut [V3s; 2], k: usize, v: &R4| {
+            let c = &mut x[k % 2];
+            let j = k / 2;
+            (c.x[j], c.y[j], c.z[j]) = (v[0], v[1], v[2]);
         };
         // Forward: z_k = b_k − Y_{k−1}ᵀ z_{k−1} − Z_{k−2}ᵀ z_{k−2}; then w_k = P_k⁻¹ z_k
         // (`Yᵀ z = Σ_i z_i · row_i(Y)`; `P⁻¹` is symmetric).
@@ -488,7 +482,7 @@ impl BlockTridiagonal {
             x1 = v;
             set(x, k, &v);
         }
-        x[n - 1][3..].fill(0.0);
+        x[1].set(n - 1, &Vec3::zeros());
     }
 
     /// Dense `J K⁻¹ Jᵀ + α̃` (order `6n`, the last element's bend–twist rows as identity
@@ -502,7 +496,7 @@ impl BlockTridiagonal {
         let n = ss.len();
         let mut a = vec![vec![0.0; 6 * n]; 6 * n];
         for k in 0..2 * n - 1 {
-            let (d, a1, a2) = blocks4(k, ss, bt, m);
+            let (d, a1, a2) = blocks(k, ss, bt, m);
             for r in 0..3 {
                 for c in 0..3 {
                     a[3 * k + r][3 * k + c] = d[r][c];
@@ -566,8 +560,8 @@ mod tests {
         (ss, bt, w, wi)
     }
 
-    /// The block assembly equals `J M⁻¹ Jᵀ + α̃` built densely from the constraint Jacobians,
-    /// and the block factorisation solves it.
+    /// The block assembly of the reference equals `J M⁻¹ Jᵀ + α̃` built densely from the
+    /// constraint Jacobians, and the block factorisation solves it.
     #[test]
     fn block_assembly_and_solve_match_dense() {
         let n = 6;
@@ -576,9 +570,10 @@ mod tests {
             .map(|j| Vec3::new(1e-3, 2e-3, j as f64 * 1e-4))
             .collect();
         let ao: Vec<_> = (0..n - 1).map(|_| Vec3::new(3e-2, 3e-2, 5e-2)).collect();
+        let wi_col = V3s::from_slice(&wi);
         let m = Masses {
             inv_mass: &w,
-            inv_inertia: &wi,
+            inv_inertia: &wi_col,
             alpha_gamma: &ag,
             alpha_omega: &ao,
         };
@@ -612,26 +607,6 @@ mod tests {
                 }
             })
             .collect();
-        // The closed-form assembly equals the direct products of the Jacobians.
-        for k in 0..2 * n - 1 {
-            let (d, a1, a2) = blocks(k, &ss, &bt, &m);
-            let (d4, b1, b2) = blocks4(k, &ss, &bt, &m);
-            let scale = d.iter().flatten().fold(1.0_f64, |s, v| s.max(v.abs()));
-            for r in 0..3 {
-                for c in 0..3 {
-                    for (x, y) in [
-                        (d[r][c], d4[r][c]),
-                        (a1[r][c], b1[r][c]),
-                        (a2[r][c], b2[r][c]),
-                    ] {
-                        assert!(
-                            (x - y).abs() < 1e-13 * scale,
-                            "block {k} ({r}, {c}): {x} vs {y}"
-                        );
-                    }
-                }
-            }
-        }
         let a = BlockTridiagonal::dense(&ss, &bt, &m);
         let mut worst: f64 = 0.0;
         let scale = a.iter().flatten().fold(0.0_f64, |s, v| s.max(v.abs()));
@@ -667,7 +642,7 @@ mod tests {
     ) {
         let n = ss.len();
         let mut f = BlockTridiagonal::default();
-        f.factor(ss, bt, m);
+        f.factor(&Assembled::from_blocks(n, |k| blocks(k, ss, bt, m)));
         let b: Vec<[f64; 6]> = (0..n)
             .map(|j| {
                 let mut v = [0.0; 6];
@@ -680,9 +655,18 @@ mod tests {
                 v
             })
             .collect();
-        let mut x = b.clone();
+        let mut x = [V3s::zeros(n), V3s::zeros(n)];
+        for (j, e) in b.iter().enumerate() {
+            x[0].set(j, &Vec3::new(e[0], e[1], e[2]));
+            x[1].set(j, &Vec3::new(e[3], e[4], e[5]));
+        }
         f.solve(&mut x);
-        let flat: Vec<f64> = x.iter().flatten().copied().collect();
+        let flat: Vec<f64> = (0..n)
+            .flat_map(|j| {
+                let (g, o) = (x[0].get(j), x[1].get(j));
+                [g.x, g.y, g.z, o.x, o.y, o.z]
+            })
+            .collect();
         let scale = flat.iter().fold(1.0_f64, |s, v| s.max(v.abs()));
         for r in 0..6 * n {
             let ax: f64 = (0..6 * n).map(|c| a[r][c] * flat[c]).sum();
@@ -703,9 +687,10 @@ mod tests {
             let ao: Vec<_> = (0..n.saturating_sub(1))
                 .map(|_| Vec3::new(3e-2, 3e-2, 5e-2))
                 .collect();
+            let wi_col = V3s::from_slice(&wi);
             let m = Masses {
                 inv_mass: &w,
-                inv_inertia: &wi,
+                inv_inertia: &wi_col,
                 alpha_gamma: &ag,
                 alpha_omega: &ao,
             };

@@ -55,15 +55,17 @@
 
 pub mod constraints;
 mod direct;
+mod lanes;
+mod work;
 mod xpbd;
 
 use crate::ends::EndKind;
 use crate::stepper::{CpuRod, DivergedQuantity, Divergence, SolverSettings, StepStats};
-use constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
-use cosserat_model::darboux::relative_rotation;
 use cosserat_model::quat::exp_rotation;
 use cosserat_model::{Quat, Real, Vec3};
-use direct::{BlockTridiagonal, Masses};
+use direct::{Assembled, BlockTridiagonal};
+use lanes::{V3s, padded};
+use work::Work;
 
 /// How the constraints of a step are solved.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -196,40 +198,76 @@ pub(crate) struct Consts {
     alpha_omega_matrix: Vec<Vec3<f64>>,
     /// Whether any damping coefficient is positive.
     damped: bool,
+    /// The constants of the element-wise passes as padded columns (`lanes.rs`).
+    pub(crate) cols: ConstCols,
     key: Option<(usize, u64, bool, [EndKind; 2])>,
 }
 
-/// The working state of a step, in `f64`.
+/// [`Consts`] as the element-wise passes read them: padded columns (`lanes.rs`) whose padding
+/// keeps the extra lanes finite (unit lengths and inertias, zero inverse masses).
 #[derive(Clone, Debug, Default)]
-pub(crate) struct Work {
-    pub(crate) x: Vec<Vec3<f64>>,
-    v: Vec<Vec3<f64>>,
-    x_old: Vec<Vec3<f64>>,
-    pub(crate) q: Vec<Quat<f64>>,
-    q_old: Vec<Quat<f64>>,
-    omega: Vec<Vec3<f64>>,
-    force: Vec<Vec3<f64>>,
-    /// Inertial targets `x̃`, `q̃` of the step.
-    x_pred: Vec<Vec3<f64>>,
-    q_pred: Vec<Quat<f64>>,
-    /// `M⁻¹ g`-corrected displacements towards the targets (see [`Work::rhs`]).
-    u_x: Vec<Vec3<f64>>,
-    u_th: Vec<Vec3<f64>>,
-    pub(crate) lambda: Vec<[f64; 6]>,
-    ss: Vec<StretchShear<f64>>,
-    bt: Vec<BendTwist<f64>>,
-    rhs: Vec<[f64; 6]>,
-    dtheta: Vec<Vec3<f64>>,
-    inv_k: Vec<Vec3<f64>>,
-    lambda_prev: Vec<[f64; 6]>,
-    /// Whether every multiplier is zero (the first iteration of a step).
-    lambda_zero: bool,
-    /// Constraint values `(Γ, Ω)` at the start of the step (for damping only).
-    c_old: Vec<[f64; 6]>,
-    /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (in `f64`); the next
-    /// step continues from them when the rod's state is still their rounding to its precision,
-    /// so that an `f32` rod is not re-rounded between steps (see [`step_rod_stiff`]).
-    shadow: bool,
+pub(crate) struct ConstCols {
+    /// Per point.
+    pub(crate) inv_mass: Vec<f64>,
+    /// Per element.
+    pub(crate) inv_l0: Vec<f64>,
+    pub(crate) inv_l0_sq: Vec<f64>,
+    /// Per node (`n − 1` entries; the last element's lane is padding).
+    pub(crate) lbar: Vec<f64>,
+    pub(crate) inv_lbar: Vec<f64>,
+    pub(crate) rest_u: V3s,
+    /// The compliances and damping fractions of the Newton system (`alpha_gamma_matrix`, …).
+    pub(crate) alpha_g: V3s,
+    pub(crate) alpha_o: V3s,
+    pub(crate) damp_g: V3s,
+    pub(crate) damp_o: V3s,
+    /// Per frame: the inertia, its own inverse (also for held frames), and 1 for a free frame,
+    /// 0 for a held one.
+    pub(crate) inertia: V3s,
+    pub(crate) inv_inertia_own: V3s,
+    pub(crate) free: Vec<f64>,
+}
+
+/// `v` padded to `padded(v.len())` entries with `pad`.
+fn column(v: &[f64], pad: f64) -> Vec<f64> {
+    let mut c = vec![pad; padded(v.len())];
+    c[..v.len()].copy_from_slice(v);
+    c
+}
+
+impl ConstCols {
+    fn new(k: &Consts, n: usize) -> Self {
+        let inertia = {
+            let mut c = V3s::from_slice(&k.inertia);
+            for i in n..c.x.len() {
+                c.set(i, &Vec3::repeat(1.0));
+            }
+            c
+        };
+        let mut free = vec![0.0; padded(n)];
+        for (f, w) in free.iter_mut().zip(&k.inv_inertia) {
+            *f = if w.x == 0.0 { 0.0 } else { 1.0 };
+        }
+        let mut lbar = k.lbar.clone();
+        lbar.resize(n, 0.0);
+        let mut inv_lbar = k.inv_lbar.clone();
+        inv_lbar.resize(n, 1.0);
+        Self {
+            inv_mass: column(&k.inv_mass, 0.0),
+            inv_l0: column(&k.l0.iter().map(|l| 1.0 / l).collect::<Vec<_>>(), 1.0),
+            inv_l0_sq: column(&k.inv_l0_sq, 1.0),
+            lbar: column(&lbar, 0.0),
+            inv_lbar: column(&inv_lbar, 1.0),
+            rest_u: V3s::from_slice(&k.rest_u),
+            alpha_g: V3s::from_slice(&k.alpha_gamma_matrix),
+            alpha_o: V3s::from_slice(&k.alpha_omega_matrix),
+            damp_g: V3s::from_slice(&k.damp_gamma),
+            damp_o: V3s::from_slice(&k.damp_omega),
+            inertia,
+            inv_inertia_own: V3s::from_slice(&k.inv_inertia_own),
+            free,
+        }
+    }
 }
 
 /// Scratch memory and cached constants of the stiff scheme for one rod; the caller owns one per
@@ -240,6 +278,7 @@ pub(crate) struct Work {
 pub struct StiffScratch {
     k: Consts,
     w: Work,
+    assembled: Assembled,
     factor: BlockTridiagonal,
     factor_valid: bool,
     report: StiffReport,
@@ -298,32 +337,6 @@ fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
     2.0 * sn.atan2(s.w) / sn
 }
 
-/// `r / |r|` for a quaternion whose norm is 1 up to rounding: one Newton step of `1/√x` at
-/// 1 (relative error `3/8 ε²` for `|r|² = 1 + ε`), the exact division otherwise.
-#[inline(always)]
-fn renormalise(r: Quat<f64>) -> Quat<f64> {
-    let e = r.norm_squared() - 1.0;
-    if e.abs() < 1e-7 {
-        r * (1.0 - 0.5 * e)
-    } else {
-        r / r.norm()
-    }
-}
-
-/// [`apply_rotation`] without a square root or division for rotations below 2e-2 rad: the
-/// rotation `(1, θ/2)` scaled by the series of `1/√(1 + |θ|²/4)` (error below 1e-16), then
-/// [`renormalise`].
-#[inline(always)]
-fn apply_small_rotation(q: &mut Quat<f64>, theta: &Vec3<f64>) {
-    let a = 0.25 * theta.norm_squared();
-    if a >= 1e-4 {
-        return apply_rotation(q, theta);
-    }
-    let s = 1.0 - a * (0.5 - a * (0.375 - a * 0.3125));
-    let hs = 0.5 * s;
-    *q = renormalise(*q * Quat::new(s, hs * theta.x, hs * theta.y, hs * theta.z));
-}
-
 /// `1 / s_w` for a unit quaternion by the series of `(1 − |s_v|²)^(−1/2)` when `|s_v|² < 1e-4`
 /// (error below 1e-20), by division otherwise (and 1 when `s_w` is nearly zero).
 #[inline(always)]
@@ -350,12 +363,14 @@ fn qt<T: Real>(q: &Quat<f64>) -> Quat<T> {
 /// Whether the rod's state is exactly the rounding of the scratch's `f64` state.
 fn shadow_matches<T: Real>(rod: &CpuRod<T>, w: &Work) -> bool {
     let s = &rod.state;
-    s.positions.len() == w.x.len()
-        && s.frames.len() == w.q.len()
-        && (0..w.x.len())
-            .all(|i| vt::<T>(&w.x[i]) == s.positions[i] && vt::<T>(&w.v[i]) == s.velocities[i])
-        && (0..w.q.len()).all(|j| {
-            qt::<T>(&w.q[j]) == s.frames[j] && vt::<T>(&w.omega[j]) == s.angular_velocities[j]
+    s.frames.len() == w.n
+        && s.positions.len() == w.n + 1
+        && (0..=w.n).all(|i| {
+            vt::<T>(&w.x.get(i)) == s.positions[i] && vt::<T>(&w.v.get(i)) == s.velocities[i]
+        })
+        && (0..w.n).all(|j| {
+            qt::<T>(&w.q.get(j)) == s.frames[j]
+                && vt::<T>(&w.omega.get(j)) == s.angular_velocities[j]
         })
 }
 
@@ -466,242 +481,8 @@ impl Consts {
         self.damped = dg.iter().chain(&dw).any(|d| d.amax() > 0.0);
         (self.damp_gamma, self.alpha_gamma_matrix) = (dg, ag);
         (self.damp_omega, self.alpha_omega_matrix) = (dw, aw);
+        self.cols = ConstCols::new(self, n);
         self.key = Some(key);
-    }
-}
-
-impl Work {
-    fn resize(&mut self, n: usize) {
-        if self.q.len() == n && self.x.len() == n + 1 {
-            return;
-        }
-        self.shadow = false;
-        let z = Vec3::zeros();
-        self.x = vec![z; n + 1];
-        self.v = vec![z; n + 1];
-        self.x_old = vec![z; n + 1];
-        self.force = vec![z; n + 1];
-        self.x_pred = vec![z; n + 1];
-        self.u_x = vec![z; n + 1];
-        self.u_th = vec![z; n];
-        self.q_pred = vec![Quat::identity(); n];
-        self.q = vec![Quat::identity(); n];
-        self.q_old = vec![Quat::identity(); n];
-        self.omega = vec![z; n];
-        self.dtheta = vec![z; n];
-        self.lambda = vec![[0.0; 6]; n];
-        self.lambda_prev = vec![[0.0; 6]; n];
-        self.inv_k = vec![z; n];
-        self.rhs = vec![[0.0; 6]; n];
-        self.c_old = vec![[0.0; 6]; n];
-        let m = nalgebra::Matrix3::zeros();
-        self.ss = vec![
-            StretchShear {
-                value: z,
-                d_rb: m,
-                d_theta: m
-            };
-            n
-        ];
-        self.bt = vec![
-            BendTwist {
-                value: z,
-                d_theta_a: m,
-                d_theta_b: m
-            };
-            n.saturating_sub(1)
-        ];
-    }
-
-    /// Evaluates every constraint and its Jacobian at the current iterate.
-    fn constraints(&mut self, k: &Consts) {
-        let n = k.l0.len();
-        for j in 0..n {
-            self.ss[j] = stretch_shear(&self.x[j], &self.x[j + 1], &self.q[j], k.l0[j]);
-        }
-        for j in 0..n.saturating_sub(1) {
-            self.bt[j] = bend_twist(&self.q[j], &self.q[j + 1], &k.rest_u[j], k.lbar[j]);
-        }
-    }
-
-    /// The frames' block `K_θ` of the Newton matrix: inertia plus an isotropic bound `σ_j` of
-    /// the geometric stiffness `Σ λ ∇²_θθ C` that the constraints through frame `j` give it at
-    /// the multipliers `lambda` (see [`StiffSettings::geometric`]); stores `K_θ⁻¹` in `inv_k`.
-    ///
-    /// Bounds, per unit multiplier, from the second derivatives of the constraints under
-    /// body rotations: stretch–shear `½(λ gᵀ + g λᵀ) − (λ·g) I`, at most `2 |λ| |g|`;
-    /// bend–twist, own frame `(λ·s_v)/(2 l̄)` and the neighbour coupling at most
-    /// `|λ| (1 + 2|s_v|)/(2 l̄)`, together at most `|λ| / l̄` for small relative rotations.
-    fn precondition(&mut self, k: &Consts, geometric: f64, use_previous: bool) {
-        let n = k.l0.len();
-        let lam = if use_previous {
-            &self.lambda_prev
-        } else {
-            &self.lambda
-        };
-        let norm = |l: &[f64]| (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
-        // Bend–twist bound of the node before frame j.
-        let mut before = 0.0;
-        for j in 0..n {
-            let l = &lam[j];
-            let after = if j + 1 < n {
-                norm(&l[3..]) * k.inv_lbar[j]
-            } else {
-                0.0
-            };
-            // |g| ≤ (1 + |g|²)/2, equal to second order in the strain (|g| = |e|/l0).
-            let g = self.ss[j].value + Vec3::z();
-            let g_bound = 0.5 * (1.0 + g.norm_squared());
-            let sigma = geometric * (2.0 * norm(&l[..3]) * g_bound + before + after);
-            before = after;
-            self.inv_k[j] = if k.inv_inertia[j].x == 0.0 {
-                Vec3::zeros()
-            } else {
-                // One division for the three inverses.
-                let d = k.inertia[j].add_scalar(sigma);
-                let inv = 1.0 / (d.x * d.y * d.z);
-                Vec3::new(d.y * d.z * inv, d.x * d.z * inv, d.x * d.y * inv)
-            };
-        }
-    }
-
-    /// The right-hand side of one Newton step of the full XPBD system (Macklin et al. 2016,
-    /// eqs. 9–11) at the constraints of the last [`constraints`](Self::constraints) call:
-    ///
-    /// `g = M (x − x̃) − Jᵀ λ`, `u = −K⁻¹ g`, `(J K⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ + J u)`,
-    /// `Δx = u + K⁻¹ Jᵀ Δλ`,
-    ///
-    /// with `K = M` for points and `K_θ = I + σ` for frames ([`precondition`](Self::precondition)).
-    /// `K` only steers the iteration: its fixed point `g = 0`, `C + α̃ λ = 0` does not depend
-    /// on it. Keeping `g` (which the simplified XPBD update drops) makes that fixed point the
-    /// exact implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting guess, so the
-    /// iteration can start from the positions the velocities alone would reach and loads need
-    /// not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
-    /// from `q̃` to `q` in the first-order map of [`apply_rotation`].
-    ///
-    /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
-    /// (strains, and bend–twist as angles `l̄ |ΔΩ|`).
-    fn rhs(&mut self, k: &Consts) -> f64 {
-        let n = k.l0.len();
-        // u = x̃ − x + M⁻¹ Jᵀ λ.
-        for i in 0..=n {
-            self.u_x[i] = self.x_pred[i] - self.x[i];
-        }
-        if self.lambda_zero {
-            self.dtheta.fill(Vec3::zeros());
-        } else {
-            add_jt(
-                &self.ss,
-                &self.bt,
-                &self.lambda,
-                &k.inv_mass,
-                &mut self.u_x,
-                &mut self.dtheta,
-            );
-        }
-        for j in 0..n {
-            let s = self.q[j].conjugate() * self.q_pred[j];
-            let to_target = s.imag() * (2.0 * inv_w(&s));
-            self.u_th[j] = to_target + self.dtheta[j].component_mul(&self.inv_k[j]);
-        }
-        // One pass per element; the largest residual per element first, so that the running
-        // maximum is one dependent operation per element.
-        let mut worst: f64 = 0.0;
-        for j in 0..n {
-            let s = &self.ss[j];
-            let ju = s.d_rb * (self.u_x[j + 1] - self.u_x[j]) + s.d_theta * self.u_th[j];
-            let (lam, a) = (&self.lambda[j], &k.alpha_gamma_matrix[j]);
-            let r = &mut self.rhs[j];
-            let mut local: f64 = 0.0;
-            for c in 0..3 {
-                let mut res = s.value[c] + a[c] * lam[c];
-                if k.damped {
-                    // (C + α̃λ + γ (C − C_n)) / (1 + γ) = C + α̃λ/(1 + γ) − γ/(1 + γ) C_n: the
-                    // damped residual, its rows scaled as the Newton matrix's (see
-                    // `Consts::rebuild`).
-                    res -= k.damp_gamma[j][c] * self.c_old[j][c];
-                }
-                r[c] = -(res + ju[c]);
-                local = local.max(res.abs()).max(ju[c].abs());
-            }
-            if j + 1 < n {
-                let b = &self.bt[j];
-                let ju = b.d_theta_a * self.u_th[j] + b.d_theta_b * self.u_th[j + 1];
-                let a = &k.alpha_omega_matrix[j];
-                let mut bend: f64 = 0.0;
-                for c in 0..3 {
-                    let mut res = b.value[c] + a[c] * lam[3 + c];
-                    if k.damped {
-                        res -= k.damp_omega[j][c] * self.c_old[j][3 + c];
-                    }
-                    r[3 + c] = -(res + ju[c]);
-                    bend = bend.max(res.abs()).max(ju[c].abs());
-                }
-                local = local.max(bend * k.lbar[j]);
-            }
-            worst = worst.max(local);
-        }
-        if n > 0 {
-            self.rhs[n - 1][3..].fill(0.0);
-        }
-        worst
-    }
-
-    /// Applies the multiplier increments in `rhs` through the Jacobians of the last
-    /// [`constraints`](Self::constraints): `Δx = u + M⁻¹ Jᵀ Δλ`, `Δθ = u_θ + K_θ⁻¹ J_θᵀ Δλ`; adds them
-    /// to `λ`.
-    fn apply(&mut self, k: &Consts) {
-        let n = k.l0.len();
-        add_jt(
-            &self.ss,
-            &self.bt,
-            &self.rhs,
-            &k.inv_mass,
-            &mut self.u_x,
-            &mut self.dtheta,
-        );
-        self.lambda_zero = false;
-        for i in 0..=n {
-            self.x[i] += self.u_x[i];
-        }
-        for j in 0..n {
-            let th = self.u_th[j] + self.dtheta[j].component_mul(&self.inv_k[j]);
-            apply_small_rotation(&mut self.q[j], &th);
-            for c in 0..6 {
-                self.lambda[j][c] += self.rhs[j][c];
-            }
-        }
-    }
-}
-
-/// `u_x += M⁻¹ J_rᵀ μ` for the points and `dtheta = J_θᵀ μ` for the frames, in one pass along
-/// the rod (`μ` per element: stretch–shear then bend–twist multipliers).
-fn add_jt(
-    ss: &[StretchShear<f64>],
-    bt: &[BendTwist<f64>],
-    mu: &[[f64; 6]],
-    inv_mass: &[f64],
-    u_x: &mut [Vec3<f64>],
-    dtheta: &mut [Vec3<f64>],
-) {
-    let n = ss.len();
-    // The bend–twist term of node j − 1 on frame j, carried to element j.
-    let mut carry = Vec3::zeros();
-    for j in 0..n {
-        let m = &mu[j];
-        let s = &ss[j];
-        let lg = Vec3::new(m[0], m[1], m[2]);
-        let f = s.d_rb.tr_mul(&lg);
-        u_x[j] -= f * inv_mass[j];
-        u_x[j + 1] += f * inv_mass[j + 1];
-        let mut th = s.d_theta.tr_mul(&lg) + carry;
-        if j + 1 < n {
-            let lo = Vec3::new(m[3], m[4], m[5]);
-            let b = &bt[j];
-            th += b.d_theta_a.tr_mul(&lo);
-            carry = b.d_theta_b.tr_mul(&lo);
-        }
-        dtheta[j] = th;
     }
 }
 
@@ -853,6 +634,7 @@ fn step_fixed<T: Real>(
     let StiffScratch {
         k,
         w,
+        assembled,
         factor,
         factor_valid,
         report,
@@ -863,18 +645,15 @@ fn step_fixed<T: Real>(
     // residual of the order of f32's resolution that the tolerance sees as unconverged.
     if !(w.shadow && shadow_matches(rod, w)) {
         for i in 0..=n {
-            w.x[i] = v64(&rod.state.positions[i]);
-            w.v[i] = v64(&rod.state.velocities[i]);
+            w.x.set(i, &v64(&rod.state.positions[i]));
+            w.v.set(i, &v64(&rod.state.velocities[i]));
         }
         for j in 0..n {
             let q = &rod.state.frames[j];
-            w.q[j] = Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64());
-            w.omega[j] = v64(&rod.state.angular_velocities[j]);
+            let q = Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64());
+            w.q.set(j, &q);
+            w.omega.set(j, &v64(&rod.state.angular_velocities[j]));
         }
-    }
-    w.force.fill(Vec3::zeros());
-    for load in &rod.loads {
-        w.force[load.point] += v64(&load.force);
     }
     let gravity = v64(&settings.gravity);
     let precision = T::default_epsilon().to_f64();
@@ -882,78 +661,52 @@ fn step_fixed<T: Real>(
     let limit = settings.divergence_strain.to_f64();
     let mut stats = StepStats::none();
     let mut result = Ok(());
-    let held_points = [(0, &rod.ends[0]), (n, &rod.ends[1])];
-    let held_frames = [(0, &rod.ends[0]), (n - 1, &rod.ends[1])];
+    let direct = stiff.scheme == StiffScheme::Direct;
     for step in 0..steps {
         let t = time + step as f64 * h;
         // 1. Prediction: inertial targets x̃, q̃, and the starting guess of the iteration.
-        let direct = stiff.scheme == StiffScheme::Direct;
         if k.damped {
             // The constraints at the start of the step, for the damping's rate `(C − C_n)/h`.
-            for j in 0..n {
-                let c = &mut w.c_old[j];
-                let g = stretch_shear(&w.x[j], &w.x[j + 1], &w.q[j], k.l0[j]).value;
-                c[..3].copy_from_slice(g.as_slice());
-                if j + 1 < n {
-                    let o = bend_twist(&w.q[j], &w.q[j + 1], &k.rest_u[j], k.lbar[j]).value;
-                    c[3..].copy_from_slice(o.as_slice());
+            w.constraints(k);
+            w.keep_constraint_values();
+        }
+        let loads = rod.loads.iter().map(|l| (l.point, v64(&l.force)));
+        let ends = &rod.ends;
+        w.predict(k, h, &gravity, loads, direct, |w| {
+            for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
+                if end.holds_point() {
+                    let v = v64(&end.velocities_at(t).0);
+                    w.v.set(i, &v);
+                    // The direct solver starts where the velocities alone lead (the full
+                    // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`
+                    // term and starts at x̃.
+                    if direct {
+                        w.x.set(i, &(w.x_old.get(i) + v * h));
+                    }
                 }
             }
-        }
-        for i in 0..=n {
-            w.x_old[i] = w.x[i];
-            // The direct solver starts where the velocities alone lead (the full Newton system
-            // pulls it to the target); Gauss–Seidel XPBD has no `g` term and must start at x̃.
-            if direct {
-                w.x[i] += w.v[i] * h;
-            }
-            if k.inv_mass[i] > 0.0 {
-                w.v[i] += (gravity + w.force[i] * k.inv_mass[i]) * h;
-            }
-        }
-        for (i, end) in held_points {
-            if end.holds_point() {
-                w.v[i] = v64(&end.velocities_at(t).0);
-                if direct {
-                    w.x[i] = w.x_old[i] + w.v[i] * h;
+            for (j, end) in [(0, &ends[0]), (n - 1, &ends[1])] {
+                if end.holds_frame() {
+                    let omega = v64(&end.velocities_at(t).1);
+                    let r = exp_rotation(&(omega * h)) * w.q_old.get(j);
+                    w.q.set(j, &(r / r.norm()));
                 }
             }
-        }
-        for i in 0..=n {
-            w.x_pred[i] = w.x_old[i] + w.v[i] * h;
-            if !direct {
-                w.x[i] = w.x_pred[i];
-            }
-        }
-        for j in 0..n {
-            w.q_old[j] = w.q[j];
-            let (o, inertia) = (w.omega[j], k.inertia[j]);
-            let gyro = o
-                .cross(&inertia.component_mul(&o))
-                .component_mul(&k.inv_inertia_own[j]);
-            w.omega[j] = o - gyro * h;
-            w.q[j] = renormalise(w.q[j] * exp_small(&(w.omega[j] * h)));
-        }
-        for (j, end) in held_frames {
-            if end.holds_frame() {
-                let omega = v64(&end.velocities_at(t).1);
-                let r = exp_rotation(&(omega * h)) * w.q_old[j];
-                w.q[j] = r / r.norm();
-            }
-        }
-        w.q_pred.copy_from_slice(&w.q);
+        });
         // The tolerance, raised to the strain the rod's own precision resolves: an `f32` rod
         // stores positions to `ε |x|` (ε = 2⁻²³), i.e. strains to `ε max|x| / min l0` (1.2e-4
         // for a metre-long rod of millimetre elements); iterating below that changes nothing
         // the rod can hold. No change for `f64` (ε = 2.2e-16).
         let tolerance = if stiff.tolerance > 0.0 && precision > 1e-10 {
-            let extent = w.x.iter().fold(0.0_f64, |m, x| m.max(x.amax()));
+            let extent = (0..=n).fold(0.0_f64, |m, i| m.max(w.x.get(i).amax()));
             stiff.tolerance.max(precision * extent * k.inv_l0_max)
         } else {
             stiff.tolerance
         };
         // 2. Constraint solve.
-        w.lambda.fill([0.0; 6]);
+        for c in &mut w.lambda {
+            c.fill_zero();
+        }
         w.lambda_zero = true;
         let mut used = 0;
         let mut residual = f64::NAN;
@@ -989,13 +742,8 @@ fn step_fixed<T: Real>(
                         refactor = true;
                     }
                     if refactor {
-                        let m = Masses {
-                            inv_mass: &k.inv_mass,
-                            inv_inertia: &w.inv_k,
-                            alpha_gamma: &k.alpha_gamma_matrix,
-                            alpha_omega: &k.alpha_omega_matrix,
-                        };
-                        factor.factor(&w.ss, &w.bt, &m);
+                        w.assemble(k, assembled);
+                        factor.factor(assembled);
                         *factor_valid = true;
                         report.factorisations += 1;
                     }
@@ -1015,57 +763,40 @@ fn step_fixed<T: Real>(
                 }
             }
         }
-        w.lambda_prev.copy_from_slice(&w.lambda);
+        for (p, l) in w.lambda_prev.iter_mut().zip(&w.lambda) {
+            p.copy_from(l);
+        }
         report.iterations = used;
         report.total_iterations += used as u64;
         report.residual = residual;
-        // 3. Velocities from the positions and frames.
-        let inv_h = 1.0 / h;
-        // Drag of the medium, implicit (`v (1 + h γ) = v_solved`) and applied after the solve so
-        // that it removes kinetic energy without changing static equilibria.
-        for i in 0..=n {
-            w.v[i] = (w.x[i] - w.x_old[i]) * (inv_h * drag);
-        }
-        for j in 0..n {
-            let s = relative_rotation(&w.q_old[j], &w.q[j]);
-            let sv = s.imag();
-            w.omega[j] = sv * (angle_over_sin_half(&s) * inv_h);
-        }
+        // 3. Velocities from the positions and frames. Drag of the medium, implicit
+        // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
+        // energy without changing static equilibria.
+        w.velocities(h, drag);
         // Divergence check, as the explicit stepper's, on squared stretches (`|r − 1| > limit`
         // is `r² > (1 + limit)²` or `r² < (1 − limit)²`).
-        let (mut lo, mut hi) = (f64::MAX, 0.0_f64);
         let (above, below) = ((1.0 + limit).powi(2), (1.0 - limit).max(0.0).powi(2));
-        let mut bad = None;
-        for j in 0..n {
-            if !w.q[j].coords.iter().all(|c| c.is_finite()) {
-                bad = Some((j, DivergedQuantity::NonFiniteFrame));
+        match w.stretch_range(k, above, below) {
+            Ok((lo, hi)) => {
+                stats.min_stretch = stats.min_stretch.min(lo.sqrt());
+                stats.max_stretch = stats.max_stretch.max(hi.sqrt());
+            }
+            Err((element, r2)) => {
+                let quantity = match r2 {
+                    None => DivergedQuantity::NonFiniteFrame,
+                    Some(r2) if !r2.is_finite() => DivergedQuantity::NonFinitePosition,
+                    Some(r2) => DivergedQuantity::Strain((r2.sqrt() - 1.0).abs()),
+                };
+                *factor_valid = false;
+                result = Err(Divergence {
+                    rod: rod_index,
+                    element,
+                    step: first_step + step,
+                    quantity,
+                });
                 break;
             }
-            let r2 = (w.x[j + 1] - w.x[j]).norm_squared() * k.inv_l0_sq[j];
-            if !r2.is_finite() {
-                bad = Some((j, DivergedQuantity::NonFinitePosition));
-                break;
-            }
-            if r2 > above || r2 < below {
-                bad = Some((j, DivergedQuantity::Strain((r2.sqrt() - 1.0).abs())));
-                break;
-            }
-            lo = lo.min(r2);
-            hi = hi.max(r2);
         }
-        let (lo, hi) = (lo.sqrt(), hi.sqrt());
-        if let Some((element, quantity)) = bad {
-            *factor_valid = false;
-            result = Err(Divergence {
-                rod: rod_index,
-                element,
-                step: first_step + step,
-                quantity,
-            });
-            break;
-        }
-        stats.min_stretch = stats.min_stretch.min(lo);
-        stats.max_stretch = stats.max_stretch.max(hi);
     }
     if result.is_err() && keep_start_on_divergence {
         // The caller retakes the batch from its start, which `rod.state` still holds.
@@ -1073,12 +804,12 @@ fn step_fixed<T: Real>(
         return result.map(|()| stats);
     }
     for i in 0..=n {
-        rod.state.positions[i] = vt(&w.x[i]);
-        rod.state.velocities[i] = vt(&w.v[i]);
+        rod.state.positions[i] = vt(&w.x.get(i));
+        rod.state.velocities[i] = vt(&w.v.get(i));
     }
     for j in 0..n {
-        rod.state.frames[j] = qt(&w.q[j]);
-        rod.state.angular_velocities[j] = vt(&w.omega[j]);
+        rod.state.frames[j] = qt(&w.q.get(j));
+        rod.state.angular_velocities[j] = vt(&w.omega.get(j));
     }
     w.shadow = true;
     result.map(|()| stats)
@@ -1096,23 +827,17 @@ mod tests {
             let v = Vec3::new(0.6, -0.48, 0.64) * a;
             let (q, e) = (exp_small(&v), exp_rotation(&v));
             assert!((q.coords - e.coords).amax() < 1e-16, "exp at {a}");
-            let s = relative_rotation(&Quat::identity(), &e);
+            let s = cosserat_model::darboux::relative_rotation(&Quat::identity(), &e);
             let rv = s.imag() * angle_over_sin_half(&s);
             assert!(
                 (rv - v).amax() < 1e-15 * (1.0 + a),
                 "log at {a}: {rv} vs {v}"
             );
-            // The division-free forms used by the direct solver.
+            // The inverse of the first-order map of `apply_rotation`.
             let q0 = exp_rotation(&Vec3::new(0.3, -1.2, 0.7));
-            let (mut fast, mut exact) = (q0, q0);
-            apply_small_rotation(&mut fast, &v);
-            apply_rotation(&mut exact, &v);
-            assert!(
-                (fast.coords - exact.coords).amax() < 1e-15,
-                "rotation at {a}"
-            );
-            assert!((fast.norm() - 1.0).abs() < 1e-15, "norm at {a}");
-            let s = q0.conjugate() * fast;
+            let mut turned = q0;
+            apply_rotation(&mut turned, &v);
+            let s = q0.conjugate() * turned;
             assert!(
                 (s.imag() * (2.0 * inv_w(&s)) - v).amax() < 1e-15 * (1.0 + a),
                 "inverse map at {a}"

@@ -29,9 +29,9 @@ pub(crate) fn sweep(w: &mut Work, k: &Consts) -> f64 {
     let mut worst: f64 = 0.0;
     for j in 0..n {
         // Stretch–shear of element j.
-        let s = stretch_shear(&w.x[j], &w.x[j + 1], &w.q[j], k.l0[j]);
-        let lam = w.lambda[j];
-        let lg = nalgebra::Vector3::new(lam[0], lam[1], lam[2]);
+        let (xa, xb, mut q) = (w.x.get(j), w.x.get(j + 1), w.q.get(j));
+        let s = stretch_shear(&xa, &xb, &q, k.l0[j]);
+        let lg = w.lambda[0].get(j);
         let r = -(s.value + k.alpha_gamma[j].component_mul(&lg));
         worst = worst.max(r.amax());
         let wsum = k.inv_mass[j] + k.inv_mass[j + 1];
@@ -41,20 +41,19 @@ pub(crate) fn sweep(w: &mut Work, k: &Consts) -> f64 {
         }
         if let Some(dl) = a.cholesky().map(|ch| ch.solve(&r)) {
             let f = s.d_rb.transpose() * dl;
-            w.x[j] -= f * k.inv_mass[j];
-            w.x[j + 1] += f * k.inv_mass[j + 1];
+            w.x.set(j, &(xa - f * k.inv_mass[j]));
+            w.x.set(j + 1, &(xb + f * k.inv_mass[j + 1]));
             let dth = (s.d_theta.transpose() * dl).component_mul(&k.inv_inertia[j]);
-            apply_rotation(&mut w.q[j], &dth);
-            for c in 0..3 {
-                w.lambda[j][c] += dl[c];
-            }
+            apply_rotation(&mut q, &dth);
+            w.q.set(j, &q);
+            w.lambda[0].set(j, &(lg + dl));
         }
         // Bend–twist of the node below element j (between frames j − 1 and j).
         if j >= 1 {
             let i = j - 1;
-            let b = bend_twist(&w.q[i], &w.q[j], &k.rest_u[i], k.lbar[i]);
-            let lam = w.lambda[i];
-            let lo = nalgebra::Vector3::new(lam[3], lam[4], lam[5]);
+            let (mut qa, mut qb) = (w.q.get(i), w.q.get(j));
+            let b = bend_twist(&qa, &qb, &k.rest_u[i], k.lbar[i]);
+            let lo = w.lambda[1].get(i);
             let r = -(b.value + k.alpha_omega[i].component_mul(&lo));
             worst = worst.max(r.amax() * k.lbar[i]);
             let mut a =
@@ -65,11 +64,11 @@ pub(crate) fn sweep(w: &mut Work, k: &Consts) -> f64 {
             if let Some(dl) = a.cholesky().map(|ch| ch.solve(&r)) {
                 let da = (b.d_theta_a.transpose() * dl).component_mul(&k.inv_inertia[i]);
                 let db = (b.d_theta_b.transpose() * dl).component_mul(&k.inv_inertia[j]);
-                apply_rotation(&mut w.q[i], &da);
-                apply_rotation(&mut w.q[j], &db);
-                for c in 0..3 {
-                    w.lambda[i][3 + c] += dl[c];
-                }
+                apply_rotation(&mut qa, &da);
+                apply_rotation(&mut qb, &db);
+                w.q.set(i, &qa);
+                w.q.set(j, &qb);
+                w.lambda[1].set(i, &(lo + dl));
             }
         }
     }

@@ -1,0 +1,846 @@
+//! The working state of a stiff step and its element-wise passes, four elements at a time
+//! (`lanes.rs`). The formulas are those of `constraints.rs` and of the module docs of `stiff`;
+//! `tests` at the bottom compares every pass with them, element by element.
+
+use super::Consts;
+use super::direct::Assembled;
+use super::lanes::{F, Q, Q4s, V, V3s, below, load, mask_ge, padded, store};
+use super::{angle_over_sin_half, exp_small, inv_w};
+use cosserat_model::Vec3;
+
+/// The working state of a step, in `f64`, as padded columns.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Work {
+    /// Elements.
+    pub(crate) n: usize,
+    pub(crate) x: V3s,
+    pub(crate) v: V3s,
+    pub(crate) x_old: V3s,
+    pub(crate) q: Q4s,
+    pub(crate) q_old: Q4s,
+    pub(crate) omega: V3s,
+    /// Inertial targets `x̃`, `q̃` of the step.
+    pub(crate) x_pred: V3s,
+    pub(crate) q_pred: Q4s,
+    /// `M⁻¹ g`-corrected displacements towards the targets (see [`Work::rhs`]).
+    u_x: V3s,
+    u_th: V3s,
+    /// `J_θᵀ μ` per frame.
+    dtheta: V3s,
+    /// `K_θ⁻¹` per frame (see [`Work::precondition`]).
+    pub(crate) inv_k: V3s,
+    /// Per element at the current iterate: `Γ`, the directors (rows of `Rᵀ`), `Ω − û` and the
+    /// relative rotation `s = q̄_j q_{j+1}` (`s_w ≥ 0`); the last element's `Ω`, `s` are unused.
+    pub(crate) gamma: V3s,
+    pub(crate) dirs: [V3s; 3],
+    pub(crate) omega_c: V3s,
+    pub(crate) rel: Q4s,
+    /// Multipliers `(λ_Γ, λ_Ω)` per element, those of the previous step, the right-hand side
+    /// (and, after the solve, the increments), and the constraint values at the start of the
+    /// step (for damping only).
+    pub(crate) lambda: [V3s; 2],
+    pub(crate) lambda_prev: [V3s; 2],
+    pub(crate) rhs: [V3s; 2],
+    pub(crate) c_old: [V3s; 2],
+    /// Whether every multiplier is zero (the first iteration of a step).
+    pub(crate) lambda_zero: bool,
+    /// Scratch of `add_jt`: the point term of element `j − 1` at `j` (`R μ_Γ / l0`), and the
+    /// bend–twist term of node `j − 1` on frame `j`; of `precondition`: the bend–twist bound of
+    /// node `j − 1` at `j`.
+    f_before: V3s,
+    tb_before: V3s,
+    bound_before: Vec<f64>,
+    /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (see `step_fixed`).
+    pub(crate) shadow: bool,
+}
+
+/// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
+fn chunks(end: usize) -> impl Iterator<Item = usize> {
+    (0..end).step_by(4)
+}
+
+/// Calls `f(j + lane)` for each lane set in `bits` whose element is below `end`: the scalar
+/// redo of the rare lanes a series does not cover.
+#[inline(always)]
+fn for_lanes(bits: u32, j: usize, end: usize, mut f: impl FnMut(usize)) {
+    if bits & 0xf == 0 {
+        return;
+    }
+    for lane in 0..4 {
+        if bits & (1 << lane) != 0 && j + lane < end {
+            f(j + lane);
+        }
+    }
+}
+
+impl Work {
+    pub(crate) fn resize(&mut self, n: usize) {
+        if self.n == n && !self.q.w.is_empty() {
+            return;
+        }
+        self.n = n;
+        self.shadow = false;
+        let points = || V3s::zeros(n + 1);
+        let frames = || V3s::zeros(n);
+        self.x = points();
+        self.v = points();
+        self.x_old = points();
+        self.x_pred = points();
+        self.u_x = points();
+        self.f_before = V3s::zeros(n + 2);
+        self.q = Q4s::identities(n);
+        self.q_old = Q4s::identities(n);
+        self.q_pred = Q4s::identities(n);
+        self.omega = frames();
+        self.u_th = frames();
+        self.dtheta = frames();
+        self.inv_k = frames();
+        self.tb_before = V3s::zeros(n + 1);
+        self.bound_before = vec![0.0; padded(n + 1)];
+        self.gamma = frames();
+        self.dirs = [frames(), frames(), frames()];
+        self.omega_c = frames();
+        self.rel = Q4s::identities(n);
+        self.lambda = [frames(), frames()];
+        self.lambda_prev = [frames(), frames()];
+        self.rhs = [frames(), frames()];
+        self.c_old = [frames(), frames()];
+    }
+
+    /// Evaluates every constraint and its Jacobian at the current iterate.
+    pub(crate) fn constraints(&mut self, k: &Consts) {
+        let c = &k.cols;
+        let e3 = V::splat(&Vec3::z());
+        for j in chunks(self.n) {
+            let (qa, qb) = (self.q.load(j), self.q.load(j + 1));
+            let d = qa.directors();
+            let e = self.x.load(j + 1) - self.x.load(j);
+            let il = load(&c.inv_l0, j);
+            let g = V {
+                x: d[0].dot(e),
+                y: d[1].dot(e),
+                z: d[2].dot(e),
+            }
+            .scale(il);
+            self.gamma.store(j, g - e3);
+            for (col, dk) in self.dirs.iter_mut().zip(d) {
+                col.store(j, dk);
+            }
+            let s = qa.conj_mul(qb).positive();
+            self.rel.store(j, s);
+            let two_over_l = load(&c.inv_lbar, j) * F::splat(2.0);
+            self.omega_c
+                .store(j, s.v.scale(two_over_l) - c.rest_u.load(j));
+        }
+    }
+
+    /// Copies the constraint values of the last [`constraints`](Self::constraints) call into
+    /// `c_old`.
+    pub(crate) fn keep_constraint_values(&mut self) {
+        self.c_old[0].copy_from(&self.gamma);
+        self.c_old[1].copy_from(&self.omega_c);
+    }
+
+    /// The frames' block `K_θ` of the Newton matrix: inertia plus an isotropic bound `σ_j` of
+    /// the geometric stiffness `Σ λ ∇²_θθ C` that the constraints through frame `j` give it at
+    /// the multipliers `lambda` (see [`StiffSettings::geometric`](super::StiffSettings));
+    /// stores `K_θ⁻¹` in `inv_k`.
+    ///
+    /// Bounds, per unit multiplier, from the second derivatives of the constraints under
+    /// body rotations: stretch–shear `½(λ gᵀ + g λᵀ) − (λ·g) I`, at most `2 |λ| |g|`;
+    /// bend–twist, own frame `(λ·s_v)/(2 l̄)` and the neighbour coupling at most
+    /// `|λ| (1 + 2|s_v|)/(2 l̄)`, together at most `|λ| / l̄` for small relative rotations.
+    pub(crate) fn precondition(&mut self, k: &Consts, geometric: f64, use_previous: bool) {
+        let c = &k.cols;
+        let lam = if use_previous {
+            &self.lambda_prev
+        } else {
+            &self.lambda
+        };
+        let geometric = F::splat(geometric);
+        // The bend–twist bound of node j, |λ_Ω| / l̄, stored at j + 1 (zero for the last
+        // element, whose λ_Ω is zero).
+        for j in chunks(self.n) {
+            let after = lam[1].load(j).norm2().sqrt() * load(&c.inv_lbar, j);
+            store(&mut self.bound_before, j + 1, after);
+        }
+        let (half, one, e3) = (F::splat(0.5), F::ONE, V::splat(&Vec3::z()));
+        for j in chunks(self.n) {
+            let before = load(&self.bound_before, j);
+            let after = load(&self.bound_before, j + 1);
+            // |g| ≤ (1 + |g|²)/2, equal to second order in the strain (|g| = |e|/l0).
+            let g = self.gamma.load(j) + e3;
+            let g_bound = half * (one + g.norm2());
+            let lg = lam[0].load(j).norm2().sqrt();
+            let sigma = geometric * (F::splat(2.0) * lg * g_bound + before + after);
+            // One division for the three inverses; zero for held frames.
+            let i = c.inertia.load(j);
+            let d = V {
+                x: i.x + sigma,
+                y: i.y + sigma,
+                z: i.z + sigma,
+            };
+            let inv = load(&c.free, j) / (d.x * d.y * d.z);
+            self.inv_k.store(
+                j,
+                V {
+                    x: d.y * d.z * inv,
+                    y: d.x * d.z * inv,
+                    z: d.x * d.y * inv,
+                },
+            );
+        }
+    }
+
+    /// `u_x += M⁻¹ J_rᵀ μ` for the points and `dtheta = J_θᵀ μ` for the frames (`μ` per
+    /// element: stretch–shear in `mu[0]`, bend–twist in `mu[1]`; the last element's bend–twist
+    /// entry is zero), with the Jacobians of the last [`constraints`](Self::constraints) call.
+    ///
+    /// `J_rᵀ μ_Γ = ∓ R μ_Γ / l0` on points `j`, `j + 1`; `J_θᵀ μ_Γ = [g]×ᵀ μ_Γ = μ_Γ × g`;
+    /// bend–twist on frame `j`: `−(s_w μ + s_v × μ)/l̄`, on frame `j + 1`: `(s_w μ − s_v × μ)/l̄`.
+    fn add_jt(&mut self, k: &Consts, mu: &[V3s; 2]) {
+        let c = &k.cols;
+        let e3 = V::splat(&Vec3::z());
+        for j in chunks(self.n) {
+            let (mg, mo) = (mu[0].load(j), mu[1].load(j));
+            let il = load(&c.inv_l0, j);
+            let d = [
+                self.dirs[0].load(j),
+                self.dirs[1].load(j),
+                self.dirs[2].load(j),
+            ];
+            let f = d[0]
+                .scale(mg.x)
+                .add_scaled(d[1], mg.y)
+                .add_scaled(d[2], mg.z)
+                .scale(il);
+            self.f_before.store(j + 1, f);
+            let g = self.gamma.load(j) + e3;
+            let s = self.rel.load(j);
+            let ilb = load(&c.inv_lbar, j);
+            let (sw_mu, sv_mu) = (mo.scale(s.w), s.v.cross(mo));
+            let ta = (sw_mu + sv_mu).scale(-ilb);
+            let tb = (sw_mu - sv_mu).scale(ilb);
+            self.tb_before.store(j + 1, tb);
+            self.dtheta.store(j, mg.cross(g) + ta);
+        }
+        for i in chunks(self.n + 1) {
+            let w = load(&c.inv_mass, i);
+            let f = self.f_before.load(i) - self.f_before.load(i + 1);
+            let u = self.u_x.load(i).add_scaled(f, w);
+            self.u_x.store(i, u);
+        }
+        for j in chunks(self.n) {
+            let t = self.dtheta.load(j) + self.tb_before.load(j);
+            self.dtheta.store(j, t);
+        }
+    }
+
+    /// The right-hand side of one Newton step of the full XPBD system (Macklin et al. 2016,
+    /// eqs. 9–11) at the constraints of the last [`constraints`](Self::constraints) call:
+    ///
+    /// `g = M (x − x̃) − Jᵀ λ`, `u = −K⁻¹ g`, `(J K⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ + J u)`,
+    /// `Δx = u + K⁻¹ Jᵀ Δλ`,
+    ///
+    /// with `K = M` for points and `K_θ = I + σ` for frames ([`precondition`](Self::precondition)).
+    /// `K` only steers the iteration: its fixed point `g = 0`, `C + α̃ λ = 0` does not depend
+    /// on it. Keeping `g` (which the simplified XPBD update drops) makes that fixed point the
+    /// exact implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting guess, so the
+    /// iteration can start from the positions the velocities alone would reach and loads need
+    /// not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
+    /// from `q̃` to `q` in the first-order map of [`apply_rotation`](super::apply_rotation).
+    ///
+    /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
+    /// (strains, and bend–twist as angles `l̄ |ΔΩ|`).
+    pub(crate) fn rhs(&mut self, k: &Consts) -> f64 {
+        let n = self.n;
+        let c = &k.cols;
+        // u = x̃ − x + M⁻¹ Jᵀ λ.
+        for i in chunks(n + 1) {
+            self.u_x.store(i, self.x_pred.load(i) - self.x.load(i));
+        }
+        if self.lambda_zero {
+            self.dtheta.fill_zero();
+        } else {
+            let lambda = std::mem::take(&mut self.lambda);
+            self.add_jt(k, &lambda);
+            self.lambda = lambda;
+        }
+        for j in chunks(n) {
+            let s = self.q.load(j).conj_mul(self.q_pred.load(j));
+            // 1/s_w by the series of (1 − |s_v|²)^(−1/2) where it applies (as `inv_w`).
+            let x2 = s.v.norm2();
+            let series = F::ONE
+                + x2 * (F::splat(0.5)
+                    + x2 * (F::splat(0.375) + x2 * (F::splat(0.3125) + x2 * F::splat(0.2734375))));
+            let norm_err = (s.w.mul_add(s.w, x2) - F::ONE).abs();
+            let off = x2.simd_lt(F::splat(1e-4)) & norm_err.simd_lt(F::splat(1e-12));
+            let to_target = s.v.scale(F::splat(2.0) * series);
+            let u = to_target + self.dtheta.load(j).mul(self.inv_k.load(j));
+            self.u_th.store(j, u);
+            // Lanes outside the series: 1/s_w exactly, as `inv_w`.
+            for_lanes(!off.to_bitmask(), j, n, |e| {
+                let s = self.q.get(e).conjugate() * self.q_pred.get(e);
+                let u = s.imag() * (2.0 * inv_w(&s))
+                    + self.dtheta.get(e).component_mul(&self.inv_k.get(e));
+                self.u_th.set(e, &u);
+            });
+        }
+        // One pass per element; the largest residual per lane.
+        let mut worst = F::ZERO;
+        let e3 = V::splat(&Vec3::z());
+        for j in chunks(n) {
+            let il = load(&c.inv_l0, j);
+            let du = self.u_x.load(j + 1) - self.u_x.load(j);
+            let (ua, ub) = (self.u_th.load(j), self.u_th.load(j + 1));
+            let g = self.gamma.load(j) + e3;
+            let ju = V {
+                x: self.dirs[0].load(j).dot(du),
+                y: self.dirs[1].load(j).dot(du),
+                z: self.dirs[2].load(j).dot(du),
+            }
+            .scale(il)
+                + g.cross(ua);
+            let mut res = self.gamma.load(j) + c.alpha_g.load(j).mul(self.lambda[0].load(j));
+            if k.damped {
+                // (C + α̃λ + γ (C − C_n)) / (1 + γ) = C + α̃λ/(1 + γ) − γ/(1 + γ) C_n: the
+                // damped residual, its rows scaled as the Newton matrix's (see
+                // `Consts::rebuild`).
+                res = res - c.damp_g.load(j).mul(self.c_old[0].load(j));
+            }
+            let valid = below(j, n);
+            self.rhs[0].store(j, (res + ju).scale(-valid));
+            let local = res.abs_max().max(ju.abs_max()) * valid;
+            // Bend–twist: J u = (s_w (u_b − u_a) + s_v × (u_a + u_b)) / l̄.
+            let s = self.rel.load(j);
+            let ju = ((ub - ua).scale(s.w) + s.v.cross(ua + ub)).scale(load(&c.inv_lbar, j));
+            let mut res = self.omega_c.load(j) + c.alpha_o.load(j).mul(self.lambda[1].load(j));
+            if k.damped {
+                res = res - c.damp_o.load(j).mul(self.c_old[1].load(j));
+            }
+            let bends = below(j, n.saturating_sub(1));
+            self.rhs[1].store(j, (res + ju).scale(-bends));
+            let bend = res.abs_max().max(ju.abs_max()) * load(&c.lbar, j) * bends;
+            worst = worst.max(local.max(bend));
+        }
+        worst.to_array().into_iter().fold(0.0, f64::max)
+    }
+
+    /// Applies the multiplier increments in `rhs` through the Jacobians of the last
+    /// [`constraints`](Self::constraints): `Δx = u + M⁻¹ Jᵀ Δλ`, `Δθ = u_θ + K_θ⁻¹ J_θᵀ Δλ`
+    /// (the frames turned by `q ← normalise(q ⊗ (1, Δθ/2))`); adds them to `λ`.
+    pub(crate) fn apply(&mut self, k: &Consts) {
+        let n = self.n;
+        let rhs = std::mem::take(&mut self.rhs);
+        self.add_jt(k, &rhs);
+        self.lambda_zero = false;
+        for i in chunks(n + 1) {
+            self.x.store(i, self.x.load(i) + self.u_x.load(i));
+        }
+        let half = F::splat(0.5);
+        for j in chunks(n) {
+            let th = self.u_th.load(j) + self.dtheta.load(j).mul(self.inv_k.load(j));
+            let r = self.q.load(j).mul(Q {
+                w: F::ONE,
+                v: th.scale(half),
+            });
+            self.q.store(j, r.normalised());
+            for (l, d) in self.lambda.iter_mut().zip(&rhs) {
+                l.store(j, l.load(j) + d.load(j));
+            }
+        }
+        self.rhs = rhs;
+    }
+
+    /// Assembles `J K⁻¹ Jᵀ + α̃` (Deul et al. 2018, eq. 17; `direct.rs`) at the Jacobians of the
+    /// last [`constraints`](Self::constraints) call and the frames' `K_θ⁻¹` of the last
+    /// [`precondition`](Self::precondition), block rows of four elements at a time:
+    ///
+    /// - `Γ_j`: diagonal `[g]× W_j [g]×ᵀ + (w_j + w_{j+1}) |d_1|²/l0² I + α̃`, coupling to `Ω_j`
+    ///   `[g]× W_j (∂Ω_j/∂θ_j)ᵀ`, to `Γ_{j+1}` `−w_{j+1} R_jᵀ R_{j+1} / (l0_j l0_{j+1})`;
+    /// - `Ω_j`: diagonal `A W_j Aᵀ + B W_{j+1} Bᵀ + α̃` (`A`, `B` = `∂Ω_j/∂θ_j`, `∂Ω_j/∂θ_{j+1}`),
+    ///   coupling to `Γ_{j+1}` `B W_{j+1} [g_{j+1}]×ᵀ`, to `Ω_{j+1}` `B W_{j+1} (∂Ω_{j+1}/∂θ_{j+1})ᵀ`,
+    ///
+    /// with `W` the frames' `K_θ⁻¹`, `w` the inverse point masses and the damped compliances
+    /// of `Consts`; blocks past the end of the rod are zero.
+    pub(crate) fn assemble(&self, k: &Consts, out: &mut Assembled) {
+        let n = self.n;
+        let c = &k.cols;
+        out.resize(n, self.gamma.x.len());
+        let (next, second) = (Assembled::NEXT, Assembled::SECOND);
+        let e3 = V::splat(&Vec3::z());
+        for j in chunks(n) {
+            let (g, g1) = (self.gamma.load(j) + e3, self.gamma.load(j + 1) + e3);
+            let (wa, wb) = (self.inv_k.load(j), self.inv_k.load(j + 1));
+            let (il, il1) = (load(&c.inv_l0, j), load(&c.inv_l0, j + 1));
+            let (ilb, ilb1) = (load(&c.inv_lbar, j), load(&c.inv_lbar, j + 1));
+            let (wm, wm1) = (load(&c.inv_mass, j), load(&c.inv_mass, j + 1));
+            let d = [
+                self.dirs[0].load(j),
+                self.dirs[1].load(j),
+                self.dirs[2].load(j),
+            ];
+            let d1 = [
+                self.dirs[0].load(j + 1),
+                self.dirs[1].load(j + 1),
+                self.dirs[2].load(j + 1),
+            ];
+            let (s, s1) = (self.rel.load(j), self.rel.load(j + 1));
+            let bends = below(j, n.saturating_sub(1));
+            let next_bends = below(j + 1, n.saturating_sub(1));
+            // ∂Ω_j/∂θ_j = [c]× − a I, ∂Ω_j/∂θ_{j+1} = [c]× + a I with (a, c) = (s_w, s_v) / l̄.
+            let (a, cv) = (s.w * ilb, s.v.scale(ilb));
+            let (da, db) = (cross_plus(cv, -a), cross_plus(cv, a));
+            let da1 = cross_plus(s1.v.scale(ilb1), -(s1.w * ilb1));
+            let mut e = [F::ZERO; Assembled::ENTRIES];
+            // Γ_j.
+            let gg = cross_w_cross(g, wa);
+            let diag = (wm + wm1) * il * il * d[0].norm2();
+            let alpha = c.alpha_g.load(j);
+            e[..6].copy_from_slice(&[
+                gg[0] + diag + alpha.x,
+                gg[1],
+                gg[2],
+                gg[3] + diag + alpha.y,
+                gg[4],
+                gg[5] + diag + alpha.z,
+            ]);
+            put(&mut e[next..], awbt(&cross(g), wa, &da), bends);
+            let scale = -(wm1 * il * il1) * bends;
+            for r in 0..3 {
+                for q in 0..3 {
+                    e[second + 4 * r + q] = d[r].dot(d1[q]) * scale;
+                }
+            }
+            // Ω_j.
+            let (pa, pb) = (awat(&da, wa), awat(&db, wb));
+            let alpha = c.alpha_o.load(j);
+            let b = Assembled::BEND;
+            e[b..b + 6].copy_from_slice(&[
+                pa[0] + pb[0] + alpha.x,
+                pa[1] + pb[1],
+                pa[2] + pb[2],
+                pa[3] + pb[3] + alpha.y,
+                pa[4] + pb[4],
+                pa[5] + pb[5] + alpha.z,
+            ]);
+            put(&mut e[b + next..], awbt(&db, wb, &cross(g1)), bends);
+            put(&mut e[b + second..], awbt(&db, wb, &da1), next_bends);
+            // Four entries of four elements at a time, transposed to one record per element.
+            let records = &mut out.records[j..j + 4];
+            for (group, quad) in e.chunks_exact(4).enumerate() {
+                let t = F::transpose([quad[0], quad[1], quad[2], quad[3]]);
+                for (record, v) in records.iter_mut().zip(t) {
+                    record[4 * group..4 * group + 4].copy_from_slice(&v.to_array());
+                }
+            }
+        }
+    }
+
+    /// Step 1 of the module docs for the free points and frames: `x_old = x`, `v += h (g + f/m)`,
+    /// `x̃ = x_old + h v` (and `x = x_old + h v_old` as the starting guess of the direct
+    /// solver, `x = x̃` for Gauss–Seidel); frames `ω += −h I⁻¹ (ω × I ω)`,
+    /// `q = q̃ = q ⊗ exp(h ω / 2)`. `held` is called between the velocities and the targets,
+    /// to set the held points' and frames' velocities and positions.
+    pub(crate) fn predict(
+        &mut self,
+        k: &Consts,
+        h: f64,
+        gravity: &Vec3<f64>,
+        loads: impl Iterator<Item = (usize, Vec3<f64>)>,
+        direct: bool,
+        held: impl FnOnce(&mut Work),
+    ) {
+        let n = self.n;
+        let c = &k.cols;
+        let hf = F::splat(h);
+        let gh = V::splat(&(gravity * h));
+        for i in chunks(n + 1) {
+            let (x, v) = (self.x.load(i), self.v.load(i));
+            self.x_old.store(i, x);
+            if direct {
+                self.x.store(i, x.add_scaled(v, hf));
+            }
+            let free = load(&c.inv_mass, i)
+                .simd_gt(F::ZERO)
+                .select(F::ONE, F::ZERO);
+            self.v.store(i, v.add_scaled(gh, free));
+        }
+        for (p, f) in loads {
+            let w = k.inv_mass[p];
+            if w > 0.0 {
+                let v = self.v.get(p) + f * (w * h);
+                self.v.set(p, &v);
+            }
+        }
+        for j in chunks(n) {
+            let q = self.q.load(j);
+            self.q_old.store(j, q);
+            let o = self.omega.load(j);
+            let gyro = o
+                .cross(c.inertia.load(j).mul(o))
+                .mul(c.inv_inertia_own.load(j));
+            let o = o.add_scaled(gyro, -hf);
+            self.omega.store(j, o);
+            // exp(h ω / 2) by its series (as `exp_small`); lanes past 1e-2 rad are redone.
+            let v = o.scale(hf);
+            let a2 = v.norm2();
+            let h2 = F::splat(0.25) * a2;
+            let cos = F::ONE
+                - h2 * (F::splat(0.5) - h2 * (F::splat(1.0 / 24.0) - h2 * F::splat(1.0 / 720.0)));
+            let sin = F::splat(0.5)
+                * (F::ONE
+                    - h2 * (F::splat(1.0 / 6.0)
+                        - h2 * (F::splat(1.0 / 120.0) - h2 * F::splat(1.0 / 5040.0))));
+            let e = Q {
+                w: cos,
+                v: v.scale(sin),
+            };
+            self.q.store(j, q.mul(e).normalised());
+            // Lanes past 1e-2 rad: the closed form, as `exp_small`.
+            for_lanes(mask_ge(a2, F::splat(1e-4)), j, n, |e| {
+                let r = self.q_old.get(e) * exp_small(&(self.omega.get(e) * h));
+                self.q.set(e, &(r / r.norm()));
+            });
+        }
+        held(self);
+        for i in chunks(n + 1) {
+            let target = self.x_old.load(i).add_scaled(self.v.load(i), hf);
+            self.x_pred.store(i, target);
+            if !direct {
+                self.x.store(i, target);
+            }
+        }
+        self.q_pred.copy_from(&self.q);
+    }
+
+    /// Step 3 of the module docs: `v = (x − x_old) / (h (1 + h γ))` (`drag = 1/(1 + hγ)`) and
+    /// `ω = log(q̄_old q) / h`.
+    pub(crate) fn velocities(&mut self, h: f64, drag: f64) {
+        let n = self.n;
+        let scale = F::splat(drag / h);
+        for i in chunks(n + 1) {
+            let v = (self.x.load(i) - self.x_old.load(i)).scale(scale);
+            self.v.store(i, v);
+        }
+        let inv_h = F::splat(1.0 / h);
+        for j in chunks(n) {
+            let s = self.q_old.load(j).conj_mul(self.q.load(j)).positive();
+            // angle / |s_v| by the series of 2 asin(x)/x (as `angle_over_sin_half`); other
+            // lanes are redone.
+            let sn2 = s.v.norm2();
+            let series = F::splat(2.0)
+                + sn2
+                    * (F::splat(1.0 / 3.0)
+                        + sn2
+                            * (F::splat(0.15)
+                                + sn2 * (F::splat(5.0 / 56.0) + sn2 * F::splat(35.0 / 576.0))));
+            let norm_err = (s.w.mul_add(s.w, sn2) - F::ONE).abs();
+            let ok = sn2.simd_lt(F::splat(1e-4)) & norm_err.simd_lt(F::splat(1e-12));
+            self.omega.store(j, s.v.scale(series * inv_h));
+            // Other lanes: the closed form, as `angle_over_sin_half`.
+            for_lanes(!ok.to_bitmask(), j, n, |e| {
+                let mut s = self.q_old.get(e).conjugate() * self.q.get(e);
+                if s.w < 0.0 {
+                    s = -s;
+                }
+                self.omega
+                    .set(e, &(s.imag() * (angle_over_sin_half(&s) / h)));
+            });
+        }
+    }
+
+    /// The divergence test of a step: the first element (in order) whose frame is not finite,
+    /// whose length is not finite, or whose squared stretch `|e|² / l0²` is above `above` or
+    /// below `below`; otherwise the smallest and largest squared stretch.
+    pub(crate) fn stretch_range(
+        &self,
+        k: &Consts,
+        above: f64,
+        below_sq: f64,
+    ) -> Result<(f64, f64), (usize, Option<f64>)> {
+        let n = self.n;
+        let c = &k.cols;
+        let (mut lo, mut hi) = (F::splat(f64::MAX), F::ZERO);
+        let (up, down) = (F::splat(above), F::splat(below_sq));
+        for j in chunks(n) {
+            let q = self.q.load(j);
+            let r2 = (self.x.load(j + 1) - self.x.load(j)).norm2() * load(&c.inv_l0_sq, j);
+            // NaN or infinity anywhere makes `finite` NaN, which fails both (ordered)
+            // comparisons.
+            let finite = (q.w + q.v.x + q.v.y + q.v.z) * F::ZERO;
+            let good = (finite + r2).simd_le(up) & r2.simd_ge(down);
+            let valid = below(j, n).simd_gt(F::ZERO);
+            if (!good & valid).any() {
+                for e in j..(j + 4).min(n) {
+                    let q = self.q.get(e);
+                    if !q.coords.iter().all(|x| x.is_finite()) {
+                        return Err((e, None));
+                    }
+                    let r2 = (self.x.get(e + 1) - self.x.get(e)).norm_squared() * k.inv_l0_sq[e];
+                    if !r2.is_finite() || r2 > above || r2 < below_sq {
+                        return Err((e, Some(r2)));
+                    }
+                }
+            }
+            lo = valid.select(lo.min(r2), lo);
+            hi = valid.select(hi.max(r2), hi);
+        }
+        let lo = lo.to_array().into_iter().fold(f64::MAX, f64::min);
+        let hi = hi.to_array().into_iter().fold(0.0, f64::max);
+        Ok((lo, hi))
+    }
+}
+
+/// A 3×3 matrix per lane, row-major.
+type M = [[F; 3]; 3];
+
+/// `[v]×`.
+#[inline(always)]
+fn cross(v: V) -> M {
+    let z = F::ZERO;
+    [[z, -v.z, v.y], [v.z, z, -v.x], [-v.y, v.x, z]]
+}
+
+/// `[c]× + a I`.
+#[inline(always)]
+fn cross_plus(c: V, a: F) -> M {
+    [[a, -c.z, c.y], [c.z, a, -c.x], [-c.y, c.x, a]]
+}
+
+/// `[g]× diag(w) [g]×ᵀ` (upper triangle 00, 01, 02, 11, 12, 22) in closed form.
+#[inline(always)]
+fn cross_w_cross(g: V, w: V) -> [F; 6] {
+    let (x, y, z) = (g.x, g.y, g.z);
+    [
+        w.y * z * z + w.z * y * y,
+        -(w.z * x * y),
+        -(w.y * x * z),
+        w.x * z * z + w.z * x * x,
+        -(w.x * y * z),
+        w.x * y * y + w.y * x * x,
+    ]
+}
+
+/// `a diag(w) bᵀ`.
+#[inline(always)]
+fn awbt(a: &M, w: V, b: &M) -> M {
+    let mut out = [[F::ZERO; 3]; 3];
+    for (r, o) in out.iter_mut().enumerate() {
+        let aw = [a[r][0] * w.x, a[r][1] * w.y, a[r][2] * w.z];
+        for (q, oq) in o.iter_mut().enumerate() {
+            *oq = aw[2].mul_add(b[q][2], aw[1].mul_add(b[q][1], aw[0] * b[q][0]));
+        }
+    }
+    out
+}
+
+/// `a diag(w) aᵀ` (upper triangle, as [`cross_w_cross`]).
+#[inline(always)]
+fn awat(a: &M, w: V) -> [F; 6] {
+    let m = awbt(a, w, a);
+    [m[0][0], m[0][1], m[0][2], m[1][1], m[1][2], m[2][2]]
+}
+
+/// `out = m · mask` as rows padded to four (the padding stays zero).
+#[inline(always)]
+fn put(out: &mut [F], m: M, mask: F) {
+    for r in 0..3 {
+        for q in 0..3 {
+            out[4 * r + q] = m[r][q] * mask;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ends::EndCondition;
+    use crate::stepper::CpuRod;
+    use crate::stiff::constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
+    use crate::stiff::direct::{Masses, blocks};
+    use cosserat_model::Quat;
+    use cosserat_model::presets::preset;
+    use cosserat_model::quat::exp_rotation;
+    use cosserat_model::rod::{RodSpec, build_rod};
+
+    /// A curved, twisted rod of `n` elements (not a multiple of four, so that the last chunk
+    /// is partial) with a clamped start and a free end, its constants, and a working state
+    /// whose points and frames are perturbed so that every constraint is violated.
+    fn setup(n: usize) -> (Consts, Work) {
+        let pts: Vec<[f64; 3]> = (0..=n)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                [t, 0.2 * (3.0 * t).sin(), 0.1 * t * t]
+            })
+            .collect();
+        let spec = RodSpec::new(preset("nitinol").unwrap().material());
+        let (s, p) = build_rod::<f64>(&pts, &spec).unwrap();
+        let rod = CpuRod::new(
+            s,
+            p,
+            [EndCondition::clamped(), EndCondition::free()],
+            vec![],
+        );
+        let mut k = Consts::default();
+        k.rebuild(&rod, 1e-3, true, 0.0);
+        let mut w = Work::default();
+        w.resize(n);
+        for i in 0..=n {
+            let x = rod.state.positions[i] + Vec3::new(1e-4, -2e-4, 3e-5) * (i as f64).sin();
+            w.x.set(i, &x);
+        }
+        for j in 0..n {
+            let turn = exp_rotation(&Vec3::new(0.01, -0.02, 0.03 * (j as f64).cos()));
+            w.q.set(j, &(rod.state.frames[j] * turn));
+        }
+        (k, w)
+    }
+
+    /// The reference structures of `constraints.rs` at the working state.
+    fn reference(k: &Consts, w: &Work) -> (Vec<StretchShear<f64>>, Vec<BendTwist<f64>>) {
+        let n = w.n;
+        let ss = (0..n)
+            .map(|j| stretch_shear(&w.x.get(j), &w.x.get(j + 1), &w.q.get(j), k.l0[j]))
+            .collect();
+        let bt = (0..n - 1)
+            .map(|j| bend_twist(&w.q.get(j), &w.q.get(j + 1), &k.rest_u[j], k.lbar[j]))
+            .collect();
+        (ss, bt)
+    }
+
+    fn close(a: &Vec3<f64>, b: &Vec3<f64>, scale: f64, what: &str) {
+        assert!(
+            (a - b).amax() <= 1e-12 * scale.max(b.amax()),
+            "{what}: {a} vs {b}"
+        );
+    }
+
+    /// Constraint values, the assembled blocks of `J K⁻¹ Jᵀ + α̃`, `Jᵀ μ` and the right-hand
+    /// side of the lanes against the scalar formulas of `constraints.rs` and `direct::blocks`.
+    #[test]
+    fn lane_passes_match_the_scalar_formulas() {
+        let n = 11;
+        let (k, mut w) = setup(n);
+        w.constraints(&k);
+        let (ss, bt) = reference(&k, &w);
+        for j in 0..n {
+            close(&w.gamma.get(j), &ss[j].value, 1.0, "Γ");
+            if j + 1 < n {
+                close(&w.omega_c.get(j), &bt[j].value, 1.0, "Ω");
+            }
+        }
+        // Assembly, with the geometric bound of some multipliers in K_θ.
+        for j in 0..n {
+            let f = j as f64;
+            w.lambda_prev[0].set(j, &Vec3::new(0.3 * f.sin(), -0.2, 5.0 + f));
+            let bend = if j + 1 < n { 1e-3 * f.cos() } else { 0.0 };
+            w.lambda_prev[1].set(j, &Vec3::new(bend, 2.0 * bend, -bend));
+        }
+        w.precondition(&k, 1.0, true);
+        let mut asm = Assembled::default();
+        w.assemble(&k, &mut asm);
+        let reference_asm = {
+            let m = Masses {
+                inv_mass: &k.inv_mass,
+                inv_inertia: &w.inv_k,
+                alpha_gamma: &k.alpha_gamma_matrix,
+                alpha_omega: &k.alpha_omega_matrix,
+            };
+            Assembled::from_blocks(n, |b| blocks(b, &ss, &bt, &m))
+        };
+        for j in 0..n {
+            let (a, b) = (&asm.records[j], &reference_asm.records[j]);
+            let last = if j + 1 < n {
+                Assembled::ENTRIES
+            } else {
+                Assembled::BEND
+            };
+            for e in 0..last {
+                // Relative to the largest entry of the same 3×3 block (exactly zero past the
+                // end of the rod).
+                let (row, off) = (e - e % Assembled::BEND, e % Assembled::BEND);
+                let block = match off {
+                    0..8 => row..row + 8,
+                    8..20 => row + 8..row + 20,
+                    _ => row + 20..row + 32,
+                };
+                let scale = b[block].iter().fold(0.0_f64, |s, v| s.max(v.abs()));
+                assert!(
+                    (a[e] - b[e]).abs() <= 1e-12 * scale,
+                    "element {j}, entry {e}: {} vs {}",
+                    a[e],
+                    b[e]
+                );
+            }
+        }
+        // Jᵀ μ against the reference Jacobians.
+        let mu: [V3s; 2] = {
+            let mut m = [V3s::zeros(n), V3s::zeros(n)];
+            for j in 0..n {
+                let f = j as f64;
+                m[0].set(j, &Vec3::new(f.sin(), 0.5, -f.cos()));
+                if j + 1 < n {
+                    m[1].set(j, &Vec3::new(0.1 * f, -0.3, 0.7));
+                }
+            }
+            m
+        };
+        w.u_x.fill_zero();
+        w.add_jt(&k, &mu);
+        for i in 0..=n {
+            let mut f = Vec3::zeros();
+            if i < n {
+                f -= ss[i].d_rb.transpose() * mu[0].get(i);
+            }
+            if i > 0 {
+                f += ss[i - 1].d_rb.transpose() * mu[0].get(i - 1);
+            }
+            close(&w.u_x.get(i), &(f * k.inv_mass[i]), 1e-9, "M⁻¹ J_rᵀ μ");
+        }
+        for j in 0..n {
+            let mut t = ss[j].d_theta.transpose() * mu[0].get(j);
+            if j + 1 < n {
+                t += bt[j].d_theta_a.transpose() * mu[1].get(j);
+            }
+            if j > 0 {
+                t += bt[j - 1].d_theta_b.transpose() * mu[1].get(j - 1);
+            }
+            close(&w.dtheta.get(j), &t, 1.0, "J_θᵀ μ");
+        }
+        // Right-hand side at λ = 0 towards displaced targets: −(C + J u).
+        let mut u_th = Vec::new();
+        for i in 0..=n {
+            let d = Vec3::new(2e-6, -1e-6, 3e-6) * (1.0 + (i as f64).cos());
+            w.x_pred.set(i, &(w.x.get(i) + d));
+        }
+        for j in 0..n {
+            let th = Vec3::new(1e-4, 2e-4 * (j as f64).sin(), -5e-5);
+            let q: Quat<f64> = w.q.get(j) * exp_rotation(&th);
+            w.q_pred.set(j, &q);
+            let s = w.q.get(j).conjugate() * q;
+            u_th.push(s.imag() * (2.0 / s.w));
+        }
+        w.lambda_zero = true;
+        for c in &mut w.lambda {
+            c.fill_zero();
+        }
+        let worst = w.rhs(&k);
+        let mut expected_worst: f64 = 0.0;
+        for j in 0..n {
+            let du = (w.x_pred.get(j + 1) - w.x.get(j + 1)) - (w.x_pred.get(j) - w.x.get(j));
+            let ju = ss[j].d_rb * du + ss[j].d_theta * u_th[j];
+            close(&w.rhs[0].get(j), &-(ss[j].value + ju), 1e-6, "Γ rows");
+            expected_worst = expected_worst.max(ss[j].value.amax()).max(ju.amax());
+            if j + 1 < n {
+                let ju = bt[j].d_theta_a * u_th[j] + bt[j].d_theta_b * u_th[j + 1];
+                close(&w.rhs[1].get(j), &-(bt[j].value + ju), 1e-3, "Ω rows");
+                let bend = bt[j].value.amax().max(ju.amax()) * k.lbar[j];
+                expected_worst = expected_worst.max(bend);
+            } else {
+                assert_eq!(w.rhs[1].get(j), Vec3::zeros());
+            }
+        }
+        assert!((worst - expected_worst).abs() <= 1e-12 * expected_worst);
+    }
+}
