@@ -412,17 +412,24 @@ impl Work {
                     e[second + 4 * r + q] = d[r].dot(d1[q]) * scale;
                 }
             }
-            // Ω_j.
-            let (pa, pb) = (awat(&da, wa), awat(&db, wb));
+            // Ω_j: A W_a Aᵀ + B W_b Bᵀ with A, B = [c]× ∓ a I is, in closed form,
+            // [c]× (W_a + W_b) [c]×ᵀ + a S(c, W_b − W_a) + a² (W_a + W_b) with
+            // S(c, W)_{rk} = [c]×_{rk} (W_k − W_r) (off-diagonal only).
+            let (wsum, wdiff) = (wa + wb, wb - wa);
+            let cc = cross_w_cross(cv, wsum);
+            let s01 = -(a * cv.z) * (wdiff.y - wdiff.x);
+            let s02 = a * cv.y * (wdiff.z - wdiff.x);
+            let s12 = -(a * cv.x) * (wdiff.z - wdiff.y);
+            let a2 = a * a;
             let alpha = c.alpha_o.load(j);
             let b = Assembled::BEND;
             e[b..b + 6].copy_from_slice(&[
-                pa[0] + pb[0] + alpha.x,
-                pa[1] + pb[1],
-                pa[2] + pb[2],
-                pa[3] + pb[3] + alpha.y,
-                pa[4] + pb[4],
-                pa[5] + pb[5] + alpha.z,
+                cc[0] + a2.mul_add(wsum.x, alpha.x),
+                cc[1] + s01,
+                cc[2] + s02,
+                cc[3] + a2.mul_add(wsum.y, alpha.y),
+                cc[4] + s12,
+                cc[5] + a2.mul_add(wsum.z, alpha.z),
             ]);
             put(&mut e[b + next..], awbt(&db, wb, &cross(g1)), bends);
             put(&mut e[b + second..], awbt(&db, wb, &da1), next_bends);
@@ -633,13 +640,6 @@ fn awbt(a: &M, w: V, b: &M) -> M {
         }
     }
     out
-}
-
-/// `a diag(w) aᵀ` (upper triangle, as [`cross_w_cross`]).
-#[inline(always)]
-fn awat(a: &M, w: V) -> [F; 6] {
-    let m = awbt(a, w, a);
-    [m[0][0], m[0][1], m[0][2], m[1][1], m[1][2], m[2][2]]
 }
 
 /// `out = m · mask` as rows padded to four (the padding stays zero).
