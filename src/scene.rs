@@ -222,12 +222,16 @@ pub struct SolverSection {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StiffSection {
-    /// Newton iterations per step (default 2).
+    /// Largest number of Newton iterations per step (default 4).
     pub iterations: Option<usize>,
-    /// Residual at which iterations stop early (default 0: always run `iterations`).
+    /// Residual (a strain) at which iterations stop (default 1e-5; 0: always run
+    /// `iterations`).
     pub tolerance: Option<f64>,
-    /// Floor on frame inertia as a multiple of `m l² / 12` (default 1).
+    /// Floor on frame inertia as a multiple of `m l² / 12` (default 0: the model's inertia).
     pub inertia_floor: Option<f64>,
+    /// Retake a step of an inextensible rod that does not converge with the material's axial
+    /// compliance (default true; `backend_cpu::StiffSettings::axial_fallback`).
+    pub axial_fallback: Option<bool>,
 }
 
 impl Default for SolverSection {
@@ -745,6 +749,9 @@ impl Checker<'_> {
                     }
                     if let Some(f) = x.inertia_floor {
                         st.inertia_floor = self.non_negative("solver.stiff.inertia_floor", f)?;
+                    }
+                    if let Some(a) = x.axial_fallback {
+                        st.axial_fallback = a;
                     }
                 }
                 Ok(Some(st))

@@ -5,12 +5,15 @@
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_stability -- [what]`
 //! with `what` one of `cantilever`, `stability`, `bisect`, `frequency`, `gs` (default: all),
 //! or `timing` (per-step cost at 1000 elements), `trace PRESET_INDEX N DT` (the first
-//! steps of the pushed-and-twisted run with up to 30 iterations) and `debug`.
+//! steps of the pushed-and-twisted run with up to 30 iterations), `pinned` (that run with its
+//! far end pinned: `N` elements over 0.5 m, default 40, for `SECONDS`, default 1; with
+//! `EXPLICIT_DT` the explicit scheme at that step instead) and `debug`.
 //!
 //! Environment overrides of the stiff settings, for the measurements of
 //! `docs/stiff-solver.md`: `GEOM` (geometric multiplier), `ITERS`, `TOL`, `REFACTOR`
 //! (`it`, `step`, `lag`), `FLOOR` (inertia floor); of the scenarios: `PUSH` [m/s], `TWIST`
-//! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `ONLY` (preset names), `DTS`
+//! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no axial retry),
+//! `ONLY` (preset names), `DTS`
 //! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
 //! 500).
 
@@ -111,6 +114,9 @@ fn cantilever(p: &Preset, dt: f64, n: usize, stiff: &StiffSettings, tip_load: bo
 
 fn stiff_default() -> StiffSettings {
     let mut s = StiffSettings::default();
+    if std::env::var("AXIAL").as_deref() == Ok("0") {
+        s.axial_fallback = false;
+    }
     if let Ok(v) = std::env::var("GEOM") {
         s.geometric = v.parse().unwrap();
     }
@@ -133,26 +139,32 @@ fn stiff_default() -> StiffSettings {
     s
 }
 
+/// The drive of the pushed end: `PUSH` [m/s] along and `TWIST` [rad/s] about the rod's axis
+/// (default 2 cm/s and 2π rad/s).
+fn push_motion() -> PrescribedMotion<f64> {
+    PrescribedMotion {
+        velocity: Vec3::new(
+            std::env::var("PUSH").map_or(0.02, |v| v.parse().unwrap()),
+            0.0,
+            0.0,
+        ),
+        angular_velocity: Vec3::new(
+            std::env::var("TWIST").map_or(2.0 * std::f64::consts::PI, |v| v.parse().unwrap()),
+            0.0,
+            0.0,
+        ),
+        start_time: 0.0,
+        end_time: f64::INFINITY,
+    }
+}
+
 /// The two dynamic scenarios of issue 4: a pendulum (pinned at one end, released horizontally)
 /// and an end pushed and twisted (start clamped and driven along and about the rod's axis, far
 /// end free, under gravity: a wire advanced and spun while it sags).
 fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
     let m = p.material();
     if pushed {
-        let motion = PrescribedMotion {
-            velocity: Vec3::new(
-                std::env::var("PUSH").map_or(0.02, |v| v.parse().unwrap()),
-                0.0,
-                0.0,
-            ),
-            angular_velocity: Vec3::new(
-                std::env::var("TWIST").map_or(2.0 * std::f64::consts::PI, |v| v.parse().unwrap()),
-                0.0,
-                0.0,
-            ),
-            start_time: 0.0,
-            end_time: f64::INFINITY,
-        };
+        let motion = push_motion();
         rod(
             m,
             length,
@@ -411,6 +423,9 @@ fn main() {
     if what == "frequency" || what.is_empty() {
         frequency();
     }
+    if what == "pinned" {
+        pinned_push();
+    }
     if what == "debug" {
         for (vel, om) in [(0.02, 0.0), (0.0, 6.0), (0.02, 6.0)] {
             let m = PRESETS[0].material();
@@ -575,6 +590,83 @@ fn main() {
             for p in &PRESETS[..1] {
                 cantilever(p, 1e-3, 500, &st, false);
             }
+        }
+    }
+}
+
+/// The pushed-and-twisted rod with its far end pinned (`FAR_PINNED` of `stability`), shorter
+/// (`N` elements, default 40, over 0.5 m) and for `SECONDS` (default 1): result, largest strain
+/// and the bow (largest distance of a point from the straight line between the ends).
+fn pinned_push() {
+    let n: usize = std::env::var("N").map_or(40, |v| v.parse().unwrap());
+    let seconds: f64 = std::env::var("SECONDS").map_or(1.0, |v| v.parse().unwrap());
+    let only = std::env::var("ONLY").unwrap_or_default();
+    let explicit_dt: Option<f64> = std::env::var("EXPLICIT_DT")
+        .ok()
+        .map(|v| v.parse().unwrap());
+    println!(
+        "| preset | dt [s] | result | max strain | bow [m] | iterations/step | axial steps | unconverged steps |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for p in &PRESETS {
+        if !only.is_empty() && !only.contains(p.name) {
+            continue;
+        }
+        let dts = explicit_dt.map_or(vec![1e-3, 1e-4], |d| vec![d]);
+        for dt in dts {
+            let motion = push_motion();
+            let ends = [
+                EndCondition::clamped().driven(motion),
+                EndCondition::pinned(),
+            ];
+            let mut r = rod(p.material(), 0.5, n, 0.0, ends, vec![]);
+            let mut s = settings(dt);
+            s.divergence_strain = 0.5;
+            let mut scratch = StiffScratch::new();
+            // Batches of 1000 explicit steps, or single stiff steps (as a haptic loop takes them).
+            let batch = if explicit_dt.is_some() { 1000 } else { 1 };
+            let steps = (seconds / dt).round() as u64 / batch * batch;
+            let mut worst: f64 = 0.0;
+            let mut result = "stable".to_string();
+            for k in (0..steps).step_by(batch as usize) {
+                let t = k as f64 * dt;
+                let res = if explicit_dt.is_some() {
+                    step_rod_batch(&mut r, &s, t, 0, k, batch)
+                } else {
+                    step_rod_stiff(&mut r, &s, &stiff_default(), &mut scratch, t, 0, k, 1)
+                };
+                match res {
+                    Ok(st) => worst = worst.max(st.max_strain()),
+                    Err(e) => {
+                        result = format!("diverged at step {}: {:?}", e.step, e.quantity);
+                        break;
+                    }
+                }
+            }
+            let (a, b) = (r.state.positions[0], r.state.positions[n]);
+            let axis = (b - a).normalize();
+            let bow = r
+                .state
+                .positions
+                .iter()
+                .map(|x| {
+                    let d = x - a;
+                    (d - axis * d.dot(&axis)).norm()
+                })
+                .fold(0.0, f64::max);
+            let rep = scratch.report();
+            println!(
+                "| {}{} | {dt:e} | {result} | {worst:.1e} | {bow:.2e} | {:.2} | {} | {} |",
+                p.name,
+                if explicit_dt.is_some() {
+                    " explicit"
+                } else {
+                    ""
+                },
+                rep.total_iterations as f64 / steps as f64,
+                rep.axial_steps,
+                rep.unconverged_steps
+            );
         }
     }
 }

@@ -136,6 +136,14 @@ pub struct StiffSettings {
     /// moves so far in its first 1 ms step that the linearised step overshoots; its first steps
     /// are then taken in halves, quarters, …, and the rest at the full step.
     pub max_halvings: u32,
+    /// Retake a step of an inextensible rod that does not converge within
+    /// [`iterations`](Self::iterations) (direct solver only) with the material's axial
+    /// compliance `1/(E A)` instead
+    /// of the exact inextensibility constraint. A straight inextensible rod pushed along its
+    /// axis against a held far end has no solution (it can only shorten by buckling, which the
+    /// linearised step does not produce): without the retry its steps end unconverged, with
+    /// strains of several per cent, or diverge. Counted in [`StiffReport::axial_steps`].
+    pub axial_fallback: bool,
 }
 
 impl Default for StiffSettings {
@@ -151,6 +159,7 @@ impl Default for StiffSettings {
             inertia_floor: 0.0,
             geometric: 1.0,
             max_halvings: 8,
+            axial_fallback: true,
         }
     }
 }
@@ -168,6 +177,14 @@ pub struct StiffReport {
     pub factorisations: u64,
     /// Iterations (or sweeps) since the scratch was created.
     pub total_iterations: u64,
+    /// Steps since the scratch was created whose residual was still above the tolerance
+    /// after the last iteration (also after the axial retry).
+    pub unconverged_steps: u64,
+    /// Steps of an inextensible rod retaken with the material's axial compliance
+    /// ([`StiffSettings::axial_fallback`]) since the scratch was created.
+    pub axial_steps: u64,
+    /// Largest residual at the end of a step since the scratch was created.
+    pub max_residual: f64,
 }
 
 /// Per-rod constants of the stiff scheme, in `f64`.
@@ -278,6 +295,8 @@ impl ConstCols {
 pub struct StiffScratch {
     k: Consts,
     w: Work,
+    /// The constants of the extensible model, for steps retaken with the axial compliance.
+    axial: Option<Consts>,
     assembled: Assembled,
     factor: BlockTridiagonal,
     factor_valid: bool,
@@ -634,6 +653,7 @@ fn step_fixed<T: Real>(
     let StiffScratch {
         k,
         w,
+        axial,
         assembled,
         factor,
         factor_valid,
@@ -661,114 +681,39 @@ fn step_fixed<T: Real>(
     let limit = settings.divergence_strain.to_f64();
     let mut stats = StepStats::none();
     let mut result = Ok(());
-    let direct = stiff.scheme == StiffScheme::Direct;
     for step in 0..steps {
         let t = time + step as f64 * h;
-        // 1. Prediction: inertial targets x̃, q̃, and the starting guess of the iteration.
-        if k.damped {
-            // The constraints at the start of the step, for the damping's rate `(C − C_n)/h`.
-            w.constraints(k);
-            w.keep_constraint_values();
-        }
-        let loads = rod.loads.iter().map(|l| (l.point, v64(&l.force)));
-        let ends = &rod.ends;
-        w.predict(k, h, &gravity, loads, direct, |w| {
-            for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
-                if end.holds_point() {
-                    let v = v64(&end.velocities_at(t).0);
-                    w.v.set(i, &v);
-                    // The direct solver starts where the velocities alone lead (the full
-                    // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`
-                    // term and starts at x̃.
-                    if direct {
-                        w.x.set(i, &(w.x_old.get(i) + v * h));
-                    }
-                }
-            }
-            for (j, end) in [(0, &ends[0]), (n - 1, &ends[1])] {
-                if end.holds_frame() {
-                    let omega = v64(&end.velocities_at(t).1);
-                    let r = exp_rotation(&(omega * h)) * w.q_old.get(j);
-                    w.q.set(j, &(r / r.norm()));
-                }
-            }
-        });
-        // The tolerance, raised to the strain the rod's own precision resolves: an `f32` rod
-        // stores positions to `ε |x|` (ε = 2⁻²³), i.e. strains to `ε max|x| / min l0` (1.2e-4
-        // for a metre-long rod of millimetre elements); iterating below that changes nothing
-        // the rod can hold. No change for `f64` (ε = 2.2e-16).
-        let tolerance = if stiff.tolerance > 0.0 && precision > 1e-10 {
-            let extent = (0..=n).fold(0.0_f64, |m, i| m.max(w.x.get(i).amax()));
-            stiff.tolerance.max(precision * extent * k.inv_l0_max)
-        } else {
-            stiff.tolerance
+        let ctx = StepContext {
+            rod,
+            stiff,
+            h,
+            t,
+            gravity: &gravity,
+            precision,
         };
-        // 2. Constraint solve.
-        for c in &mut w.lambda {
-            c.fill_zero();
+        let (mut residual, mut tolerance) =
+            solve_step(&ctx, k, w, assembled, factor, factor_valid, report);
+        let unconverged = stiff.tolerance > 0.0 && !(residual <= tolerance);
+        if unconverged
+            && !settings.extensible
+            && stiff.axial_fallback
+            && stiff.scheme == StiffScheme::Direct
+        {
+            // The inextensible step has no solution (or Newton did not find it): retake it
+            // with the material's axial compliance (see `StiffSettings::axial_fallback`).
+            w.restore_step_start();
+            let ka = axial.get_or_insert_with(Consts::default);
+            ka.rebuild(rod, h, true, stiff.inertia_floor);
+            *factor_valid = false;
+            (residual, tolerance) =
+                solve_step(&ctx, ka, w, assembled, factor, factor_valid, report);
+            *factor_valid = false;
+            report.axial_steps += 1;
         }
-        w.lambda_zero = true;
-        let mut used = 0;
-        let mut residual = f64::NAN;
-        match stiff.scheme {
-            StiffScheme::Direct => {
-                let mut previous = f64::INFINITY;
-                for it in 0..=stiff.iterations {
-                    let last = it == stiff.iterations;
-                    if last && stiff.tolerance <= 0.0 {
-                        break;
-                    }
-                    w.constraints(k);
-                    let mut refactor = !*factor_valid
-                        || match stiff.refactor {
-                            Refactor::EveryIteration => true,
-                            Refactor::EveryStep => it == 0,
-                            Refactor::Lagged => false,
-                        };
-                    if refactor && !last {
-                        w.precondition(k, stiff.geometric, it == 0);
-                    }
-                    residual = w.rhs(k);
-                    // At least one iteration: with λ = 0 the residual `C` of a compliant
-                    // constraint is its strain, not the imbalance of its force, so a gently
-                    // bent rod would pass the test without being solved at all.
-                    if (residual <= tolerance && it > 0) || last {
-                        break;
-                    }
-                    if !refactor && stiff.refactor == Refactor::Lagged && residual > 0.25 * previous
-                    {
-                        w.precondition(k, stiff.geometric, it == 0);
-                        residual = w.rhs(k);
-                        refactor = true;
-                    }
-                    if refactor {
-                        w.assemble(k, assembled);
-                        factor.factor(assembled);
-                        *factor_valid = true;
-                        report.factorisations += 1;
-                    }
-                    previous = residual;
-                    factor.solve(&mut w.rhs);
-                    w.apply(k);
-                    used += 1;
-                }
-            }
-            StiffScheme::GaussSeidel => {
-                for _ in 0..stiff.iterations {
-                    residual = xpbd::sweep(w, k);
-                    used += 1;
-                    if residual <= stiff.tolerance {
-                        break;
-                    }
-                }
-            }
+        if stiff.tolerance > 0.0 && !(residual <= tolerance) {
+            report.unconverged_steps += 1;
         }
-        for (p, l) in w.lambda_prev.iter_mut().zip(&w.lambda) {
-            p.copy_from(l);
-        }
-        report.iterations = used;
-        report.total_iterations += used as u64;
-        report.residual = residual;
+        report.max_residual = report.max_residual.max(residual);
         // 3. Velocities from the positions and frames. Drag of the medium, implicit
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
         // energy without changing static equilibria.
@@ -813,6 +758,154 @@ fn step_fixed<T: Real>(
     }
     w.shadow = true;
     result.map(|()| stats)
+}
+
+/// What one step needs to know besides the scratch.
+struct StepContext<'a, T: Real> {
+    rod: &'a CpuRod<T>,
+    stiff: &'a StiffSettings,
+    h: f64,
+    /// Time at the start of the step.
+    t: f64,
+    gravity: &'a Vec3<f64>,
+    /// Machine epsilon of the rod's precision.
+    precision: f64,
+}
+
+impl<T: Real> StepContext<'_, T> {
+    /// The tolerance, raised to the strain the rod's own precision resolves: an `f32` rod
+    /// stores positions to `ε |x|` (ε = 2⁻²³), i.e. strains to `ε max|x| / min l0` (1.2e-4
+    /// for a metre-long rod of millimetre elements); iterating below that changes nothing
+    /// the rod can hold. No change for `f64` (ε = 2.2e-16).
+    fn tolerance(&self, k: &Consts, w: &Work) -> f64 {
+        let stiff = self.stiff;
+        if stiff.tolerance > 0.0 && self.precision > 1e-10 {
+            let extent = (0..=w.n).fold(0.0_f64, |m, i| m.max(w.x.get(i).amax()));
+            stiff.tolerance.max(self.precision * extent * k.inv_l0_max)
+        } else {
+            stiff.tolerance
+        }
+    }
+}
+
+/// Steps 1 and 2 of the module docs for one step: the prediction from the state in `w` and
+/// the constraint solve with the constants `k`. Returns the last residual and the tolerance it
+/// was held to.
+fn solve_step<T: Real>(
+    ctx: &StepContext<'_, T>,
+    k: &Consts,
+    w: &mut Work,
+    assembled: &mut Assembled,
+    factor: &mut BlockTridiagonal,
+    factor_valid: &mut bool,
+    report: &mut StiffReport,
+) -> (f64, f64) {
+    let StepContext {
+        rod,
+        stiff,
+        h,
+        t,
+        gravity,
+        ..
+    } = *ctx;
+    let n = w.n;
+    let direct = stiff.scheme == StiffScheme::Direct;
+    // 1. Prediction: inertial targets x̃, q̃, and the starting guess of the iteration.
+    if k.damped {
+        // The constraints at the start of the step, for the damping's rate `(C − C_n)/h`.
+        w.constraints(k);
+        w.keep_constraint_values();
+    }
+    let loads = rod.loads.iter().map(|l| (l.point, v64(&l.force)));
+    let ends = &rod.ends;
+    w.predict(k, h, gravity, loads, direct, |w| {
+        for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
+            if end.holds_point() {
+                let v = v64(&end.velocities_at(t).0);
+                w.v.set(i, &v);
+                // The direct solver starts where the velocities alone lead (the full
+                // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`
+                // term and starts at x̃.
+                if direct {
+                    w.x.set(i, &(w.x_old.get(i) + v * h));
+                }
+            }
+        }
+        for (j, end) in [(0, &ends[0]), (n - 1, &ends[1])] {
+            if end.holds_frame() {
+                let omega = v64(&end.velocities_at(t).1);
+                let r = exp_rotation(&(omega * h)) * w.q_old.get(j);
+                w.q.set(j, &(r / r.norm()));
+            }
+        }
+    });
+    let tolerance = ctx.tolerance(k, w);
+    // 2. Constraint solve.
+    for c in &mut w.lambda {
+        c.fill_zero();
+    }
+    w.lambda_zero = true;
+    let mut used = 0;
+    let mut residual = f64::NAN;
+    match stiff.scheme {
+        StiffScheme::Direct => {
+            let mut previous = f64::INFINITY;
+            for it in 0..=stiff.iterations {
+                let last = it == stiff.iterations;
+                if last && stiff.tolerance <= 0.0 {
+                    break;
+                }
+                w.constraints(k);
+                let mut refactor = !*factor_valid
+                    || match stiff.refactor {
+                        Refactor::EveryIteration => true,
+                        Refactor::EveryStep => it == 0,
+                        Refactor::Lagged => false,
+                    };
+                if refactor && !last {
+                    w.precondition(k, stiff.geometric, it == 0);
+                }
+                residual = w.rhs(k);
+                // At least one iteration: with λ = 0 the residual `C` of a compliant
+                // constraint is its strain, not the imbalance of its force, so a gently
+                // bent rod would pass the test without being solved at all.
+                if (residual <= tolerance && it > 0) || last {
+                    break;
+                }
+                if !refactor && stiff.refactor == Refactor::Lagged && residual > 0.25 * previous {
+                    w.precondition(k, stiff.geometric, it == 0);
+                    residual = w.rhs(k);
+                    refactor = true;
+                }
+                if refactor {
+                    w.assemble(k, assembled);
+                    factor.factor(assembled);
+                    *factor_valid = true;
+                    report.factorisations += 1;
+                }
+                previous = residual;
+                factor.solve(&mut w.rhs);
+                w.apply(k);
+                used += 1;
+            }
+        }
+        StiffScheme::GaussSeidel => {
+            for _ in 0..stiff.iterations {
+                residual = xpbd::sweep(w, k);
+                used += 1;
+                if residual <= stiff.tolerance {
+                    break;
+                }
+            }
+        }
+    }
+    for (p, l) in w.lambda_prev.iter_mut().zip(&w.lambda) {
+        p.copy_from(l);
+    }
+    report.iterations = used;
+    report.total_iterations += used as u64;
+    report.residual = residual;
+    (residual, tolerance)
 }
 
 #[cfg(test)]

@@ -19,6 +19,9 @@ pub(crate) struct Work {
     pub(crate) q: Q4s,
     pub(crate) q_old: Q4s,
     pub(crate) omega: V3s,
+    /// Velocities and angular velocities at the start of the step (for a retake).
+    v_start: V3s,
+    omega_start: V3s,
     /// Inertial targets `x̃`, `q̃` of the step.
     pub(crate) x_pred: V3s,
     pub(crate) q_pred: Q4s,
@@ -85,6 +88,8 @@ impl Work {
         self.x = points();
         self.v = points();
         self.x_old = points();
+        self.v_start = points();
+        self.omega_start = frames();
         self.x_pred = points();
         self.u_x = points();
         self.f_before = V3s::zeros(n + 2);
@@ -465,6 +470,7 @@ impl Work {
         for i in chunks(n + 1) {
             let (x, v) = (self.x.load(i), self.v.load(i));
             self.x_old.store(i, x);
+            self.v_start.store(i, v);
             if direct {
                 self.x.store(i, x.add_scaled(v, hf));
             }
@@ -484,6 +490,7 @@ impl Work {
             let q = self.q.load(j);
             self.q_old.store(j, q);
             let o = self.omega.load(j);
+            self.omega_start.store(j, o);
             let gyro = o
                 .cross(c.inertia.load(j).mul(o))
                 .mul(c.inv_inertia_own.load(j));
@@ -519,6 +526,15 @@ impl Work {
             }
         }
         self.q_pred.copy_from(&self.q);
+    }
+
+    /// Puts back the state at the start of the step (before [`predict`](Self::predict)), so
+    /// that the step can be taken again.
+    pub(crate) fn restore_step_start(&mut self) {
+        self.x.copy_from(&self.x_old);
+        self.q.copy_from(&self.q_old);
+        self.v.copy_from(&self.v_start);
+        self.omega.copy_from(&self.omega_start);
     }
 
     /// Step 3 of the module docs: `v = (x − x_old) / (h (1 + h γ))` (`drag = 1/(1 + hγ)`) and
