@@ -194,9 +194,9 @@ fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
 
 fn stability() {
     println!(
-        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step |"
+        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step | axial steps | unconverged steps | max residual |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let only = std::env::var("ONLY").unwrap_or_default();
     let dts: Vec<f64> = std::env::var("DTS").map_or(vec![1e-3, 1e-4], |v| {
         v.split(',').map(|x| x.parse().unwrap()).collect()
@@ -228,12 +228,16 @@ fn stability() {
                     Ok(_) => steps,
                     Err(e) => e.step + 1,
                 };
+                let rep = scratch.report();
                 println!(
-                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {el:.1} | {:.0} |",
+                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {el:.1} | {:.0} | {} | {} | {:.1e} |",
                     p.name,
                     if pushed { "pushed+twisted" } else { "pendulum" },
-                    scratch.report().total_iterations as f64 / done as f64,
-                    el / done as f64 * 1e6
+                    rep.total_iterations as f64 / done as f64,
+                    el / done as f64 * 1e6,
+                    rep.axial_steps,
+                    rep.unconverged_steps,
+                    rep.max_residual
                 );
             }
         }

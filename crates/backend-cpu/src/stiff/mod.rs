@@ -136,13 +136,14 @@ pub struct StiffSettings {
     /// moves so far in its first 1 ms step that the linearised step overshoots; its first steps
     /// are then taken in halves, quarters, …, and the rest at the full step.
     pub max_halvings: u32,
-    /// Retake a step of an inextensible rod that does not converge within
-    /// [`iterations`](Self::iterations) (direct solver only) with the material's axial
-    /// compliance `1/(E A)` instead
-    /// of the exact inextensibility constraint. A straight inextensible rod pushed along its
-    /// axis against a held far end has no solution (it can only shorten by buckling, which the
-    /// linearised step does not produce): without the retry its steps end unconverged, with
-    /// strains of several per cent, or diverge. Counted in [`StiffReport::axial_steps`].
+    /// Retake a step of an inextensible rod that ends unconverged (residual above the
+    /// tolerance after [`iterations`](Self::iterations); direct solver only) with some element
+    /// stretched or compressed beyond the tolerance, with the material's axial compliance
+    /// `1/(E A)` instead of the exact inextensibility constraint. A straight inextensible rod
+    /// pushed along its axis against a held far end has no solution (it can only shorten by
+    /// buckling, which the linearised step does not produce): without the retry its steps end
+    /// unconverged, with strains of several per cent, or diverge. Counted in
+    /// [`StiffReport::axial_steps`].
     pub axial_fallback: bool,
 }
 
@@ -698,9 +699,11 @@ fn step_fixed<T: Real>(
             && !settings.extensible
             && stiff.axial_fallback
             && stiff.scheme == StiffScheme::Direct
+            && stretched_beyond(w, k, tolerance)
         {
-            // The inextensible step has no solution (or Newton did not find it): retake it
-            // with the material's axial compliance (see `StiffSettings::axial_fallback`).
+            // The inextensible step has no solution (or Newton did not find it) and has left
+            // the rod stretched or compressed beyond the tolerance: retake it with the
+            // material's axial compliance (see `StiffSettings::axial_fallback`).
             w.restore_step_start();
             let ka = axial.get_or_insert_with(Consts::default);
             ka.rebuild(rod, h, true, stiff.inertia_floor);
@@ -758,6 +761,15 @@ fn step_fixed<T: Real>(
     }
     w.shadow = true;
     result.map(|()| stats)
+}
+
+/// Whether some element of `w` is stretched or compressed by more than `strain` (or is not
+/// finite).
+fn stretched_beyond(w: &Work, k: &Consts, strain: f64) -> bool {
+    match w.stretch_range(k, f64::INFINITY, 0.0) {
+        Ok((lo, hi)) => 1.0 - lo.sqrt() > strain || hi.sqrt() - 1.0 > strain,
+        Err(_) => true,
+    }
 }
 
 /// What one step needs to know besides the scratch.
