@@ -30,5 +30,5 @@ pub use cosserat_model::{self, Material};
 pub use environment::Environment;
 pub use sim::{
     Backend, BuildError, ContactReport, RodBuilder, RodHandle, Simulation, SimulationBuilder,
-    StepError,
+    StepError, StiffSummary,
 };

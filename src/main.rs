@@ -300,6 +300,15 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         if let Some(f) = sim.max_reaction_force() {
             v["max_reaction_force"] = serde_json::json!(f);
         }
+        if let Some(st) = sim.stiff_summary() {
+            v["stiff"] = serde_json::json!({
+                "iterations_per_step": st.iterations as f64 / st.rod_steps.max(1) as f64,
+                "unconverged_steps": st.unconverged_steps,
+                "axial_steps": st.axial_steps,
+                "max_residual": st.max_residual,
+                "max_tolerance": st.max_tolerance,
+            });
+        }
         if let Some(c) = sim.coupling_stats() {
             v["bound_points"] = serde_json::json!(c.bound_points);
             v["rod_contacts"] = serde_json::json!(c.contacts);
@@ -349,6 +358,17 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             println!(
                 "contact    {} points in contact, max penetration {:.3e} m, {} escaped, detection {:.2} µs/step",
                 c.contacts, c.max_penetration, c.escaped_points, c.detection_us_per_step
+            );
+        }
+        if let Some(st) = sim.stiff_summary() {
+            println!(
+                "stiff      {:.2} iterations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken with axial compliance",
+                st.iterations as f64 / st.rod_steps.max(1) as f64,
+                st.unconverged_steps,
+                st.rod_steps,
+                st.max_tolerance,
+                st.max_residual,
+                st.axial_steps
             );
         }
         if let Some(d) = &o.divergence {

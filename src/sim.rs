@@ -677,6 +677,24 @@ impl<T: Real> Rods<T> {
         Ok(self)
     }
 
+    /// The stiff solver's reports of all rods together after `steps` steps.
+    fn stiff_summary(&self, steps: u64) -> Option<StiffSummary> {
+        let (settings, scratch) = self.stiff.as_ref()?;
+        let mut s = StiffSummary {
+            rod_steps: steps * scratch.len() as u64,
+            max_tolerance: settings.tolerance,
+            ..StiffSummary::default()
+        };
+        for r in scratch.iter().map(backend_cpu::StiffScratch::report) {
+            s.iterations += r.total_iterations;
+            s.unconverged_steps += r.unconverged_steps;
+            s.axial_steps += r.axial_steps;
+            s.max_residual = s.max_residual.max(r.max_residual);
+            s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
+        }
+        Some(s)
+    }
+
     /// Steps every rod `n` times on the CPU; returns the largest strain seen.
     fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
         if let Some((st, scratch)) = self.stiff.as_mut() {
@@ -872,6 +890,26 @@ pub struct ContactReport {
     pub detection_us_per_step: f64,
 }
 
+/// What the stiff solver did since the simulation was built, over all rods
+/// (`backend_cpu::StiffReport` summed).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StiffSummary {
+    /// Rod-steps taken (steps × rods).
+    pub rod_steps: u64,
+    /// Newton iterations, all rods together.
+    pub iterations: u64,
+    /// Rod-steps whose residual was still above the tolerance after the last iteration.
+    pub unconverged_steps: u64,
+    /// Rod-steps of inextensible rods retaken with the material's axial compliance
+    /// (`StiffSettings::axial_fallback`).
+    pub axial_steps: u64,
+    /// Largest residual at the end of any rod-step.
+    pub max_residual: f64,
+    /// The largest residual tolerance a rod-step was held to (the settings', raised for `f32`
+    /// rods to the strain their positions resolve).
+    pub max_tolerance: f64,
+}
+
 impl Simulation {
     /// Advances every rod by one time step.
     pub fn step(&mut self) -> Result<(), StepError> {
@@ -1011,6 +1049,18 @@ impl Simulation {
     /// Largest `|l/l0 − 1|` of any segment at the end of any step so far.
     pub fn max_strain(&self) -> f64 {
         self.max_strain
+    }
+
+    /// What the stiff solver did so far: iterations, steps that ended above the tolerance and
+    /// steps retaken with axial compliance; `None` with the explicit scheme.
+    pub fn stiff_summary(&self) -> Option<StiffSummary> {
+        let steps = self.steps;
+        match &self.world {
+            World::F32(r) => r.stiff_summary(steps),
+            World::F64(r) => r.stiff_summary(steps),
+            #[cfg(feature = "gpu")]
+            World::Gpu(_) => None,
+        }
     }
 
     /// Centreline points of a rod [m].

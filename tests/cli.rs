@@ -53,6 +53,42 @@ fn run_json_reports_every_field() {
     );
 }
 
+/// A run with the stiff solver says how well its steps converged.
+#[test]
+fn stiff_runs_report_their_convergence() {
+    let out = cosserat()
+        .args([
+            "run",
+            "scenes/nitinol-pendulum.toml",
+            "--elements",
+            "50",
+            "--steps",
+            "100",
+            "--json",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let st = &v["stiff"];
+    let it = st["iterations_per_step"].as_f64().unwrap();
+    assert!((1.0..=2.0).contains(&it), "{st}");
+    let unconverged = st["unconverged_steps"].as_u64().unwrap();
+    let (residual, tolerance) = (
+        st["max_residual"].as_f64().unwrap(),
+        st["max_tolerance"].as_f64().unwrap(),
+    );
+    assert!(tolerance >= 1e-5, "{st}");
+    // Without unconverged steps, no step's residual ended above its tolerance.
+    assert!(unconverged > 0 || residual <= tolerance, "{st}");
+    assert_eq!(st["axial_steps"], 0, "{st}");
+}
+
 #[test]
 fn a_diverging_run_says_where_and_exits_nonzero() {
     let out = cosserat()

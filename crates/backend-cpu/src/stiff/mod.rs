@@ -186,6 +186,10 @@ pub struct StiffReport {
     pub axial_steps: u64,
     /// Largest residual at the end of a step since the scratch was created.
     pub max_residual: f64,
+    /// The largest tolerance a step was held to since the scratch was created:
+    /// [`StiffSettings::tolerance`], raised for an `f32` rod to the strain its positions
+    /// resolve (which depends on how far the rod is from the origin).
+    pub max_tolerance: f64,
 }
 
 /// Per-rod constants of the stiff scheme, in `f64`.
@@ -716,6 +720,7 @@ fn step_fixed<T: Real>(
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
             report.unconverged_steps += 1;
         }
+        report.max_tolerance = report.max_tolerance.max(tolerance);
         report.max_residual = report.max_residual.max(residual);
         // 3. Velocities from the positions and frames. Drag of the medium, implicit
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
