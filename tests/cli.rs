@@ -6,18 +6,11 @@ fn cosserat() -> Command {
     Command::new(env!("CARGO_BIN_EXE_cosserat"))
 }
 
-#[test]
-fn run_json_reports_every_field() {
+/// Runs `cosserat` with `args` (from the repository root), expects success and returns its
+/// JSON output.
+fn run_json(args: &[&str]) -> serde_json::Value {
     let out = cosserat()
-        .args([
-            "run",
-            "scenes/pendulum.toml",
-            "--elements",
-            "32",
-            "--steps",
-            "200",
-            "--json",
-        ])
+        .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
@@ -26,7 +19,20 @@ fn run_json_reports_every_field() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn run_json_reports_every_field() {
+    let v = run_json(&[
+        "run",
+        "scenes/pendulum.toml",
+        "--elements",
+        "32",
+        "--steps",
+        "200",
+        "--json",
+    ]);
     for key in [
         "scene",
         "backend",
@@ -56,25 +62,15 @@ fn run_json_reports_every_field() {
 /// A run with the stiff solver says how well its steps converged.
 #[test]
 fn stiff_runs_report_their_convergence() {
-    let out = cosserat()
-        .args([
-            "run",
-            "scenes/nitinol-pendulum.toml",
-            "--elements",
-            "50",
-            "--steps",
-            "100",
-            "--json",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = run_json(&[
+        "run",
+        "scenes/nitinol-pendulum.toml",
+        "--elements",
+        "50",
+        "--steps",
+        "100",
+        "--json",
+    ]);
     let st = &v["stiff"];
     let it = st["iterations_per_step"].as_f64().unwrap();
     assert!((1.0..=2.0).contains(&it), "{st}");
