@@ -222,7 +222,7 @@ pub struct SolverSection {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StiffSection {
-    /// Largest number of Newton iterations per step (default 4).
+    /// Largest number of Newton iterations per step (default 8).
     pub iterations: Option<usize>,
     /// Residual (a strain) at which iterations stop (default 1e-5; 0: always run
     /// `iterations`).

@@ -4,7 +4,7 @@
 //! scheme runs at a time step it is stable at (explicit 1e-7 s, stiff 1e-3 s). The cost of a
 //! step does not depend on `dt` for either scheme, except through the stiff scheme's
 //! iteration count: the default settings iterate until the residual is below 1e-5 (for the f32
-//! rod, the 1.2e-4 strain its positions resolve; at most 4 iterations; the mean is printed),
+//! rod, the 1.2e-4 strain its positions resolve; at most 8 iterations; the mean is printed),
 //! `stiff_1_iteration` runs exactly one.
 //!
 //! `cargo bench -p cosserat-backend-cpu --bench stiff`; results in `docs/benchmarks/stiff.md`.

@@ -381,8 +381,9 @@ fn pinned_push(
 }
 
 /// A straight inextensible rod pushed along its axis against a pinned far end can only shorten
-/// by buckling, which the linearised step does not produce: without the axial retry its steps
-/// end unconverged with strains of per cents. With it (the default), every preset buckles
+/// by buckling, which the linearised step does not produce: without the axial retry some of
+/// its steps end far from converged, some presets with strains of per cents. With it (the
+/// default), every preset buckles
 /// sideways by what inextensibility demands for the 6 mm push, `(2/π) √(δ L)` = 3.5 cm for a
 /// half sine wave, while its strain stays below 1e-3.
 #[test]
@@ -399,14 +400,25 @@ fn a_rod_pushed_against_a_pinned_end_buckles_with_the_axial_retry() {
         );
         assert!(report.axial_steps > 0, "{}: {report:?}", p.name);
     }
-    // Without the retry, the same push leaves unconverged steps and large strains.
+    // Without the retry, the same push leaves every preset with steps that end far from
+    // converged, and some of them with strains of per cents.
     let without = StiffSettings {
         axial_fallback: false,
         ..StiffSettings::default()
     };
-    let (outcome, strain, _, report) = pinned_push(&PRESETS[0], &without);
-    assert!(
-        outcome.is_err() || (strain > 1e-2 && report.unconverged_steps > 0),
-        "{outcome:?}, strain {strain:e}, {report:?}"
-    );
+    let mut worst: f64 = 0.0;
+    for p in &PRESETS {
+        let (outcome, strain, _, report) = pinned_push(p, &without);
+        assert!(
+            outcome.is_err() || (report.unconverged_steps > 0 && report.max_residual > 1e-3),
+            "{}: {outcome:?}, strain {strain:e}, {report:?}",
+            p.name
+        );
+        worst = worst.max(if outcome.is_err() {
+            f64::INFINITY
+        } else {
+            strain
+        });
+    }
+    assert!(worst > 1e-2, "largest strain without the retry {worst:e}");
 }
