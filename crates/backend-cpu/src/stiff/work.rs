@@ -77,6 +77,8 @@ fn for_lanes(bits: u32, j: usize, end: usize, mut f: impl FnMut(usize)) {
 }
 
 impl Work {
+    /// Sizes the columns for `n` elements (a new state; nothing is kept) unless they already
+    /// are.
     pub(crate) fn resize(&mut self, n: usize) {
         if self.n == n && !self.q.w.is_empty() {
             return;
