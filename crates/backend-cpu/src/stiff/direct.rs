@@ -560,16 +560,24 @@ mod tests {
         (ss, bt, w, wi)
     }
 
+    /// Compliances of the stretch–shear and bend–twist rows of a test chain of `n` elements.
+    fn compliances(n: usize) -> (Vec<Vec3<f64>>, Vec<Vec3<f64>>) {
+        let ag = (0..n)
+            .map(|j| Vec3::new(1e-3, 2e-3, j as f64 * 1e-4))
+            .collect();
+        let ao = (0..n.saturating_sub(1))
+            .map(|_| Vec3::new(3e-2, 3e-2, 5e-2))
+            .collect();
+        (ag, ao)
+    }
+
     /// The block assembly of the reference equals `J M⁻¹ Jᵀ + α̃` built densely from the
     /// constraint Jacobians, and the block factorisation solves it.
     #[test]
     fn block_assembly_and_solve_match_dense() {
         let n = 6;
         let (ss, bt, w, wi) = chain(n);
-        let ag: Vec<_> = (0..n)
-            .map(|j| Vec3::new(1e-3, 2e-3, j as f64 * 1e-4))
-            .collect();
-        let ao: Vec<_> = (0..n - 1).map(|_| Vec3::new(3e-2, 3e-2, 5e-2)).collect();
+        let (ag, ao) = compliances(n);
         let wi_col = V3s::from_slice(&wi);
         let m = Masses {
             inv_mass: &w,
@@ -681,12 +689,7 @@ mod tests {
     fn solve_matches_dense_for_every_length() {
         for n in [1, 2, 3, 4, 7, 23] {
             let (ss, bt, w, wi) = chain(n);
-            let ag: Vec<_> = (0..n)
-                .map(|j| Vec3::new(1e-3, 2e-3, j as f64 * 1e-4))
-                .collect();
-            let ao: Vec<_> = (0..n.saturating_sub(1))
-                .map(|_| Vec3::new(3e-2, 3e-2, 5e-2))
-                .collect();
+            let (ag, ao) = compliances(n);
             let wi_col = V3s::from_slice(&wi);
             let m = Masses {
                 inv_mass: &w,

@@ -200,28 +200,16 @@ pub struct StiffReport {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Consts {
     pub(crate) l0: Vec<f64>,
-    inv_l0_sq: Vec<f64>,
     /// `1 / min l0`.
     inv_l0_max: f64,
     pub(crate) lbar: Vec<f64>,
-    inv_lbar: Vec<f64>,
     pub(crate) rest_u: Vec<Vec3<f64>>,
     pub(crate) inv_mass: Vec<f64>,
-    pub(crate) mass: Vec<f64>,
-    pub(crate) inertia: Vec<Vec3<f64>>,
+    /// Inverse inertias of the frames, zero for held frames.
     pub(crate) inv_inertia: Vec<Vec3<f64>>,
-    /// `1 / inertia` also for held frames (the gyroscopic term of the prediction).
-    inv_inertia_own: Vec<Vec3<f64>>,
+    /// Compliances `α̃` of the stretch–shear and bend–twist rows.
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
-    /// Internal damping (Macklin et al. 2016, eq. 26) with `γ = α β / h` per constraint row
-    /// (`β` the damping of the constraint's rate, see [`Consts::rebuild`]): `γ / (1 + γ)`.
-    damp_gamma: Vec<Vec3<f64>>,
-    damp_omega: Vec<Vec3<f64>>,
-    /// The compliances of the (row-scaled) damped Newton system, `α̃ / (1 + γ)`; equal to
-    /// `alpha_gamma`, `alpha_omega` without damping.
-    alpha_gamma_matrix: Vec<Vec3<f64>>,
-    alpha_omega_matrix: Vec<Vec3<f64>>,
     /// Whether any damping coefficient is positive.
     damped: bool,
     /// The constants of the element-wise passes as padded columns (`lanes.rs`).
@@ -242,58 +230,26 @@ pub(crate) struct ConstCols {
     pub(crate) lbar: Vec<f64>,
     pub(crate) inv_lbar: Vec<f64>,
     pub(crate) rest_u: V3s,
-    /// The compliances and damping fractions of the Newton system (`alpha_gamma_matrix`, …).
+    /// The compliances of the (row-scaled) damped Newton system, `α̃ / (1 + γ)` (equal to
+    /// `alpha_gamma`, `alpha_omega` without damping), and the damping fractions `γ / (1 + γ)`
+    /// with `γ = α β / h` per constraint row (Macklin et al. 2016, eq. 26; `β` the damping of
+    /// the constraint's rate, see [`Consts::rebuild`]).
     pub(crate) alpha_g: V3s,
     pub(crate) alpha_o: V3s,
     pub(crate) damp_g: V3s,
     pub(crate) damp_o: V3s,
-    /// Per frame: the inertia, its own inverse (also for held frames), and 1 for a free frame,
-    /// 0 for a held one.
+    /// Per frame: the inertia, its own inverse (also for held frames: the gyroscopic term of
+    /// the prediction), and 1 for a free frame, 0 for a held one.
     pub(crate) inertia: V3s,
     pub(crate) inv_inertia_own: V3s,
     pub(crate) free: Vec<f64>,
 }
 
-/// `v` padded to `padded(v.len())` entries with `pad`.
-fn column(v: &[f64], pad: f64) -> Vec<f64> {
-    let mut c = vec![pad; padded(v.len())];
+/// `v` as a column of `len ≥ v.len()` entries (padded, see `lanes.rs`), the rest `pad`.
+fn column(v: &[f64], len: usize, pad: f64) -> Vec<f64> {
+    let mut c = vec![pad; padded(len)];
     c[..v.len()].copy_from_slice(v);
     c
-}
-
-impl ConstCols {
-    fn new(k: &Consts, n: usize) -> Self {
-        let inertia = {
-            let mut c = V3s::from_slice(&k.inertia);
-            for i in n..c.x.len() {
-                c.set(i, &Vec3::repeat(1.0));
-            }
-            c
-        };
-        let mut free = vec![0.0; padded(n)];
-        for (f, w) in free.iter_mut().zip(&k.inv_inertia) {
-            *f = if w.x == 0.0 { 0.0 } else { 1.0 };
-        }
-        let mut lbar = k.lbar.clone();
-        lbar.resize(n, 0.0);
-        let mut inv_lbar = k.inv_lbar.clone();
-        inv_lbar.resize(n, 1.0);
-        Self {
-            inv_mass: column(&k.inv_mass, 0.0),
-            inv_l0: column(&k.l0.iter().map(|l| 1.0 / l).collect::<Vec<_>>(), 1.0),
-            inv_l0_sq: column(&k.inv_l0_sq, 1.0),
-            lbar: column(&lbar, 0.0),
-            inv_lbar: column(&inv_lbar, 1.0),
-            rest_u: V3s::from_slice(&k.rest_u),
-            alpha_g: V3s::from_slice(&k.alpha_gamma_matrix),
-            alpha_o: V3s::from_slice(&k.alpha_omega_matrix),
-            damp_g: V3s::from_slice(&k.damp_gamma),
-            damp_o: V3s::from_slice(&k.damp_omega),
-            inertia,
-            inv_inertia_own: V3s::from_slice(&k.inv_inertia_own),
-            free,
-        }
-    }
 }
 
 /// Scratch memory and cached constants of the stiff scheme for one rod; the caller owns one per
@@ -419,16 +375,13 @@ impl Consts {
         // A zero stiffness means no constraint: a compliance so large that λ stays zero.
         let compliance = |k: f64, l: f64| (1.0 / (k * l)).min(1e300) / h2;
         self.l0 = p.rest_lengths.iter().map(|l| l.to_f64()).collect();
-        self.inv_l0_sq = self.l0.iter().map(|l| 1.0 / (l * l)).collect();
         self.inv_l0_max = self.l0.iter().fold(0.0, |m, l| m.max(1.0 / l));
         self.lbar = (0..n.saturating_sub(1))
             .map(|j| p.node_length(j).to_f64())
             .collect();
-        self.inv_lbar = self.lbar.iter().map(|l| 1.0 / l).collect();
         self.rest_u = p.rest_darboux.iter().map(v64).collect();
         self.inv_mass = p.inv_masses.iter().map(|w| w.to_f64()).collect();
-        self.mass = p.masses.iter().map(|m| m.to_f64()).collect();
-        self.inertia = (0..n)
+        let inertia: Vec<Vec3<f64>> = (0..n)
             .map(|j| {
                 let l = self.l0[j];
                 let own = v64(&p.inertias[j]);
@@ -438,8 +391,8 @@ impl Consts {
                 own.map(|i| i.max(bar))
             })
             .collect();
-        self.inv_inertia = self.inertia.iter().map(|i| i.map(|x| 1.0 / x)).collect();
-        self.inv_inertia_own = self.inv_inertia.clone();
+        let inv_inertia_own: Vec<Vec3<f64>> = inertia.iter().map(|i| i.map(|x| 1.0 / x)).collect();
+        self.inv_inertia = inv_inertia_own.clone();
         if rod.ends[0].holds_frame() {
             self.inv_inertia[0] = Vec3::zeros();
         }
@@ -507,9 +460,36 @@ impl Consts {
             aw.push(Vec3::new(r[0].1, r[1].1, r[2].1));
         }
         self.damped = dg.iter().chain(&dw).any(|d| d.amax() > 0.0);
-        (self.damp_gamma, self.alpha_gamma_matrix) = (dg, ag);
-        (self.damp_omega, self.alpha_omega_matrix) = (dw, aw);
-        self.cols = ConstCols::new(self, n);
+        // The columns of the lane passes; padding with unit lengths and inertias.
+        let mut inertia = V3s::from_slice(&inertia);
+        for i in n..inertia.x.len() {
+            inertia.set(i, &Vec3::repeat(1.0));
+        }
+        let mut free = vec![0.0; padded(n)];
+        for (f, w) in free.iter_mut().zip(&self.inv_inertia) {
+            *f = if w.x == 0.0 { 0.0 } else { 1.0 };
+        }
+        let inv = |v: &[f64]| v.iter().map(|l| 1.0 / l).collect::<Vec<_>>();
+        self.cols = ConstCols {
+            inv_mass: column(&self.inv_mass, n + 1, 0.0),
+            inv_l0: column(&inv(&self.l0), n, 1.0),
+            inv_l0_sq: column(
+                &inv(&self.l0).iter().map(|i| i * i).collect::<Vec<_>>(),
+                n,
+                1.0,
+            ),
+            // Per node: the last element's lane is padding.
+            lbar: column(&self.lbar, n, 0.0),
+            inv_lbar: column(&inv(&self.lbar), n, 1.0),
+            rest_u: V3s::from_slice(&self.rest_u),
+            alpha_g: V3s::from_slice(&ag),
+            alpha_o: V3s::from_slice(&aw),
+            damp_g: V3s::from_slice(&dg),
+            damp_o: V3s::from_slice(&dw),
+            inertia,
+            inv_inertia_own: V3s::from_slice(&inv_inertia_own),
+            free,
+        };
         self.key = Some(key);
     }
 }

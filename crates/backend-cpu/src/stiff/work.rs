@@ -602,7 +602,7 @@ impl Work {
                     if !q.coords.iter().all(|x| x.is_finite()) {
                         return Err((e, None));
                     }
-                    let r2 = (self.x.get(e + 1) - self.x.get(e)).norm_squared() * k.inv_l0_sq[e];
+                    let r2 = (self.x.get(e + 1) - self.x.get(e)).norm_squared() * c.inv_l0_sq[e];
                     if !r2.is_finite() || r2 > above || r2 < below_sq {
                         return Err((e, Some(r2)));
                     }
@@ -759,11 +759,13 @@ mod tests {
         let mut asm = Assembled::default();
         w.assemble(&k, &mut asm);
         let reference_asm = {
+            let alpha_gamma: Vec<_> = (0..n).map(|j| k.cols.alpha_g.get(j)).collect();
+            let alpha_omega: Vec<_> = (0..n - 1).map(|j| k.cols.alpha_o.get(j)).collect();
             let m = Masses {
                 inv_mass: &k.inv_mass,
                 inv_inertia: &w.inv_k,
-                alpha_gamma: &k.alpha_gamma_matrix,
-                alpha_omega: &k.alpha_omega_matrix,
+                alpha_gamma: &alpha_gamma,
+                alpha_omega: &alpha_omega,
             };
             Assembled::from_blocks(n, |b| blocks(b, &ss, &bt, &m))
         };
