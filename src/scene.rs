@@ -232,6 +232,10 @@ pub struct StiffSection {
     /// Retake a step of an inextensible rod that does not converge with the material's axial
     /// compliance (default true; `backend_cpu::StiffSettings::axial_fallback`).
     pub axial_fallback: Option<bool>,
+    /// When the banded matrix is refactorised: `"every-step"` (default: once per step, reused
+    /// by the step's later iterations), `"every-iteration"` (Newton) or `"lagged"` (kept
+    /// across steps); `backend_cpu::Refactor`.
+    pub refactor: Option<String>,
 }
 
 impl Default for SolverSection {
@@ -752,6 +756,20 @@ impl Checker<'_> {
                     }
                     if let Some(a) = x.axial_fallback {
                         st.axial_fallback = a;
+                    }
+                    if let Some(r) = &x.refactor {
+                        st.refactor = match r.as_str() {
+                            "every-step" => backend_cpu::Refactor::EveryStep,
+                            "every-iteration" => backend_cpu::Refactor::EveryIteration,
+                            "lagged" => backend_cpu::Refactor::Lagged,
+                            other => {
+                                return Err(self.invalid(
+                                    "solver.stiff.refactor",
+                                    other,
+                                    "expected \"every-step\", \"every-iteration\" or \"lagged\"",
+                                ));
+                            }
+                        };
                     }
                 }
                 Ok(Some(st))

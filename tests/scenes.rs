@@ -94,6 +94,14 @@ fn bad_values_name_file_field_and_value() {
             "free",
         ),
         (
+            GOOD.replace(
+                "steps = 10",
+                "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\nrefactor = \"sometimes\"",
+            ),
+            "solver.stiff.refactor",
+            "sometimes",
+        ),
+        (
             GOOD.to_string() + "[[rod.load]]\npoint = 99\nforce = [0, 0, 1]\n",
             "rod[0].load[0].point",
             "99",

@@ -2,7 +2,7 @@
 //! other in one process: the bench's rod (nitinol, 1 m, 1000 elements, pendulum, dt 1e-3).
 //!
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_profile -- [f32|f64] [STEPS]`;
-//! `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`step`, `lag`) override the stiff settings (default settings otherwise).
+//! `N` (elements, default 1000), `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`step`, `lag`) override the stiff settings (default settings otherwise).
 
 use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings};
 use backend_cpu::{step_rod, step_rod_stiff};
@@ -46,7 +46,7 @@ fn run<T: Real>(steps: u64) {
         Ok("lag") => st.refactor = backend_cpu::Refactor::Lagged,
         _ => {}
     }
-    let n = 1000;
+    let n = env("N").map_or(1000, |v| v as usize);
     let mut times = Vec::new();
     let mut r = rod::<T>(n);
     let s = settings::<T>(1e-7);
