@@ -2,7 +2,7 @@
 //! other in one process: the bench's rod (nitinol, 1 m, 1000 elements, pendulum, dt 1e-3).
 //!
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_profile -- [f32|f64] [STEPS]`;
-//! `N` (elements, default 1000), `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`step`, `lag`) override the stiff settings (default settings otherwise).
+//! `N` (elements, default 1000), `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`newton`, `step`, `lag`) override the stiff settings (default settings otherwise).
 
 use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings};
 use backend_cpu::{step_rod, step_rod_stiff};
@@ -44,6 +44,7 @@ fn run<T: Real>(steps: u64) {
     match std::env::var("REFACTOR").as_deref() {
         Ok("step") => st.refactor = backend_cpu::Refactor::EveryStep,
         Ok("lag") => st.refactor = backend_cpu::Refactor::Lagged,
+        Ok("newton") => st.refactor = backend_cpu::Refactor::EveryIteration,
         _ => {}
     }
     let n = env("N").map_or(1000, |v| v as usize);

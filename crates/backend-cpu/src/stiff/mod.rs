@@ -130,9 +130,11 @@ pub struct StiffSettings {
     /// XPBD approximates the Hessian `M − Σ λ ∇²C` by `M`; for a thin rod's frames the
     /// geometric part (tension through stretch–shear, moments through bend–twist) exceeds the
     /// inertia by orders of magnitude, and the iteration then over-rotates them. `σ` bounds
-    /// that part per frame from the multipliers (the previous step's on the first iteration);
-    /// it steers the iteration only, the converged step does not depend on it. Measured in
-    /// `docs/stiff-solver.md`: half the iterations for the same tolerance.
+    /// that part per frame from the multipliers (the previous step's on the first iteration).
+    /// It steers the points' iteration only; for the frames it also acts as an added
+    /// rotational inertia of order `h²` (`σ ∝ λ ∝ h²`), a consistent perturbation of the step.
+    /// Measured in `docs/stiff-solver.md` (item 6): half the iterations for the same
+    /// tolerance, and the step's dependence on `σ`.
     pub geometric: f64,
     /// How many times a step that diverges may be split in two halves (recursively) before
     /// the divergence is reported; 0 reports it at once. A rod released far from its rest

@@ -250,11 +250,14 @@ impl Work {
     /// `Δx = u + K⁻¹ Jᵀ Δλ`,
     ///
     /// with `K = M` for points and `K_θ = I + σ` for frames ([`precondition`](Self::precondition)).
-    /// `K` only steers the iteration: its fixed point `g = 0`, `C + α̃ λ = 0` does not depend
-    /// on it. Keeping `g` (which the simplified XPBD update drops) makes that fixed point the
-    /// exact implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting guess, so the
-    /// iteration can start from the positions the velocities alone would reach and loads need
-    /// not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
+    /// For the points `K` only steers the iteration: its fixed point `g = 0`, `C + α̃ λ = 0`
+    /// does not depend on it. For the frames, `u_θ = (θ̃ − θ) + K_θ⁻¹ J_θᵀ λ` (rather than
+    /// `K_θ⁻¹ (I (θ̃ − θ) + J_θᵀ λ)`) converges to `(I + σ)(θ − θ̃) = J_θᵀ λ`: `σ` adds a
+    /// rotational inertia of order `h²` (`docs/stiff-solver.md`, item 6, says why the exact
+    /// balance was not kept). Keeping `g` (which the simplified XPBD update drops) makes the
+    /// fixed point the implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting
+    /// guess, so the iteration can start from the positions the velocities alone would reach
+    /// and loads need not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
     /// from `q̃` to `q` in the first-order map of [`apply_rotation`](super::apply_rotation).
     ///
     /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
