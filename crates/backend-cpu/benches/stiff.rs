@@ -67,13 +67,6 @@ fn bench_precision<T: Real>(c: &mut Criterion, name: &str) {
             },
         ),
         (
-            "stiff_every_step",
-            StiffSettings {
-                refactor: Refactor::EveryStep,
-                ..StiffSettings::default()
-            },
-        ),
-        (
             "stiff_lagged",
             StiffSettings {
                 refactor: Refactor::Lagged,
