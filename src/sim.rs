@@ -698,12 +698,17 @@ impl<T: Real> Rods<T> {
     /// Steps every rod `n` times on the CPU; returns the largest strain seen.
     fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
         if let Some((st, scratch)) = self.stiff.as_mut() {
-            self.stats.clear();
-            for (i, (rod, sc)) in self.rods.iter_mut().zip(scratch.iter_mut()).enumerate() {
-                let stats =
-                    backend_cpu::step_rod_stiff(rod, &self.settings, st, sc, time, i, step, n)?;
-                self.stats.push(stats);
-            }
+            backend_cpu::step_rods_stiff(
+                &mut self.rods,
+                scratch,
+                &self.settings,
+                st,
+                time,
+                step,
+                n,
+                par,
+                &mut self.stats,
+            )?;
             return Ok(self
                 .stats
                 .iter()

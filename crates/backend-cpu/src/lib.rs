@@ -36,4 +36,7 @@ pub use stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
     step_rod_batch, step_rods, step_rods_batch,
 };
-pub use stiff::{Refactor, StiffReport, StiffScheme, StiffScratch, StiffSettings, step_rod_stiff};
+pub use stiff::{
+    Refactor, StiffReport, StiffScheme, StiffScratch, StiffSettings, step_rod_stiff,
+    step_rods_stiff,
+};

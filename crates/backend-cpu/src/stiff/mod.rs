@@ -60,7 +60,7 @@ mod work;
 mod xpbd;
 
 use crate::ends::EndKind;
-use crate::stepper::{CpuRod, DivergedQuantity, Divergence, SolverSettings, StepStats};
+use crate::stepper::{CpuRod, DivergedQuantity, Divergence, Par, SolverSettings, StepStats};
 use cosserat_model::quat::exp_rotation;
 use cosserat_model::{Quat, Real, Vec3};
 use direct::{Assembled, BlockTridiagonal};
@@ -530,6 +530,54 @@ pub fn step_rod_stiff<T: Real>(
         steps,
     };
     step_with_retries(rod, settings, stiff, scratch, window)
+}
+
+/// Advances every rod by `steps` steps with the stiff scheme, each with its own scratch
+/// (`scratches[i]` belongs to `rods[i]`), serially or spread over rayon's thread pool; the
+/// rods do not interact, so both give the same states bit for bit. Fills `stats` with one
+/// entry per rod. On divergence, returns that of the rod with the lowest index (with
+/// [`Par::Rayon`] the other rods have still taken their steps).
+///
+/// # Panics
+/// If `scratches` and `rods` differ in length.
+pub fn step_rods_stiff<T: Real>(
+    rods: &mut [CpuRod<T>],
+    scratches: &mut [StiffScratch],
+    settings: &SolverSettings<T>,
+    stiff: &StiffSettings,
+    time: f64,
+    first_step: u64,
+    steps: u64,
+    par: Par,
+    stats: &mut Vec<StepStats>,
+) -> Result<(), Divergence> {
+    assert_eq!(rods.len(), scratches.len(), "one stiff scratch per rod");
+    stats.clear();
+    match par {
+        #[cfg(feature = "rayon")]
+        Par::Rayon => {
+            use rayon::prelude::*;
+            let results: Vec<_> = rods
+                .par_iter_mut()
+                .zip(scratches.par_iter_mut())
+                .enumerate()
+                .map(|(i, (rod, sc))| {
+                    step_rod_stiff(rod, settings, stiff, sc, time, i, first_step, steps)
+                })
+                .collect();
+            for r in results {
+                stats.push(r?);
+            }
+        }
+        _ => {
+            for (i, (rod, sc)) in rods.iter_mut().zip(scratches.iter_mut()).enumerate() {
+                stats.push(step_rod_stiff(
+                    rod, settings, stiff, sc, time, i, first_step, steps,
+                )?);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The steps of a call to [`step_rod_stiff`]: from `time`, step indices `first_step…` (which
