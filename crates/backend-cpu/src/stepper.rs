@@ -735,23 +735,37 @@ pub fn step_rods_batch<T: Real>(
     par: Par,
     stats: &mut Vec<StepStats>,
 ) -> Result<(), Divergence> {
+    step_each(rods, par, stats, |i, rod| {
+        step_rod_batch(rod, settings, time, i, step, steps)
+    })
+}
+
+/// Calls `step(i, &mut items[i])` for every item, serially or spread over rayon's pool, and
+/// collects the statistics in item order. Serially it stops at the first divergence; on the
+/// pool every item is stepped and the divergence of the lowest index is returned.
+pub(crate) fn step_each<I: Send>(
+    items: &mut [I],
+    par: Par,
+    stats: &mut Vec<StepStats>,
+    step: impl Fn(usize, &mut I) -> Result<StepStats, Divergence> + Sync,
+) -> Result<(), Divergence> {
     stats.clear();
     match par {
         #[cfg(feature = "rayon")]
         Par::Rayon => {
             use rayon::prelude::*;
-            let results: Vec<_> = rods
+            let results: Vec<_> = items
                 .par_iter_mut()
                 .enumerate()
-                .map(|(i, rod)| step_rod_batch(rod, settings, time, i, step, steps))
+                .map(|(i, item)| step(i, item))
                 .collect();
             for r in results {
                 stats.push(r?);
             }
         }
         _ => {
-            for (i, rod) in rods.iter_mut().enumerate() {
-                stats.push(step_rod_batch(rod, settings, time, i, step, steps)?);
+            for (i, item) in items.iter_mut().enumerate() {
+                stats.push(step(i, item)?);
             }
         }
     }

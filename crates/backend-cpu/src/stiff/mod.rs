@@ -60,7 +60,9 @@ mod work;
 mod xpbd;
 
 use crate::ends::EndKind;
-use crate::stepper::{CpuRod, DivergedQuantity, Divergence, Par, SolverSettings, StepStats};
+use crate::stepper::{
+    CpuRod, DivergedQuantity, Divergence, Par, SolverSettings, StepStats, step_each,
+};
 use cosserat_model::quat::exp_rotation;
 use cosserat_model::{Quat, Real, Vec3};
 use direct::{Assembled, BlockTridiagonal};
@@ -552,32 +554,10 @@ pub fn step_rods_stiff<T: Real>(
     stats: &mut Vec<StepStats>,
 ) -> Result<(), Divergence> {
     assert_eq!(rods.len(), scratches.len(), "one stiff scratch per rod");
-    stats.clear();
-    match par {
-        #[cfg(feature = "rayon")]
-        Par::Rayon => {
-            use rayon::prelude::*;
-            let results: Vec<_> = rods
-                .par_iter_mut()
-                .zip(scratches.par_iter_mut())
-                .enumerate()
-                .map(|(i, (rod, sc))| {
-                    step_rod_stiff(rod, settings, stiff, sc, time, i, first_step, steps)
-                })
-                .collect();
-            for r in results {
-                stats.push(r?);
-            }
-        }
-        _ => {
-            for (i, (rod, sc)) in rods.iter_mut().zip(scratches.iter_mut()).enumerate() {
-                stats.push(step_rod_stiff(
-                    rod, settings, stiff, sc, time, i, first_step, steps,
-                )?);
-            }
-        }
-    }
-    Ok(())
+    let mut pairs: Vec<_> = rods.iter_mut().zip(scratches.iter_mut()).collect();
+    step_each(&mut pairs, par, stats, |i, (rod, sc)| {
+        step_rod_stiff(rod, settings, stiff, sc, time, i, first_step, steps)
+    })
 }
 
 /// The steps of a call to [`step_rod_stiff`]: from `time`, step indices `first_step…` (which
