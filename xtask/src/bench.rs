@@ -8,6 +8,11 @@
 //! step against insertion depth) and the free-space benchmark (`benches/free_space.rs`, the
 //! step with and without the collision code in play) into `docs/benchmarks/insertion.md`.
 //!
+//! `--stiff` runs the stiff-vs-explicit bench (`crates/backend-cpu/benches/stiff.rs`) and
+//! writes `docs/benchmarks/stiff-target.md`: each stiff variant's median against the explicit
+//! step of the same run, beside the accuracy it reached, and whether the default meets the
+//! target of at most 2× (the exit status says so too).
+//!
 //! The GPU part builds and runs the GPU backend's benchmark example on whatever adapter this
 //! machine has and writes `docs/benchmarks/gpu-local.json`; the committed H100/H200 tables in
 //! `docs/benchmarks/gpu.md` come from the same program run on the device machine.
@@ -302,4 +307,109 @@ pub(crate) fn gpu(quick: bool) -> Result<bool, String> {
         out.display()
     );
     Ok(true)
+}
+
+/// The stiff scheme's variants in `crates/backend-cpu/benches/stiff.rs`, with what they are.
+const STIFF_VARIANTS: [(&str, &str); 4] = [
+    ("stiff", "default (one factorisation per step)"),
+    (
+        "stiff_every_iteration",
+        "Newton (a factorisation per iteration)",
+    ),
+    ("stiff_lagged", "factorisation kept across steps"),
+    (
+        "stiff_1_iteration",
+        "exactly one iteration, no convergence test",
+    ),
+];
+
+/// The issue's speed target: a stiff step at most this many explicit steps.
+const STIFF_TARGET: f64 = 2.0;
+
+/// `cargo xtask bench --stiff`: runs the stiff-vs-explicit criterion bench (1000 elements,
+/// f32 and f64), reads its medians and the accuracy line each variant prints, and writes
+/// `docs/benchmarks/stiff-target.md` with each variant's ratio to the explicit step of the
+/// same run against the target. Returns whether the default variant meets the target in both
+/// precisions.
+pub(crate) fn stiff() -> Result<bool, String> {
+    println!("running the stiff bench (crates/backend-cpu/benches/stiff.rs)…");
+    let conditions = conditions();
+    let out = cargo(&[
+        "bench",
+        "-p",
+        "cosserat-backend-cpu",
+        "--bench",
+        "stiff",
+        "--",
+        "--noplot",
+    ])?;
+    let mut md = String::new();
+    let _ = writeln!(md, "# Stiff step against explicit step: the speed target\n");
+    let _ = writeln!(
+        md,
+        "Machine: {}; {conditions}. Command: `cargo xtask bench --stiff` (criterion, `crates/backend-cpu/benches/stiff.rs`; medians).\n",
+        machine()
+    );
+    let _ = writeln!(
+        md,
+        "A 1 m nitinol guidewire of 1000 elements swinging as a pendulum: the explicit scheme at dt 1e-7 s (its stable range), the stiff scheme at 1e-3 s over the first 3 s of the swing, replayed. \
+Accuracy columns: the largest strain `| |e|/l0 − 1 |` and the largest residual over the bench's steps, and the steps that ended above the tolerance (1e-5 in f64; in f32 the strain the positions resolve). \
+Target: a stiff step within {STIFF_TARGET}× the explicit step of the same run.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| precision | variant | median [µs] | / explicit | iterations / factorisations per step | max strain | max residual | steps above the tolerance |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    let mut met = true;
+    for prec in ["f32", "f64"] {
+        let group = format!("stiff_vs_explicit_{prec}");
+        let explicit = median_us(&group, "explicit", "1000")
+            .ok_or_else(|| format!("no criterion estimate for {group}/explicit"))?;
+        let _ = writeln!(md, "| {prec} | explicit | {explicit:.1} | 1 | | | | |");
+        for (id, what) in STIFF_VARIANTS {
+            let t = median_us(&group, id, "1000")
+                .ok_or_else(|| format!("no criterion estimate for {group}/{id}"))?;
+            let ratio = t / explicit;
+            if id == "stiff" && ratio > STIFF_TARGET {
+                met = false;
+            }
+            // "<id> <prec>: 1.26 iterations and 1.00 factorisations per step over N steps;
+            // max strain S, max residual R, U steps above the tolerance"
+            let prefix = format!("{id} {prec}: ");
+            let line = out
+                .lines()
+                .filter_map(|l| l.strip_prefix(&prefix))
+                .next_back()
+                .ok_or_else(|| format!("the bench printed no line for {id} {prec}"))?;
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let word_after = |key: &str| {
+                words
+                    .iter()
+                    .position(|w| *w == key)
+                    .and_then(|i| words.get(i + 1))
+                    .map(|w| w.trim_end_matches([',', ';']))
+                    .unwrap_or("?")
+            };
+            let (iterations, factorisations) = (words[0], words[3]);
+            let above = words.iter().rev().nth(4).copied().unwrap_or("?");
+            let _ = writeln!(
+                md,
+                "| {prec} | {id}: {what} | {t:.1} | {ratio:.2} | {iterations} / {factorisations} | {} | {} | {above} |",
+                word_after("strain"),
+                word_after("residual"),
+            );
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nTarget (default variant within {STIFF_TARGET}× the explicit step in f32 and f64): **{}**.",
+        if met { "met" } else { "not met" }
+    );
+    let docs = root().join("docs/benchmarks");
+    std::fs::create_dir_all(&docs).map_err(|e| e.to_string())?;
+    std::fs::write(docs.join("stiff-target.md"), &md)
+        .map_err(|e| format!("docs/benchmarks/stiff-target.md: {e}"))?;
+    print!("{md}");
+    Ok(met)
 }

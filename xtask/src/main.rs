@@ -93,7 +93,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --gpu [--quick]]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --gpu [--quick]]".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -107,11 +107,13 @@ fn run() -> Result<bool, String> {
             validate::run(args.option("only"))
         }
         "bench" => {
-            args.reject_unknown(&["pareto", "insertion", "gpu", "quick"])?;
+            args.reject_unknown(&["pareto", "insertion", "stiff", "gpu", "quick"])?;
             if args.flag("pareto") {
                 pareto::run()
             } else if args.flag("insertion") {
                 bench::insertion_only()
+            } else if args.flag("stiff") {
+                bench::stiff()
             } else if args.flag("gpu") {
                 bench::gpu(args.flag("quick"))
             } else {
