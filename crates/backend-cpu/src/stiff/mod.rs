@@ -83,14 +83,16 @@ pub enum StiffScheme {
 
 /// When the direct solver refactorises `J K⁻¹ Jᵀ + α̃`. With every policy, an iteration that
 /// reduced the residual by less than a factor of 4 refactorises with the current multipliers
-/// (a Newton iteration), so reusing a factorisation never costs more than one iteration.
+/// (a Newton iteration), so a factorisation that no longer fits is given up after one poor
+/// iteration.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Refactor {
     /// At every iteration: Newton's method, as Deul et al. do.
     EveryIteration,
     /// At the first iteration of every step, reused by the later ones (a chord method); the
     /// default. On the bench's swinging nitinol pendulum it needed 1.26 iterations per step
-    /// against Newton's 1.54 and took 22 % less time (`docs/benchmarks/stiff.md`).
+    /// against Newton's 1.54 and took 22–26 % less time in three runs
+    /// (`docs/benchmarks/stiff.md`).
     #[default]
     EveryStep,
     /// Kept across steps and rebuilt only when an iteration fails to reduce the residual by a
