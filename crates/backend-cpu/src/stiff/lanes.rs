@@ -12,7 +12,7 @@
 //! may load `j + 1` of the last chunk; the padding holds benign values (zero vectors, identity
 //! rotations) that keep the extra lanes finite, and every reduction masks them out.
 
-use cosserat_model::{Quat, Vec3};
+use cosserat_model::{Quat, Real, Vec3};
 use wide::f64x4;
 
 /// Four lanes of `f64`.
@@ -295,6 +295,22 @@ impl V3s {
         self.y.copy_from_slice(&o.y);
         self.z.copy_from_slice(&o.z);
     }
+    /// The first `out.len()` entries, rounded to `T`, into `out` (one pass without bounds
+    /// checks, which the compiler vectorises).
+    pub(crate) fn write_to<T: Real>(&self, out: &mut [Vec3<T>]) {
+        let columns = self.x.iter().zip(&self.y).zip(&self.z);
+        for (o, ((x, y), z)) in out.iter_mut().zip(columns) {
+            *o = Vec3::new(T::lit(*x), T::lit(*y), T::lit(*z));
+        }
+    }
+    /// Whether `v` holds exactly the first `v.len()` entries rounded to `T`.
+    pub(crate) fn rounds_to<T: Real>(&self, v: &[Vec3<T>]) -> bool {
+        let columns = self.x.iter().zip(&self.y).zip(&self.z);
+        v.len() <= self.x.len()
+            && v.iter().zip(columns).fold(true, |same, (a, ((x, y), z))| {
+                same & (T::lit(*x) == a.x) & (T::lit(*y) == a.y) & (T::lit(*z) == a.z)
+            })
+    }
 }
 
 /// A column of quaternions, padded with identities.
@@ -336,6 +352,26 @@ impl Q4s {
     pub(crate) fn copy_from(&mut self, o: &Q4s) {
         self.w.copy_from_slice(&o.w);
         self.v.copy_from(&o.v);
+    }
+    /// As [`V3s::write_to`].
+    pub(crate) fn write_to<T: Real>(&self, out: &mut [Quat<T>]) {
+        let columns = self.w.iter().zip(&self.v.x).zip(&self.v.y).zip(&self.v.z);
+        for (o, (((w, x), y), z)) in out.iter_mut().zip(columns) {
+            *o = Quat::new(T::lit(*w), T::lit(*x), T::lit(*y), T::lit(*z));
+        }
+    }
+    /// As [`V3s::rounds_to`].
+    pub(crate) fn rounds_to<T: Real>(&self, q: &[Quat<T>]) -> bool {
+        let columns = self.w.iter().zip(&self.v.x).zip(&self.v.y).zip(&self.v.z);
+        q.len() <= self.w.len()
+            && q.iter()
+                .zip(columns)
+                .fold(true, |same, (a, (((w, x), y), z))| {
+                    same & (T::lit(*w) == a.w)
+                        & (T::lit(*x) == a.i)
+                        & (T::lit(*y) == a.j)
+                        & (T::lit(*z) == a.k)
+                })
     }
 }
 

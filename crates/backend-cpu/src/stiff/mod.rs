@@ -347,26 +347,15 @@ fn v64<T: Real>(v: &Vec3<T>) -> Vec3<f64> {
     Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64())
 }
 
-fn vt<T: Real>(v: &Vec3<f64>) -> Vec3<T> {
-    Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z))
-}
-
-fn qt<T: Real>(q: &Quat<f64>) -> Quat<T> {
-    Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k))
-}
-
 /// Whether the rod's state is exactly the rounding of the scratch's `f64` state.
 fn shadow_matches<T: Real>(rod: &CpuRod<T>, w: &Work) -> bool {
     let s = &rod.state;
     s.frames.len() == w.n
         && s.positions.len() == w.n + 1
-        && (0..=w.n).all(|i| {
-            vt::<T>(&w.x.get(i)) == s.positions[i] && vt::<T>(&w.v.get(i)) == s.velocities[i]
-        })
-        && (0..w.n).all(|j| {
-            qt::<T>(&w.q.get(j)) == s.frames[j]
-                && vt::<T>(&w.omega.get(j)) == s.angular_velocities[j]
-        })
+        && w.x.rounds_to(&s.positions)
+        && w.v.rounds_to(&s.velocities)
+        && w.q.rounds_to(&s.frames)
+        && w.omega.rounds_to(&s.angular_velocities)
 }
 
 impl Consts {
@@ -782,14 +771,10 @@ fn step_fixed<T: Real>(
         w.shadow = false;
         return result.map(|()| stats);
     }
-    for i in 0..=n {
-        rod.state.positions[i] = vt(&w.x.get(i));
-        rod.state.velocities[i] = vt(&w.v.get(i));
-    }
-    for j in 0..n {
-        rod.state.frames[j] = qt(&w.q.get(j));
-        rod.state.angular_velocities[j] = vt(&w.omega.get(j));
-    }
+    w.x.write_to(&mut rod.state.positions);
+    w.v.write_to(&mut rod.state.velocities);
+    w.q.write_to(&mut rod.state.frames);
+    w.omega.write_to(&mut rod.state.angular_velocities);
     w.shadow = true;
     result.map(|()| stats)
 }
