@@ -59,6 +59,10 @@ struct RunArgs {
     /// Override a scene value: KEY=VALUE with a dotted key, e.g. solver.dt=1e-5 or rod.0.elements=1000.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
+    /// Time every step on its own, as a haptic or real-time loop calls it, and report the
+    /// median, 99th percentile and largest step time.
+    #[arg(long)]
+    step_times: bool,
 }
 
 fn main() -> ExitCode {
@@ -92,13 +96,32 @@ struct RunOutcome {
     steps: u64,
     wall_s: f64,
     divergence: Option<String>,
+    /// With `--step-times`: the wall time of each step, in seconds.
+    step_times: Option<Vec<f64>>,
 }
 
+/// The first step's time, then the median, 99th percentile and largest of the later steps'
+/// times (nearest-rank percentiles), in µs. The first step is apart: it also builds what the
+/// solver keeps between steps.
+fn step_time_summary(times: &[f64]) -> Option<[f64; 4]> {
+    let (first, rest) = times.split_first()?;
+    let mut t: Vec<f64> = rest.iter().map(|s| s * 1e6).collect();
+    if t.is_empty() {
+        return Some([first * 1e6, f64::NAN, f64::NAN, f64::NAN]);
+    }
+    t.sort_by(f64::total_cmp);
+    let rank = |q: f64| t[((q * t.len() as f64).ceil() as usize).clamp(1, t.len()) - 1];
+    Some([first * 1e6, rank(0.5), rank(0.99), t[t.len() - 1]])
+}
+
+/// Steps `sim` by `steps` steps, in batches (or one at a time with `time_each`), recording
+/// frames with `record`.
 fn step_for(
     sim: &mut Simulation,
     steps: u64,
     record: &mut Option<Recorder>,
     show_progress: bool,
+    time_each: bool,
 ) -> RunOutcome {
     let bar = (show_progress && steps >= 20_000).then(|| {
         let b = indicatif::ProgressBar::new(steps);
@@ -119,17 +142,29 @@ fn step_for(
         }
     };
     capture(sim, record);
+    let mut times = Vec::new();
     while done < steps {
-        let n = chunk.min(steps - done);
+        let n = if time_each {
+            1
+        } else {
+            chunk.min(steps - done)
+        };
         let t0 = Instant::now();
         let res = sim.run(n);
-        wall += t0.elapsed().as_secs_f64();
+        let elapsed = t0.elapsed().as_secs_f64();
+        wall += elapsed;
         match res {
             Ok(()) => done += n,
             Err(e) => {
                 done = sim.steps();
                 divergence = Some(e.to_string());
                 break;
+            }
+        }
+        if time_each {
+            times.push(elapsed);
+            if done % chunk != 0 && done != steps {
+                continue;
             }
         }
         capture(sim, record);
@@ -144,6 +179,7 @@ fn step_for(
         steps: done,
         wall_s: wall,
         divergence,
+        step_times: time_each.then_some(times),
     }
 }
 
@@ -221,7 +257,7 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
         .as_ref()
         .map(|_| Recorder::new(&sim, steps, args.frames))
         .transpose()?;
-    let outcome = step_for(&mut sim, steps, &mut recorder, !args.json);
+    let outcome = step_for(&mut sim, steps, &mut recorder, !args.json, args.step_times);
     if let (Some(dir), Some(rec)) = (&args.out, &recorder) {
         write_output(dir, rec)?;
     }
@@ -290,6 +326,11 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "warnings": sim.warnings(),
         });
         let mut v = v;
+        if let Some([first, median, p99, max]) = o.step_times.as_deref().and_then(step_time_summary)
+        {
+            v["step_us"] =
+                serde_json::json!({"first": first, "median": median, "p99": p99, "max": max});
+        }
         if let Some(c) = sim.contact_report() {
             v["triangles"] = serde_json::json!(sim.environment().map_or(0, |e| e.triangles()));
             v["max_penetration"] = serde_json::json!(c.max_penetration);
@@ -344,6 +385,12 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             us_per_step,
             sim.time() / o.wall_s.max(1e-12)
         );
+        if let Some([first, median, p99, max]) = o.step_times.as_deref().and_then(step_time_summary)
+        {
+            println!(
+                "step time  median {median:.2} µs, 99th percentile {p99:.2} µs, largest {max:.2} µs after the first ({first:.2} µs; each step timed on its own)"
+            );
+        }
         println!(
             "accuracy   max strain |l/l0 - 1| = {:.3e}",
             sim.max_strain()
@@ -387,7 +434,7 @@ fn demo() -> Result<ExitCode, String> {
         "Try `cosserat run scenes/pendulum.toml --elements 1000 --json` or `cosserat --help`.\n"
     );
     let mut sim = builder.build().map_err(|e| e.to_string())?;
-    let outcome = step_for(&mut sim, length.steps, &mut None, true);
+    let outcome = step_for(&mut sim, length.steps, &mut None, true, false);
     report(&sim, &name, &outcome, false);
     Ok(if outcome.divergence.is_some() {
         ExitCode::from(1)

@@ -85,6 +85,29 @@ fn stiff_runs_report_their_convergence() {
     assert_eq!(st["axial_steps"], 0, "{st}");
 }
 
+/// `--step-times` times every step on its own, as a haptic loop calls it, and reports the
+/// first step apart from the median, 99th percentile and largest of the others.
+#[test]
+fn step_times_report_percentiles() {
+    let args = [
+        "run",
+        "scenes/nitinol-pendulum.toml",
+        "--elements",
+        "50",
+        "--steps",
+        "300",
+        "--json",
+    ];
+    assert!(run_json(&args).get("step_us").is_none());
+    let v = run_json(&[&args[..], &["--step-times"]].concat());
+    let t = &v["step_us"];
+    let get = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("`{k}` in {t}"));
+    let (first, median, p99, max) = (get("first"), get("median"), get("p99"), get("max"));
+    assert!(first > 0.0 && median > 0.0, "{t}");
+    assert!(median <= p99 && p99 <= max, "{t}");
+    assert_eq!(v["steps"], 300);
+}
+
 #[test]
 fn a_diverging_run_says_where_and_exits_nonzero() {
     let out = cosserat()
