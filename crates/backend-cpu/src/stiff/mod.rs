@@ -728,10 +728,9 @@ fn step_fixed<T: Real>(
             report.axial_steps += 1;
         }
         // The multipliers of the accepted step start the next one's geometric bound (a
-        // retaken step starts from the same ones as its first try).
-        for (p, l) in w.lambda_prev.iter_mut().zip(&w.lambda) {
-            p.copy_from(l);
-        }
+        // retaken step starts from the same ones as its first try); the next step sets `lambda`
+        // to zero before reading it.
+        std::mem::swap(&mut w.lambda_prev, &mut w.lambda);
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
             report.unconverged_steps += 1;
         }

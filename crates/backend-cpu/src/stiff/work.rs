@@ -269,9 +269,9 @@ impl Work {
         for i in chunks(n + 1) {
             self.u_x.store(i, self.x_pred.load(i) - self.x.load(i));
         }
-        if self.lambda_zero {
-            self.dtheta.fill_zero();
-        } else {
+        // With λ = 0, `Jᵀ λ` is zero: `dtheta` is not read below (nor computed).
+        let lambda_zero = self.lambda_zero;
+        if !lambda_zero {
             let lambda = std::mem::take(&mut self.lambda);
             self.add_jt(k, &lambda);
             self.lambda = lambda;
@@ -286,13 +286,19 @@ impl Work {
             let norm_err = (s.w.mul_add(s.w, x2) - F::ONE).abs();
             let off = x2.simd_lt(F::splat(1e-4)) & norm_err.simd_lt(F::splat(1e-12));
             let to_target = s.v.scale(F::splat(2.0) * series);
-            let u = to_target + self.dtheta.load(j).mul(self.inv_k.load(j));
+            let u = if lambda_zero {
+                to_target
+            } else {
+                to_target + self.dtheta.load(j).mul(self.inv_k.load(j))
+            };
             self.u_th.store(j, u);
             // Lanes outside the series: 1/s_w exactly, as `inv_w`.
             for_lanes(!off.to_bitmask(), j, n, |e| {
                 let s = self.q.get(e).conjugate() * self.q_pred.get(e);
-                let u = s.imag() * (2.0 * inv_w(&s))
-                    + self.dtheta.get(e).component_mul(&self.inv_k.get(e));
+                let mut u = s.imag() * (2.0 * inv_w(&s));
+                if !lambda_zero {
+                    u += self.dtheta.get(e).component_mul(&self.inv_k.get(e));
+                }
                 self.u_th.set(e, &u);
             });
         }
