@@ -257,8 +257,9 @@ impl Work {
     /// balance was not kept). Keeping `g` (which the simplified XPBD update drops) makes the
     /// fixed point the implicit-Euler step `M (x − x̃) = J(x)ᵀ λ` whatever the starting
     /// guess, so the iteration can start from the positions the velocities alone would reach
-    /// and loads need not be folded into a far-away first guess. For frames, `x − x̃` is the body rotation
-    /// from `q̃` to `q` in the first-order map of [`apply_rotation`](super::apply_rotation).
+    /// and loads need not be folded into a far-away first guess. For frames, `x − x̃` is the
+    /// body rotation from `q̃` to `q` in the first-order map of
+    /// [`apply_rotation`](super::apply_rotation).
     ///
     /// Stores the right-hand side in `rhs` and returns the largest of `|C + α̃ λ|` and `|J u|`
     /// (strains, and bend–twist as angles `l̄ |ΔΩ|`).
