@@ -137,11 +137,13 @@ fn a_diverging_run_says_where_and_exits_nonzero() {
     );
 }
 
+/// `--out` writes the frames asked for, also when `--step-times` steps one step at a time.
 #[test]
 fn out_writes_the_trajectory() {
-    let dir = std::env::temp_dir().join(format!("cosserat-cli-{}", std::process::id()));
-    let out = cosserat()
-        .args([
+    for (tag, extra) in [("batched", &[][..]), ("timed", &["--step-times"][..])] {
+        let dir = std::env::temp_dir().join(format!("cosserat-cli-{}-{tag}", std::process::id()));
+        let path = dir.to_str().expect("a UTF-8 temporary folder");
+        let args = [
             "run",
             "scenes/pendulum.toml",
             "--elements",
@@ -152,25 +154,23 @@ fn out_writes_the_trajectory() {
             "5",
             "--json",
             "--out",
-        ])
-        .arg(&dir)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    for f in [
-        "trajectory.npz",
-        "trajectory.pvd",
-        "frame_00000.vtp",
-        "frame_00005.vtp",
-    ] {
-        assert!(dir.join(f).is_file(), "missing {f}");
+            path,
+        ];
+        run_json(&[&args[..], extra].concat());
+        for f in [
+            "trajectory.npz",
+            "trajectory.pvd",
+            "frame_00000.vtp",
+            "frame_00005.vtp",
+        ] {
+            assert!(dir.join(f).is_file(), "{tag}: missing {f}");
+        }
+        assert!(
+            !dir.join("frame_00006.vtp").exists(),
+            "{tag}: a frame too many"
+        );
+        std::fs::remove_dir_all(&dir).ok();
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
