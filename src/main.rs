@@ -96,8 +96,8 @@ struct RunOutcome {
     steps: u64,
     wall_s: f64,
     divergence: Option<String>,
-    /// With `--step-times`: the wall time of each step, in seconds.
-    step_times: Option<Vec<f64>>,
+    /// With `--step-times`: [`step_time_summary`] of the steps' wall times.
+    step_times: Option<[f64; 4]>,
 }
 
 /// The first step's time, then the median, 99th percentile and largest of the later steps'
@@ -179,7 +179,7 @@ fn step_for(
         steps: done,
         wall_s: wall,
         divergence,
-        step_times: time_each.then_some(times),
+        step_times: step_time_summary(&times),
     }
 }
 
@@ -326,8 +326,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "warnings": sim.warnings(),
         });
         let mut v = v;
-        if let Some([first, median, p99, max]) = o.step_times.as_deref().and_then(step_time_summary)
-        {
+        if let Some([first, median, p99, max]) = o.step_times {
             v["step_us"] =
                 serde_json::json!({"first": first, "median": median, "p99": p99, "max": max});
         }
@@ -343,7 +342,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         }
         if let Some(st) = sim.stiff_summary() {
             v["stiff"] = serde_json::json!({
-                "iterations_per_step": st.iterations as f64 / st.rod_steps.max(1) as f64,
+                "iterations_per_step": st.iterations_per_step(),
                 "unconverged_steps": st.unconverged_steps,
                 "axial_steps": st.axial_steps,
                 "max_residual": st.max_residual,
@@ -385,8 +384,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             us_per_step,
             sim.time() / o.wall_s.max(1e-12)
         );
-        if let Some([first, median, p99, max]) = o.step_times.as_deref().and_then(step_time_summary)
-        {
+        if let Some([first, median, p99, max]) = o.step_times {
             println!(
                 "step time  median {median:.2} µs, 99th percentile {p99:.2} µs, largest {max:.2} µs after the first ({first:.2} µs; each step timed on its own)"
             );
@@ -410,7 +408,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         if let Some(st) = sim.stiff_summary() {
             println!(
                 "stiff      {:.2} iterations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken with axial compliance",
-                st.iterations as f64 / st.rod_steps.max(1) as f64,
+                st.iterations_per_step(),
                 st.unconverged_steps,
                 st.rod_steps,
                 st.max_tolerance,

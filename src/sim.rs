@@ -915,6 +915,13 @@ pub struct StiffSummary {
     pub max_tolerance: f64,
 }
 
+impl StiffSummary {
+    /// Newton iterations per rod-step (0 before the first step).
+    pub fn iterations_per_step(&self) -> f64 {
+        self.iterations as f64 / self.rod_steps.max(1) as f64
+    }
+}
+
 impl Simulation {
     /// Advances every rod by one time step.
     pub fn step(&mut self) -> Result<(), StepError> {

@@ -470,14 +470,12 @@ impl Consts {
             *f = if w.x == 0.0 { 0.0 } else { 1.0 };
         }
         let inv = |v: &[f64]| v.iter().map(|l| 1.0 / l).collect::<Vec<_>>();
+        let inv_l0 = inv(&self.l0);
+        let inv_l0_sq: Vec<f64> = inv_l0.iter().map(|i| i * i).collect();
         self.cols = ConstCols {
             inv_mass: column(&self.inv_mass, n + 1, 0.0),
-            inv_l0: column(&inv(&self.l0), n, 1.0),
-            inv_l0_sq: column(
-                &inv(&self.l0).iter().map(|i| i * i).collect::<Vec<_>>(),
-                n,
-                1.0,
-            ),
+            inv_l0: column(&inv_l0, n, 1.0),
+            inv_l0_sq: column(&inv_l0_sq, n, 1.0),
             // Per node: the last element's lane is padding.
             lbar: column(&self.lbar, n, 0.0),
             inv_lbar: column(&inv(&self.lbar), n, 1.0),
@@ -545,10 +543,21 @@ pub fn step_rods_stiff<T: Real>(
     stats: &mut Vec<StepStats>,
 ) -> Result<(), Divergence> {
     assert_eq!(rods.len(), scratches.len(), "one stiff scratch per rod");
-    let mut pairs: Vec<_> = rods.iter_mut().zip(scratches.iter_mut()).collect();
-    step_each(&mut pairs, par, stats, |i, (rod, sc)| {
-        step_rod_stiff(rod, settings, stiff, sc, time, i, first_step, steps)
-    })
+    if cfg!(feature = "rayon") && par == Par::Rayon {
+        let mut pairs: Vec<_> = rods.iter_mut().zip(scratches.iter_mut()).collect();
+        return step_each(&mut pairs, par, stats, |i, (rod, sc)| {
+            step_rod_stiff(rod, settings, stiff, sc, time, i, first_step, steps)
+        });
+    }
+    // Serially without collecting the pairs: nothing is allocated per call (a haptic loop
+    // calls this every tick).
+    stats.clear();
+    for (i, (rod, sc)) in rods.iter_mut().zip(scratches).enumerate() {
+        stats.push(step_rod_stiff(
+            rod, settings, stiff, sc, time, i, first_step, steps,
+        )?);
+    }
+    Ok(())
 }
 
 /// The steps of a call to [`step_rod_stiff`]: from `time`, step indices `first_step…` (which
