@@ -219,21 +219,24 @@ fn simulation(rod: RodBuilder, dt: f64, gravity: [f64; 3], iterations: usize) ->
 }
 
 /// The time-stepping scheme a case runs with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Scheme {
     /// The paper's explicit forces and impulse-based distance constraints, at a stable step.
     Explicit,
     /// The stiff solver (`backend_cpu::stiff`, default settings), at steps far above the
     /// explicit limit: statics at `0.1/ω₁`, frequencies at `0.02/ω` of the mode measured.
     Stiff,
+    /// The stiff solver at a fixed step in seconds, for every case (issue 4's haptic steps).
+    StiffAt(f64),
 }
 
 impl Scheme {
     /// Prefix of the case names.
-    fn label(self) -> &'static str {
+    fn label(self) -> String {
         match self {
-            Scheme::Explicit => "",
-            Scheme::Stiff => "stiff: ",
+            Scheme::Explicit => String::new(),
+            Scheme::Stiff => "stiff: ".into(),
+            Scheme::StiffAt(dt) => format!("stiff, dt {dt:e} s: "),
         }
     }
 }
@@ -255,7 +258,9 @@ fn simulation_in(
         .with_rod(rod);
     let b = match scheme {
         Scheme::Explicit => b,
-        Scheme::Stiff => b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default())),
+        Scheme::Stiff | Scheme::StiffAt(_) => {
+            b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default()))
+        }
     };
     b.build().expect("validation scene builds")
 }
@@ -334,6 +339,7 @@ fn cantilever_static(
     let dt = match scheme {
         Scheme::Explicit => rod.dt(n, 0.0, drag),
         Scheme::Stiff => 0.1 / w1,
+        Scheme::StiffAt(dt) => dt,
     };
     let mut sim = simulation_in(scheme, b, dt, gravity, static_iterations(n));
     settle(&mut sim, 1.0 / w1, 80.0 / w1, tol, rod.length)
@@ -843,6 +849,7 @@ fn frequencies_in(scheme: Scheme, size: Size) -> Result<Vec<Row>, String> {
             let dt = match scheme {
                 Scheme::Explicit => rod.dt(n, 0.0, 0.0),
                 Scheme::Stiff => STIFF_FREQUENCY_STEP / reference[mode],
+                Scheme::StiffAt(dt) => dt,
             };
             let mut sim = simulation_in(scheme, b, dt, [0.0; 3], static_iterations(n));
             let total = (periods * 2.0 * PI / reference[mode] / sim.dt()).ceil() as u64;
@@ -877,12 +884,15 @@ fn frequencies_in(scheme: Scheme, size: Size) -> Result<Vec<Row>, String> {
         // (ωh)²/3; the note gives it beside the discretisation's convergence.
         let (check, extra) = match scheme {
             Scheme::Explicit => (Check::Relative, String::new()),
-            Scheme::Stiff => {
-                let wh = STIFF_FREQUENCY_STEP;
+            Scheme::Stiff | Scheme::StiffAt(_) => {
+                let (wh, step) = match scheme {
+                    Scheme::StiffAt(dt) => (reference[mode] * dt, format!("{dt:e} s")),
+                    _ => (STIFF_FREQUENCY_STEP, format!("{STIFF_FREQUENCY_STEP}/ω")),
+                };
                 (
                     Check::Info,
                     format!(
-                        "; dt = {wh}/ω, implicit Euler's shift 1 − atan(ωh)/(ωh) = {:.2e}; GCI {:.2e}",
+                        "; dt = {step}, implicit Euler's shift 1 − atan(ωh)/(ωh) = {:.2e}; GCI {:.2e}",
                         1.0 - wh.atan() / wh,
                         c.gci / reference[mode]
                     ),
@@ -1299,6 +1309,17 @@ pub fn stiff_scheme(size: Size) -> Result<Vec<Row>, String> {
     let mut rows = cantilever_small_in(Scheme::Stiff, size)?;
     rows.extend(cantilever_large_in(Scheme::Stiff, size)?);
     rows.extend(frequencies_in(Scheme::Stiff, size)?);
+    Ok(rows)
+}
+
+/// [`stiff_scheme`] at a fixed step `dt` for every case: the haptic steps of issue 4
+/// (1e-3 s and 1e-4 s; the validation rods' first bending frequency is about 1.1 rad/s, so
+/// their statics take 10⁴–10⁶ steps to settle: xtask only).
+pub fn stiff_scheme_at(size: Size, dt: f64) -> Result<Vec<Row>, String> {
+    let scheme = Scheme::StiffAt(dt);
+    let mut rows = cantilever_small_in(scheme, size)?;
+    rows.extend(cantilever_large_in(scheme, size)?);
+    rows.extend(frequencies_in(scheme, size)?);
     Ok(rows)
 }
 

@@ -23,6 +23,12 @@ fn case_list() -> Vec<Case> {
         ("frequencies", || cases::frequencies(Size::Full)),
         ("pendulum", || cases::pendulum_cases(Size::Full)),
         ("stiff scheme", || cases::stiff_scheme(Size::Full)),
+        ("stiff scheme at 1e-3 s", || {
+            cases::stiff_scheme_at(Size::Full, 1e-3)
+        }),
+        ("stiff scheme at 1e-4 s", || {
+            cases::stiff_scheme_at(Size::Full, 1e-4)
+        }),
         ("long runs", cases::long_runs),
         ("stability map", stability_map::rows),
     ]

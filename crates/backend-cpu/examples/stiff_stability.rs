@@ -15,7 +15,7 @@
 //! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no axial retry),
 //! `ONLY` (preset names), `DTS`
 //! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
-//! 500).
+//! 500), `LENGTH` (rod length of `stability` in metres, default 1).
 
 use backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
@@ -193,6 +193,8 @@ fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
 }
 
 fn stability() {
+    let length: f64 = std::env::var("LENGTH").map_or(1.0, |v| v.parse().unwrap());
+    println!("500 elements over {length} m");
     println!(
         "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step | axial steps | unconverged steps | max residual |"
     );
@@ -211,7 +213,7 @@ fn stability() {
             }
             for &dt in &dts {
                 let n = 500;
-                let mut r = scenario(p, 1.0, n, pushed);
+                let mut r = scenario(p, length, n, pushed);
                 let mut s = settings(dt);
                 s.divergence_strain = 1e-3;
                 let mut scratch = StiffScratch::new();

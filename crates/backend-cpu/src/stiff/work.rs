@@ -409,26 +409,27 @@ impl Work {
             let (a, cv) = (s.w * ilb, s.v.scale(ilb));
             let (da, db) = (cross_plus(cv, -a), cross_plus(cv, a));
             let da1 = cross_plus(s1.v.scale(ilb1), -(s1.w * ilb1));
-            let mut e = [F::ZERO; Assembled::ENTRIES];
+            // Four entries of four elements at a time, transposed to one record per element
+            // (a group of four entries straight to the records: no record-sized scratch).
+            let records = &mut out.records[j..j + 4];
+            let mut emit = |entry: usize, quad: [F; 4]| {
+                for (record, v) in records.iter_mut().zip(F::transpose(quad)) {
+                    record[entry..entry + 4].copy_from_slice(&v.to_array());
+                }
+            };
             // Γ_j.
             let gg = cross_w_cross(g, wa);
             let diag = (wm + wm1) * il * il * d[0].norm2();
             let alpha = c.alpha_g.load(j);
-            e[..6].copy_from_slice(&[
-                gg[0] + diag + alpha.x,
-                gg[1],
-                gg[2],
-                gg[3] + diag + alpha.y,
-                gg[4],
-                gg[5] + diag + alpha.z,
-            ]);
-            put(&mut e[next..], awbt(&cross(g), wa, &da), bends);
             let scale = -(wm1 * il * il1) * bends;
-            for r in 0..3 {
-                for q in 0..3 {
-                    e[second + 4 * r + q] = d[r].dot(d1[q]) * scale;
-                }
-            }
+            let second_block = [0, 1, 2].map(|r| [0, 1, 2].map(|q| d[r].dot(d1[q])));
+            put(&mut emit, next, awbt(&cross(g), wa, &da), bends);
+            put(&mut emit, second, second_block, scale);
+            emit(
+                0,
+                [gg[0] + diag + alpha.x, gg[1], gg[2], gg[3] + diag + alpha.y],
+            );
+            emit(4, [gg[4], gg[5] + diag + alpha.z, F::ZERO, F::ZERO]);
             // Ω_j: A W_a Aᵀ + B W_b Bᵀ with A, B = [c]× ∓ a I is, in closed form,
             // [c]× (W_a + W_b) [c]×ᵀ + a S(c, W_b − W_a) + a² (W_a + W_b) with
             // S(c, W)_{rk} = [c]×_{rk} (W_k − W_r) (off-diagonal only).
@@ -440,24 +441,26 @@ impl Work {
             let a2 = a * a;
             let alpha = c.alpha_o.load(j);
             let b = Assembled::BEND;
-            e[b..b + 6].copy_from_slice(&[
-                cc[0] + a2.mul_add(wsum.x, alpha.x),
-                cc[1] + s01,
-                cc[2] + s02,
-                cc[3] + a2.mul_add(wsum.y, alpha.y),
-                cc[4] + s12,
-                cc[5] + a2.mul_add(wsum.z, alpha.z),
-            ]);
-            put(&mut e[b + next..], awbt(&db, wb, &cross(g1)), bends);
-            put(&mut e[b + second..], awbt(&db, wb, &da1), next_bends);
-            // Four entries of four elements at a time, transposed to one record per element.
-            let records = &mut out.records[j..j + 4];
-            for (group, quad) in e.chunks_exact(4).enumerate() {
-                let t = F::transpose([quad[0], quad[1], quad[2], quad[3]]);
-                for (record, v) in records.iter_mut().zip(t) {
-                    record[4 * group..4 * group + 4].copy_from_slice(&v.to_array());
-                }
-            }
+            put(&mut emit, b + next, awbt(&db, wb, &cross(g1)), bends);
+            put(&mut emit, b + second, awbt(&db, wb, &da1), next_bends);
+            emit(
+                b,
+                [
+                    cc[0] + a2.mul_add(wsum.x, alpha.x),
+                    cc[1] + s01,
+                    cc[2] + s02,
+                    cc[3] + a2.mul_add(wsum.y, alpha.y),
+                ],
+            );
+            emit(
+                b + 4,
+                [
+                    cc[4] + s12,
+                    cc[5] + a2.mul_add(wsum.z, alpha.z),
+                    F::ZERO,
+                    F::ZERO,
+                ],
+            );
         }
     }
 
@@ -670,13 +673,14 @@ fn awbt(a: &M, w: V, b: &M) -> M {
     out
 }
 
-/// `out = m · mask` as rows padded to four (the padding stays zero).
+/// The rows of `m · mask`, padded to four with zeros, to `emit` at `entry`, `entry + 4`, `entry + 8`.
 #[inline(always)]
-fn put(out: &mut [F], m: M, mask: F) {
-    for r in 0..3 {
-        for q in 0..3 {
-            out[4 * r + q] = m[r][q] * mask;
-        }
+fn put(emit: &mut impl FnMut(usize, [F; 4]), entry: usize, m: M, mask: F) {
+    for (r, row) in m.iter().enumerate() {
+        emit(
+            entry + 4 * r,
+            [row[0] * mask, row[1] * mask, row[2] * mask, F::ZERO],
+        );
     }
 }
 
