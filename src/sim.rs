@@ -651,10 +651,16 @@ impl<T: Real> Rods<T> {
                     "the stiff solver does not handle contacts or bindings yet: use solver.scheme = \"explicit\"".into(),
                 ));
             }
+            // Sized and built now, so that the first step of a haptic loop costs what the
+            // later ones do.
             let scratch = self
                 .rods
                 .iter()
-                .map(|_| backend_cpu::StiffScratch::new())
+                .map(|rod| {
+                    let mut s = backend_cpu::StiffScratch::new();
+                    s.prepare(rod, &self.settings, &st);
+                    s
+                })
                 .collect();
             self.stiff = Some((st, scratch));
         }

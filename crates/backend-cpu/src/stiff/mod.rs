@@ -289,6 +289,30 @@ impl StiffScratch {
     pub fn report(&self) -> StiffReport {
         self.report
     }
+
+    /// Sizes the scratch for `rod` and builds its constants, so that the first step costs what
+    /// the later ones do (a haptic loop's first tick; sizing and building on the first step
+    /// took about 1 ms at 1000 elements against 0.13 ms for a step). It takes one step of a
+    /// copy of the rod, which touches every buffer the step uses, and then forgets that step:
+    /// the steps that follow are bit for bit those of a fresh scratch. A step of the copy that
+    /// diverges is ignored here (the real step reports it).
+    pub fn prepare<T: Real>(
+        &mut self,
+        rod: &CpuRod<T>,
+        settings: &SolverSettings<T>,
+        stiff: &StiffSettings,
+    ) {
+        let mut copy = rod.clone();
+        let _ = step_rod_stiff(&mut copy, settings, stiff, self, 0.0, 0, 0, 1);
+        // What a step hands to the next: the shadow state, the multipliers that start the
+        // geometric bound, a factorisation a lagged policy would reuse, and the counters.
+        self.w.shadow = false;
+        for l in &mut self.w.lambda_prev {
+            l.fill_zero();
+        }
+        self.factor_valid = false;
+        self.report = StiffReport::default();
+    }
 }
 
 /// `q ← normalise(q ⊗ (1, θ/2))`: a body-frame rotation by `θ`, to first order (the Newton
