@@ -15,7 +15,7 @@
 //! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no axial retry),
 //! `ONLY` (preset names), `DTS`
 //! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
-//! 500), `LENGTH` (rod length of `stability` in metres, default 1).
+//! 500), `LENGTH` (rod length of `stability` and `bisect` in metres, default 1).
 
 use backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
@@ -193,7 +193,7 @@ fn scenario(p: &Preset, length: f64, n: usize, pushed: bool) -> CpuRod<f64> {
 }
 
 fn stability() {
-    let length: f64 = std::env::var("LENGTH").map_or(1.0, |v| v.parse().unwrap());
+    let length = length();
     println!("500 elements over {length} m");
     println!(
         "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step | axial steps | unconverged steps | max residual |"
@@ -248,7 +248,7 @@ fn stability() {
 
 /// Whether the explicit scheme survives `steps` steps of `dt` on the pendulum.
 fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
-    let mut r = scenario(p, 1.0, elements(), false);
+    let mut r = scenario(p, length(), elements(), false);
     let mut s = settings(dt);
     s.divergence_strain = 0.05;
     step_rod_batch(&mut r, &s, 0.0, 0, 0, steps).is_ok()
@@ -256,6 +256,14 @@ fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
             .frames
             .iter()
             .all(|q| q.coords.iter().all(|c| c.is_finite()))
+}
+
+/// Rod length of the `stability` and `bisect` runs: `LENGTH` [m] or 1.
+fn length() -> f64 {
+    std::env::var("LENGTH")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1.0)
 }
 
 /// Element count of the `bisect` runs: `ELEMENTS` or 500.
@@ -283,7 +291,7 @@ fn bisect() {
                 hi = mid;
             }
         }
-        let mut r = scenario(p, 1.0, elements(), false);
+        let mut r = scenario(p, length(), elements(), false);
         let mut s = settings(1e-2);
         s.divergence_strain = 1e-3;
         let ok = step_rod_stiff(

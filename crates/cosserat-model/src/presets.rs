@@ -86,10 +86,12 @@ pub const PRESETS: [Preset; 4] = [
         poisson_ratio: 0.45,
         density: 905.0,
         radius: 0.1e-3,
-        source: "polypropylene monofilament: E 0.75 GPa (issue 4's value, within the range of \
-                 initial moduli of monofilament sutures in Naleway et al. 2015, J Biomed Mater \
-                 Res B 103:735), density 0.90-0.91 g/cm3 (polypropylene), Poisson 0.45 \
-                 assumed; radius of USP size 4-0 (0.150-0.199 mm diameter)",
+        source: "polypropylene monofilament: E 0.75 GPa (issue 4's value; tensile tests of \
+                 polypropylene monofilament sutures measure more, e.g. 4.0 GPa in Nindhia et \
+                 al. 2021, Int J Appl Pharm 13(S1), doi 10.22159/ijap.2021.v13s1.Y1025: set \
+                 the modulus of a specific suture in the scene), density 0.90-0.91 g/cm3 \
+                 (polypropylene), Poisson 0.45 assumed; radius of USP size 4-0 (0.150-0.199 mm \
+                 diameter)",
     },
 ];
 
