@@ -232,6 +232,9 @@ pub struct StiffSection {
     /// Retake a step of an inextensible rod that does not converge with the material's axial
     /// compliance (default true; `backend_cpu::StiffSettings::axial_fallback`).
     pub axial_fallback: Option<bool>,
+    /// Residual above which a step still unconverged after `iterations` is retaken in halves
+    /// (default: never; `backend_cpu::StiffSettings::halve_above`).
+    pub halve_above: Option<f64>,
     /// When the banded matrix is refactorised: `"every-step"` (default: once per step, reused
     /// by the step's later iterations), `"every-iteration"` (Newton) or `"lagged"` (kept
     /// across steps); `backend_cpu::Refactor`.
@@ -756,6 +759,9 @@ impl Checker<'_> {
                     }
                     if let Some(a) = x.axial_fallback {
                         st.axial_fallback = a;
+                    }
+                    if let Some(h) = x.halve_above {
+                        st.halve_above = self.positive("solver.stiff.halve_above", h)?;
                     }
                     if let Some(r) = &x.refactor {
                         st.refactor = match r.as_str() {

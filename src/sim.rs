@@ -693,7 +693,9 @@ impl<T: Real> Rods<T> {
         };
         for r in scratch.iter().map(backend_cpu::StiffScratch::report) {
             s.iterations += r.total_iterations;
+            s.steps_kept += r.steps;
             s.unconverged_steps += r.unconverged_steps;
+            s.halved_steps += r.halved_steps;
             s.axial_steps += r.axial_steps;
             s.max_residual = s.max_residual.max(r.max_residual);
             s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
@@ -909,8 +911,14 @@ pub struct StiffSummary {
     pub rod_steps: u64,
     /// Newton iterations, all rods together.
     pub iterations: u64,
-    /// Rod-steps whose residual was still above the tolerance after the last iteration.
+    /// Rod-steps kept, each half of a step retaken in halves counted as a rod-step.
+    pub steps_kept: u64,
+    /// Rod-steps (of `steps_kept`) whose residual was still above the tolerance after the
+    /// last iteration.
     pub unconverged_steps: u64,
+    /// Rod-steps that diverged or ended far from converged and were retaken in halves
+    /// (`StiffSettings::halve_above`, `max_halvings`).
+    pub halved_steps: u64,
     /// Rod-steps of inextensible rods retaken with the material's axial compliance
     /// (`StiffSettings::axial_fallback`).
     pub axial_steps: u64,
@@ -1069,8 +1077,8 @@ impl Simulation {
         self.max_strain
     }
 
-    /// What the stiff solver did so far: iterations, steps that ended above the tolerance and
-    /// steps retaken with axial compliance; `None` with the explicit scheme.
+    /// What the stiff solver did so far: iterations, steps that ended above the tolerance,
+    /// steps retaken in halves or with axial compliance; `None` with the explicit scheme.
     pub fn stiff_summary(&self) -> Option<StiffSummary> {
         let steps = self.steps;
         match &self.world {

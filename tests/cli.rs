@@ -83,6 +83,8 @@ fn stiff_runs_report_their_convergence() {
     // Without unconverged steps, no step's residual ended above its tolerance.
     assert!(unconverged > 0 || residual <= tolerance, "{st}");
     assert_eq!(st["axial_steps"], 0, "{st}");
+    assert_eq!(st["halved_steps"], 0, "{st}");
+    assert_eq!(st["steps_kept"], 100, "{st}");
 }
 
 /// `--step-times` times every step on its own, as a haptic loop calls it, and reports the

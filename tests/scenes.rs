@@ -102,6 +102,14 @@ fn bad_values_name_file_field_and_value() {
             "sometimes",
         ),
         (
+            GOOD.replace(
+                "steps = 10",
+                "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\nhalve_above = -0.5",
+            ),
+            "solver.stiff.halve_above",
+            "-0.5",
+        ),
+        (
             GOOD.to_string() + "[[rod.load]]\npoint = 99\nforce = [0, 0, 1]\n",
             "rod[0].load[0].point",
             "99",

@@ -11,7 +11,7 @@
 //!
 //! Environment overrides of the stiff settings, for the measurements of
 //! `docs/stiff-solver.md`: `GEOM` (geometric multiplier), `ITERS`, `TOL`, `REFACTOR`
-//! (`it`, `step`, `lag`), `FLOOR` (inertia floor); of the scenarios: `PUSH` [m/s], `TWIST`
+//! (`it`, `step`, `lag`), `FLOOR` (inertia floor), `HALVE_ABOVE`; of the scenarios: `PUSH` [m/s], `TWIST`
 //! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no axial retry),
 //! `ONLY` (preset names), `DTS`
 //! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
@@ -136,6 +136,9 @@ fn stiff_default() -> StiffSettings {
     if let Ok(v) = std::env::var("FLOOR") {
         s.inertia_floor = v.parse().unwrap();
     }
+    if let Ok(v) = std::env::var("HALVE_ABOVE") {
+        s.halve_above = v.parse().unwrap();
+    }
     s
 }
 
@@ -196,9 +199,9 @@ fn stability() {
     let length = length();
     println!("500 elements over {length} m");
     println!(
-        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step | axial steps | unconverged steps | max residual |"
+        "| preset | scenario | dt [s] | steps | result | max strain | iterations/step | wall [s] | us/step | axial steps | unconverged steps | max residual | halved steps | steps kept |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let only = std::env::var("ONLY").unwrap_or_default();
     let dts: Vec<f64> = std::env::var("DTS").map_or(vec![1e-3, 1e-4], |v| {
         v.split(',').map(|x| x.parse().unwrap()).collect()
@@ -232,14 +235,16 @@ fn stability() {
                 };
                 let rep = scratch.report();
                 println!(
-                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {el:.1} | {:.0} | {} | {} | {:.1e} |",
+                    "| {} | {} | {dt:e} | {steps} | {result} | {strain:.1e} | {:.2} | {el:.1} | {:.0} | {} | {} | {:.1e} | {} | {} |",
                     p.name,
                     if pushed { "pushed+twisted" } else { "pendulum" },
                     rep.total_iterations as f64 / done as f64,
                     el / done as f64 * 1e6,
                     rep.axial_steps,
                     rep.unconverged_steps,
-                    rep.max_residual
+                    rep.max_residual,
+                    rep.halved_steps,
+                    rep.steps
                 );
             }
         }

@@ -276,6 +276,9 @@ pub enum DivergedQuantity {
     /// A point moved faster than the allowed speed [m/s]: energy is running away while the
     /// lengths still hold (an explicit scheme past its stable step).
     Speed(f64),
+    /// The stiff solver's step ended with this residual (a strain, or a bend–twist angle per
+    /// element), far above its tolerance (`StiffSettings::halve_above`), also in halves.
+    Unconverged(f64),
 }
 
 /// A rod that diverged: which one, where, when, and what.
@@ -301,6 +304,9 @@ impl std::fmt::Display for Divergence {
             }
             DivergedQuantity::Speed(v) => {
                 format!("speed {v:.3e} m/s exceeds the divergence limit")
+            }
+            DivergedQuantity::Unconverged(r) => {
+                format!("the stiff solver's step ended at residual {r:.3e}, far from converged")
             }
         };
         write!(

@@ -116,6 +116,10 @@ pub enum RodBuildError {
     Material(crate::MaterialError),
     /// A per-rod coefficient is negative or not finite.
     InvalidCoefficient(&'static str, f64),
+    /// A uniform rest curvature that no pair of frames can have at this node: the discrete
+    /// Darboux vector `(2/l̄) Im(q̄_j q_{j+1})` has a length of at most `2/l̄` (a relative
+    /// rotation of π), so `|û| l̄ / 2` (the second field) must stay below 1.
+    UnreachableRestShape(usize, f64),
 }
 
 impl std::fmt::Display for RodBuildError {
@@ -130,6 +134,12 @@ impl std::fmt::Display for RodBuildError {
             ),
             Self::FoldedBack(i) => write!(f, "the polyline folds back on itself at point {i}"),
             Self::Material(e) => write!(f, "{e}"),
+            Self::UnreachableRestShape(j, half) => write!(
+                f,
+                "the rest curvature cannot be reached at node {j}: |κ| l / 2 = {half:.3} (l the \
+                 node's length) must be below 1, the discrete Darboux vector's range (a turn of \
+                 π per element); use more elements or less curvature"
+            ),
             Self::InvalidCoefficient(name, v) => write!(
                 f,
                 "`{name}` = {v} is invalid: expected a finite number >= 0"
@@ -245,7 +255,16 @@ pub fn build_rod<T: Real>(
                 )
             })
             .collect(),
-        RestShape::Uniform(u) => vec![Vec3::from(u); n.saturating_sub(1)],
+        RestShape::Uniform(u) => {
+            let u = Vec3::from(u);
+            for j in 0..n.saturating_sub(1) {
+                let half = u.norm() * 0.25 * (lengths[j] + lengths[j + 1]);
+                if !(half < 1.0) {
+                    return Err(RodBuildError::UnreachableRestShape(j, half));
+                }
+            }
+            vec![u; n.saturating_sub(1)]
+        }
     };
     let mu = m.linear_density();
     let mut masses = vec![0.0; n + 1];
@@ -346,5 +365,28 @@ mod tests {
             build_rod::<f64>(&[[0.0; 3], [f64::NAN, 0.0, 0.0]], &spec).unwrap_err(),
             RodBuildError::NonFinitePoint(1)
         );
+    }
+
+    /// A uniform rest curvature is accepted while `|κ| l / 2 < 1` (the largest discrete
+    /// Darboux vector two frames can have, `2/l`, is a relative turn of π) and rejected beyond,
+    /// naming the node; the largest accepted one is reached by frames turned just below π.
+    #[test]
+    fn unreachable_rest_curvature_is_rejected() {
+        let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 0.2, 2);
+        let at = |kappa: f64| {
+            let mut spec = RodSpec::new(mat());
+            spec.rest_shape = RestShape::Uniform([kappa, 0.0, 0.0]);
+            build_rod::<f64>(&pts, &spec)
+        };
+        let (_, p) = at(19.9).unwrap();
+        let turn = crate::quat::exp_rotation(&Vec3::new(2.0 * (19.9_f64 * 0.05).asin(), 0.0, 0.0));
+        let reached = crate::darboux::darboux(&Quat::identity(), &turn, 0.1);
+        assert!((reached - p.rest_darboux[0]).norm() < 1e-9, "{reached}");
+        match at(20.0).unwrap_err() {
+            RodBuildError::UnreachableRestShape(0, half) => assert!((half - 1.0).abs() < 1e-12),
+            e => panic!("{e}"),
+        }
+        let msg = at(36.4).unwrap_err().to_string();
+        assert!(msg.contains("node 0") && msg.contains("1.820"), "{msg}");
     }
 }

@@ -146,6 +146,23 @@ pub struct StiffSettings {
     /// moves so far in its first 1 ms step that the linearised step overshoots; its first steps
     /// are then taken in halves, quarters, …, and the rest at the full step.
     pub max_halvings: u32,
+    /// A step still unconverged after [`iterations`](Self::iterations) (and the axial retry)
+    /// with a residual above this is retaken in halves, as a diverging one is
+    /// ([`max_halvings`](Self::max_halvings)); at the finest split the run stops with
+    /// [`DivergedQuantity::Unconverged`](crate::DivergedQuantity::Unconverged). Steps between
+    /// the tolerance and this are kept and counted in [`StiffReport::unconverged_steps`].
+    /// Direct solver only; with a tolerance of 0 nothing is checked.
+    ///
+    /// The default, `f64::INFINITY`, keeps every step that does not diverge, converged or
+    /// not. 1e-3 (a strain, or a bend–twist angle per element, of 0.1 %) turns a step that far
+    /// from its solution into smaller steps or, where none converges, into an error instead
+    /// of an answer: above the haptic range (dt 1e-2 to 1e-1 s) every run of
+    /// `docs/stiff-solver.md` then stays within 1e-3, but a driven rod whose relative frame
+    /// rotations cross π (the discrete Darboux vector's limit, where the bend–twist constraint
+    /// jumps) stops, where by default it continues with steps far from converged. Not the
+    /// default because a haptic loop is better served by a step that is reported as
+    /// unconverged than by a stop or by a step that takes 2⁸ times as long.
+    pub halve_above: f64,
     /// Retake a step of an inextensible rod that ends unconverged (residual above the
     /// tolerance after [`iterations`](Self::iterations); direct solver only) with some element
     /// stretched or compressed beyond the tolerance, with the material's axial compliance
@@ -175,6 +192,7 @@ impl Default for StiffSettings {
             inertia_floor: 0.0,
             geometric: 1.0,
             max_halvings: 8,
+            halve_above: f64::INFINITY,
             axial_fallback: true,
         }
     }
@@ -189,17 +207,25 @@ pub struct StiffReport {
     /// [`StiffSettings::tolerance`]); with `tolerance = 0` this is the residual before the
     /// last iteration.
     pub residual: f64,
-    /// Factorisations since the scratch was created.
+    /// Factorisations since the scratch was created (work: also those of steps retaken).
     pub factorisations: u64,
-    /// Iterations (or sweeps) since the scratch was created.
+    /// Iterations (or sweeps) since the scratch was created (work: also those of steps
+    /// retaken).
     pub total_iterations: u64,
-    /// Steps since the scratch was created whose residual was still above the tolerance
-    /// after the last iteration (also after the axial retry).
+    /// Steps since the scratch was created, each half of a step retaken in halves counted as
+    /// a step (a step that was retaken is counted once, as taken in the end).
+    pub steps: u64,
+    /// Steps (of [`steps`](Self::steps)) whose residual was still above the tolerance after
+    /// the last iteration (also after the axial retry).
     pub unconverged_steps: u64,
+    /// Steps of the caller's `dt` that diverged or ended far from converged
+    /// ([`StiffSettings::halve_above`]) and were retaken in halves.
+    pub halved_steps: u64,
     /// Steps of an inextensible rod retaken with the material's axial compliance
     /// ([`StiffSettings::axial_fallback`]) since the scratch was created.
     pub axial_steps: u64,
-    /// Largest residual at the end of a step since the scratch was created.
+    /// Largest residual at the end of a step since the scratch was created (of the steps
+    /// kept: a step retaken in halves counts with its halves).
     pub max_residual: f64,
     /// The largest tolerance a step was held to since the scratch was created:
     /// [`StiffSettings::tolerance`], raised for an `f32` rod to the strain its positions
@@ -631,6 +657,7 @@ fn step_with_retries<T: Real>(
         stats = stats.merged(step_with_retries(rod, settings, stiff, scratch, before)?);
     }
     let at = window.part(failed, 1, h);
+    scratch.report.halved_steps += 1;
     stats = stats.merged(step_in_halves(rod, settings, stiff, scratch, at, 1)?);
     let rest = window.steps - failed - 1;
     if rest > 0 {
@@ -729,6 +756,8 @@ fn step_fixed<T: Real>(
     let limit = settings.divergence_strain.to_f64();
     let mut stats = StepStats::none();
     let mut result = Ok(());
+    // What the batch's steps report, added to `report` only if the batch is kept.
+    let mut kept = StiffReport::default();
     for step in 0..steps {
         let t = time + step as f64 * h;
         let ctx = StepContext {
@@ -758,17 +787,33 @@ fn step_fixed<T: Real>(
             (residual, tolerance) =
                 solve_step(&ctx, ka, w, assembled, factor, factor_valid, report);
             *factor_valid = false;
-            report.axial_steps += 1;
+            kept.axial_steps += 1;
+        }
+        if stiff.tolerance > 0.0
+            && stiff.scheme == StiffScheme::Direct
+            && !(residual <= stiff.halve_above.max(tolerance))
+        {
+            // Far from converged: not an answer. Retaken in halves by the caller, or
+            // reported at the finest split.
+            *factor_valid = false;
+            result = Err(Divergence {
+                rod: rod_index,
+                element: worst_element(w, k),
+                step: first_step + step,
+                quantity: DivergedQuantity::Unconverged(residual),
+            });
+            break;
         }
         // The multipliers of the accepted step start the next one's geometric bound (a
         // retaken step starts from the same ones as its first try); the next step sets `lambda`
         // to zero before reading it.
         std::mem::swap(&mut w.lambda_prev, &mut w.lambda);
+        kept.steps += 1;
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
-            report.unconverged_steps += 1;
+            kept.unconverged_steps += 1;
         }
-        report.max_tolerance = report.max_tolerance.max(tolerance);
-        report.max_residual = report.max_residual.max(residual);
+        kept.max_tolerance = kept.max_tolerance.max(tolerance);
+        kept.max_residual = kept.max_residual.max(residual);
         // 3. Velocities from the positions and frames. Drag of the medium, implicit
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
         // energy without changing static equilibria.
@@ -803,12 +848,33 @@ fn step_fixed<T: Real>(
         w.shadow = false;
         return result.map(|()| stats);
     }
+    report.steps += kept.steps;
+    report.unconverged_steps += kept.unconverged_steps;
+    report.axial_steps += kept.axial_steps;
+    report.max_tolerance = report.max_tolerance.max(kept.max_tolerance);
+    report.max_residual = report.max_residual.max(kept.max_residual);
     w.x.write_to(&mut rod.state.positions);
     w.v.write_to(&mut rod.state.velocities);
     w.q.write_to(&mut rod.state.frames);
     w.omega.write_to(&mut rod.state.angular_velocities);
     w.shadow = true;
     result.map(|()| stats)
+}
+
+/// The element with the largest entry of the last right-hand side (bend–twist rows as angles,
+/// as the residual measures them): where an unconverged step is furthest from its solution.
+fn worst_element(w: &Work, k: &Consts) -> usize {
+    let mut worst = (0, -1.0);
+    for j in 0..w.n {
+        let gamma = w.rhs[0].get(j).amax();
+        let omega = k.lbar.get(j).map_or(0.0, |l| w.rhs[1].get(j).amax() * l);
+        let v = gamma.max(omega);
+        // NaN counts as the worst.
+        if !(v <= worst.1) {
+            worst = (j, if v.is_nan() { f64::INFINITY } else { v });
+        }
+    }
+    worst.0
 }
 
 /// Whether some element of `w` is stretched or compressed by more than `strain` (or is not
