@@ -191,6 +191,26 @@ fn bad_input_is_an_error_message() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("quantum"));
+    // A rest curvature no pair of frames can have (|κ| l / 2 = 30 · 0.1 / 2 = 1.5 ≥ 1).
+    let out = cosserat()
+        .args([
+            "run",
+            "scenes/nitinol-pendulum.toml",
+            "--set",
+            "rod.0.elements=10",
+            "--set",
+            "rod.0.rest_shape={ curvature = [30.0, 0.0, 0.0] }",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nitinol-pendulum.toml") && err.contains("rod 0"),
+        "{err}"
+    );
+    assert!(err.contains("node 0") && err.contains("1.500"), "{err}");
 }
 
 /// `--backend gpu` runs the same scene as the CPU and lands in the same place. Skips (with a
