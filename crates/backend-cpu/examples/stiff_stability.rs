@@ -11,11 +11,11 @@
 //!
 //! Environment overrides of the stiff settings, for the measurements of
 //! `docs/stiff-solver.md`: `GEOM` (geometric multiplier), `ITERS`, `TOL`, `REFACTOR`
-//! (`it`, `step`, `lag`), `FLOOR` (inertia floor), `HALVE_ABOVE`; of the scenarios: `PUSH` [m/s], `TWIST`
-//! [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no axial retry),
-//! `ONLY` (preset names), `DTS`
-//! (comma-separated steps), `PUSHED_ONLY`, `ELEMENTS` (element count of `bisect`, default
-//! 500), `LENGTH` (rod length of `stability` and `bisect` in metres, default 1).
+//! (`it`, `step`, `lag`), `FLOOR` (inertia floor), `HALVE_ABOVE`; of the scenarios: `PUSH`
+//! [m/s], `TWIST` [rad/s], `FAR_PINNED` (pin the far end of the pushed rod), `AXIAL=0` (no
+//! axial retry), `ONLY` (preset names), `DTS` (comma-separated steps), `PUSHED_ONLY`,
+//! `ELEMENTS` (element count of `bisect`, default 500), `LENGTH` (rod length of `stability`
+//! and `bisect` in metres, default 1).
 
 use backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,

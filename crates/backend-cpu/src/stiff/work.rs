@@ -673,7 +673,8 @@ fn awbt(a: &M, w: V, b: &M) -> M {
     out
 }
 
-/// The rows of `m · mask`, padded to four with zeros, to `emit` at `entry`, `entry + 4`, `entry + 8`.
+/// The rows of `m · mask`, padded to four with zeros, to `emit` at `entry`, `entry + 4` and
+/// `entry + 8`.
 #[inline(always)]
 fn put(emit: &mut impl FnMut(usize, [F; 4]), entry: usize, m: M, mask: F) {
     for (r, row) in m.iter().enumerate() {
