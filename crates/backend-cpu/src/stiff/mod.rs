@@ -318,7 +318,7 @@ impl StiffScratch {
 
     /// Sizes the scratch for `rod` and builds its constants, so that the first step costs what
     /// the later ones do (a haptic loop's first tick; sizing and building on the first step
-    /// took about 1 ms at 1000 elements against 0.13 ms for a step). It takes one step of a
+    /// took 1–2 ms at 1000 elements against 0.13–0.2 ms for a step). It takes one step of a
     /// copy of the rod, which touches every buffer the step uses, and then forgets that step:
     /// the steps that follow are bit for bit those of a fresh scratch. A step of the copy that
     /// diverges is ignored here (the real step reports it).
