@@ -263,20 +263,22 @@ fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
             .all(|q| q.coords.iter().all(|c| c.is_finite()))
 }
 
-/// Rod length of the `stability` and `bisect` runs: `LENGTH` [m] or 1.
-fn length() -> f64 {
-    std::env::var("LENGTH")
+/// The environment variable `key` parsed, or `default` when it is unset or does not parse.
+fn env_or<T: std::str::FromStr>(key: &str, default: T) -> T {
+    std::env::var(key)
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(1.0)
+        .unwrap_or(default)
+}
+
+/// Rod length of the `stability` and `bisect` runs: `LENGTH` [m] or 1.
+fn length() -> f64 {
+    env_or("LENGTH", 1.0)
 }
 
 /// Element count of the `bisect` runs: `ELEMENTS` or 500.
 fn elements() -> usize {
-    std::env::var("ELEMENTS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(500)
+    env_or("ELEMENTS", 500)
 }
 
 fn bisect() {
