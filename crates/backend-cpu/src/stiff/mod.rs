@@ -54,6 +54,7 @@
 //! does not apply internal damping. Drag is applied to the solved velocities.
 
 pub mod constraints;
+mod contact;
 mod direct;
 mod lanes;
 mod work;
@@ -63,6 +64,7 @@ use crate::ends::EndKind;
 use crate::stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, SolverSettings, StepStats, step_each,
 };
+use contact::StiffContacts;
 use cosserat_model::quat::exp_rotation;
 use cosserat_model::{Quat, Real, Vec3};
 use direct::{Assembled, BlockTridiagonal};
@@ -247,6 +249,10 @@ pub(crate) struct Consts {
     /// Compliances `α̃` of the stretch–shear and bend–twist rows.
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
+    /// The stretch row's compliance `α̃` of the extensible model, also in inextensible mode:
+    /// `Work::pin_blocks` regularises the stretch rows of elements between sticking points with
+    /// it.
+    pub(crate) alpha_axial: Vec<f64>,
     /// Whether any damping coefficient is positive.
     damped: bool,
     /// The constants of the element-wise passes as padded columns (`lanes.rs`).
@@ -303,6 +309,8 @@ pub struct StiffScratch {
     factor: BlockTridiagonal,
     factor_valid: bool,
     report: StiffReport,
+    /// Contact with the rod's mesh, if it has one (`contact.rs`).
+    contacts: Option<StiffContacts>,
 }
 
 impl StiffScratch {
@@ -338,6 +346,9 @@ impl StiffScratch {
         }
         self.factor_valid = false;
         self.report = StiffReport::default();
+        if let Some(c) = self.contacts.as_mut() {
+            c.reset();
+        }
     }
 }
 
@@ -459,6 +470,9 @@ impl Consts {
                 };
                 Vec3::new(compliance(kp, l), compliance(kp, l), stretch)
             })
+            .collect();
+        self.alpha_axial = (0..n)
+            .map(|j| compliance(p.stretch_stiffness[j].to_f64(), self.l0[j]))
             .collect();
         self.alpha_omega = (0..n.saturating_sub(1))
             .map(|j| {
@@ -725,6 +739,12 @@ fn step_fixed<T: Real>(
     scratch
         .k
         .rebuild(rod, h, settings.extensible, stiff.inertia_floor);
+    if scratch.contacts.is_none()
+        && let Some(mesh) = rod.mesh.as_ref()
+    {
+        let radius = rod.params.radius.to_f64();
+        scratch.contacts = Some(StiffContacts::new(mesh.settings.clone(), radius));
+    }
     let StiffScratch {
         k,
         w,
@@ -733,7 +753,12 @@ fn step_fixed<T: Real>(
         factor,
         factor_valid,
         report,
+        contacts,
     } = scratch;
+    // Only a rod with a mesh (and the direct solver) pays for contacts.
+    let mut contacts = contacts
+        .as_mut()
+        .filter(|_| rod.mesh.is_some() && stiff.scheme == StiffScheme::Direct);
     w.resize(n);
     // Continue from the f64 state of the last step if the rod still holds its rounding (no
     // one changed the state in between): rounding an f32 state at every step would leave a
@@ -768,8 +793,16 @@ fn step_fixed<T: Real>(
             gravity: &gravity,
             precision,
         };
-        let (mut residual, mut tolerance) =
-            solve_step(&ctx, k, w, assembled, factor, factor_valid, report);
+        let (mut residual, mut tolerance) = solve_step(
+            &ctx,
+            k,
+            w,
+            assembled,
+            factor,
+            factor_valid,
+            report,
+            contacts.as_deref_mut(),
+        );
         let unconverged = stiff.tolerance > 0.0 && !(residual <= tolerance);
         if unconverged
             && !settings.extensible
@@ -784,8 +817,16 @@ fn step_fixed<T: Real>(
             let ka = axial.get_or_insert_with(Consts::default);
             ka.rebuild(rod, h, true, stiff.inertia_floor);
             *factor_valid = false;
-            (residual, tolerance) =
-                solve_step(&ctx, ka, w, assembled, factor, factor_valid, report);
+            (residual, tolerance) = solve_step(
+                &ctx,
+                ka,
+                w,
+                assembled,
+                factor,
+                factor_valid,
+                report,
+                contacts.as_deref_mut(),
+            );
             *factor_valid = false;
             kept.axial_steps += 1;
         }
@@ -808,6 +849,9 @@ fn step_fixed<T: Real>(
         // retaken step starts from the same ones as its first try); the next step sets `lambda`
         // to zero before reading it.
         std::mem::swap(&mut w.lambda_prev, &mut w.lambda);
+        if let Some(c) = contacts.as_deref_mut() {
+            c.end_step(w);
+        }
         kept.steps += 1;
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
             kept.unconverged_steps += 1;
@@ -858,6 +902,9 @@ fn step_fixed<T: Real>(
     w.q.write_to(&mut rod.state.frames);
     w.omega.write_to(&mut rod.state.angular_velocities);
     w.shadow = true;
+    if let (Some(c), Some(mesh)) = (contacts, rod.mesh.as_mut()) {
+        mesh.stats = c.stats;
+    }
     result.map(|()| stats)
 }
 
@@ -925,6 +972,7 @@ fn solve_step<T: Real>(
     factor: &mut BlockTridiagonal,
     factor_valid: &mut bool,
     report: &mut StiffReport,
+    mut contacts: Option<&mut StiffContacts>,
 ) -> (f64, f64) {
     let StepContext {
         rod,
@@ -966,6 +1014,9 @@ fn solve_step<T: Real>(
         }
     });
     let tolerance = ctx.tolerance(k, w);
+    if let Some(c) = contacts.as_deref_mut() {
+        c.begin_step(w, k);
+    }
     // 2. Constraint solve.
     for c in &mut w.lambda {
         c.fill_zero();
@@ -975,6 +1026,66 @@ fn solve_step<T: Real>(
     let mut residual = f64::NAN;
     match stiff.scheme {
         StiffScheme::Direct => {
+            // Rounds of the solve: one, and one more each time the contacts change (at most
+            // `contact::MAX_ROUNDS` more), continuing from the multipliers reached.
+            for round in 0..=contact::MAX_ROUNDS {
+                let (r, u) = direct_solve(
+                    stiff,
+                    k,
+                    w,
+                    assembled,
+                    factor,
+                    factor_valid,
+                    report,
+                    tolerance,
+                    round == 0,
+                );
+                residual = r;
+                used += u;
+                let Some(c) = contacts.as_deref_mut() else {
+                    break;
+                };
+                if !c.update(w, k) || round == contact::MAX_ROUNDS {
+                    break;
+                }
+                *factor_valid = false;
+            }
+        }
+        StiffScheme::GaussSeidel => {
+            for _ in 0..stiff.iterations {
+                residual = xpbd::sweep(w, k);
+                used += 1;
+                if residual <= stiff.tolerance {
+                    break;
+                }
+            }
+        }
+    }
+    report.iterations = used;
+    report.total_iterations += used as u64;
+    report.residual = residual;
+    (residual, tolerance)
+}
+
+/// The Newton iterations of one round of the direct solve (step 2 of the module docs), from
+/// the multipliers in `w`; `first` for the first round of a step (the frames' geometric bound
+/// then starts from the previous step's multipliers). Returns the last residual and the
+/// iterations run.
+fn direct_solve(
+    stiff: &StiffSettings,
+    k: &Consts,
+    w: &mut Work,
+    assembled: &mut Assembled,
+    factor: &mut BlockTridiagonal,
+    factor_valid: &mut bool,
+    report: &mut StiffReport,
+    tolerance: f64,
+    first: bool,
+) -> (f64, usize) {
+    let mut used = 0;
+    let mut residual = f64::NAN;
+    {
+        {
             let mut previous = f64::INFINITY;
             for it in 0..=stiff.iterations {
                 let last = it == stiff.iterations;
@@ -989,7 +1100,7 @@ fn solve_step<T: Real>(
                         Refactor::Lagged => false,
                     };
                 if refactor && !last {
-                    w.precondition(k, stiff.geometric, it == 0);
+                    w.precondition(k, stiff.geometric, first && it == 0);
                 }
                 residual = w.rhs(k);
                 // At least one iteration: with λ = 0 the residual `C` of a compliant
@@ -1008,6 +1119,9 @@ fn solve_step<T: Real>(
                 }
                 if refactor {
                     w.assemble(k, assembled);
+                    if !w.pinned.is_empty() {
+                        w.pin_blocks(k, assembled);
+                    }
                     factor.factor(assembled);
                     *factor_valid = true;
                     report.factorisations += 1;
@@ -1018,20 +1132,8 @@ fn solve_step<T: Real>(
                 used += 1;
             }
         }
-        StiffScheme::GaussSeidel => {
-            for _ in 0..stiff.iterations {
-                residual = xpbd::sweep(w, k);
-                used += 1;
-                if residual <= stiff.tolerance {
-                    break;
-                }
-            }
-        }
     }
-    report.iterations = used;
-    report.total_iterations += used as u64;
-    report.residual = residual;
-    (residual, tolerance)
+    (residual, used)
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! `tests` at the bottom compares every pass with them, element by element.
 
 use super::Consts;
+use super::contact::Pinned;
 use super::direct::Assembled;
 use super::lanes::{F, Q, Q4s, V, V3s, below, load, mask_ge, padded, store};
 use super::{angle_over_sin_half, exp_small, inv_w};
@@ -55,6 +56,11 @@ pub(crate) struct Work {
     bound_before: Vec<f64>,
     /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (see `step_fixed`).
     pub(crate) shadow: bool,
+    /// Points held on a mesh's surface in this step (`contact.rs`): their displacements are
+    /// projected onto the tangent plane (sliding) or removed (sticking) in every update, and
+    /// the Newton matrix is assembled with the same projected inverse masses
+    /// ([`pin_blocks`](Self::pin_blocks)). Empty without a mesh.
+    pub(crate) pinned: Vec<Pinned>,
 }
 
 /// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
@@ -277,6 +283,7 @@ impl Work {
             self.add_jt(k, &lambda);
             self.lambda = lambda;
         }
+        self.project_pinned();
         for j in chunks(n) {
             let s = self.q.load(j).conj_mul(self.q_pred.load(j));
             // 1/s_w by the series of (1 − |s_v|²)^(−1/2) where it applies (as `inv_w`).
@@ -350,6 +357,7 @@ impl Work {
         let n = self.n;
         let rhs = std::mem::take(&mut self.rhs);
         self.add_jt(k, &rhs);
+        self.project_pinned();
         self.lambda_zero = false;
         for i in chunks(n + 1) {
             self.x.store(i, self.x.load(i) + self.u_x.load(i));
@@ -461,6 +469,87 @@ impl Work {
                     F::ZERO,
                 ],
             );
+        }
+    }
+
+    /// The pinned points' part of `K⁻¹` applied to their displacements `u_x`: a sliding
+    /// point keeps only the component in its contact's tangent plane, a sticking one none.
+    fn project_pinned(&mut self) {
+        for p in &self.pinned {
+            let u = self.u_x.get(p.point);
+            let u = if p.stick {
+                Vec3::zeros()
+            } else {
+                u - p.normal * p.normal.dot(&u)
+            };
+            self.u_x.set(p.point, &u);
+        }
+    }
+
+    /// Corrects the blocks of [`assemble`](Self::assemble) for the pinned points: point `i`
+    /// enters `J K⁻¹ Jᵀ` through `Γ_{i−1}` (as its end, `∂Γ/∂r = D_{i−1}/l0`) and `Γ_i` (as its
+    /// start, `−D_i/l0`) with inverse mass `w I`; pinned, it has `w (I − Σ_k n_k n_kᵀ)` with
+    /// `n_k` its contact normal (sliding) or the three axes (sticking). So, per direction,
+    /// with `a = D_{i−1} n_k / l0_{i−1}` and `b = D_i n_k / l0_i`: `w a aᵀ` comes off the
+    /// diagonal block of `Γ_{i−1}`, `w b bᵀ` off that of `Γ_i`, and `w a bᵀ` is added to their
+    /// coupling (which holds `−w D_{i−1} D_iᵀ / (l0 l0')`).
+    ///
+    /// An element between two sticking points has no motion left along itself (the frame's
+    /// rotation changes `d3 · e` only to second order): its stretch row would be singular in
+    /// inextensible mode. Each sticking point therefore adds half the material's axial
+    /// compliance ([`Consts::alpha_axial`]) to the stretch rows of its elements, in the matrix
+    /// only: the fixed point (`C = 0` on that row) is unchanged, and the tension between two
+    /// sticking points is the one their (tiny) strain gives, as in a real wire.
+    pub(crate) fn pin_blocks(&self, k: &Consts, out: &mut Assembled) {
+        let n = self.n;
+        let axes = [Vec3::x(), Vec3::y(), Vec3::z()];
+        let project = |j: usize, v: &Vec3<f64>| {
+            let il = k.cols.inv_l0[j];
+            Vec3::new(
+                self.dirs[0].get(j).dot(v),
+                self.dirs[1].get(j).dot(v),
+                self.dirs[2].get(j).dot(v),
+            ) * il
+        };
+        let upper = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+        for p in &self.pinned {
+            let i = p.point;
+            let w = k.inv_mass[i];
+            if w == 0.0 {
+                continue;
+            }
+            let directions: &[Vec3<f64>] = if p.stick {
+                &axes
+            } else {
+                std::slice::from_ref(&p.normal)
+            };
+            if p.stick {
+                for j in [i.wrapping_sub(1), i] {
+                    if j < n {
+                        out.records[j][5] += 0.5 * k.alpha_axial[j];
+                    }
+                }
+            }
+            for nk in directions {
+                let a = (i >= 1).then(|| project(i - 1, nk));
+                let b = (i < n).then(|| project(i, nk));
+                for (j, v) in [(i.wrapping_sub(1), a), (i, b)] {
+                    if let Some(v) = v {
+                        let e = &mut out.records[j];
+                        for (slot, (r, c)) in upper.iter().enumerate() {
+                            e[slot] -= w * v[*r] * v[*c];
+                        }
+                    }
+                }
+                if let (Some(a), Some(b)) = (a, b) {
+                    let e = &mut out.records[i - 1];
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            e[Assembled::SECOND + 4 * r + c] += w * a[r] * b[c];
+                        }
+                    }
+                }
+            }
         }
     }
 
@@ -877,5 +966,153 @@ mod tests {
             }
         }
         assert!((worst - expected_worst).abs() <= 1e-12 * expected_worst);
+    }
+
+    /// The pinned points' corrections of the Newton matrix against `J K⁻¹ Jᵀ + α̃` built
+    /// densely with each pinned point's inverse mass `w (I − n nᵀ)` (sliding) or `0` (sticking),
+    /// plus half the axial compliance per sticking point on its elements' stretch rows; and the
+    /// projected update `Δx = K⁻¹ Jᵀ μ` of those points.
+    #[test]
+    fn pinned_points_enter_the_newton_matrix_with_projected_inverse_masses() {
+        let n = 9;
+        let (k, mut w) = setup(n);
+        w.constraints(&k);
+        w.precondition(&k, 1.0, true);
+        let (ss, bt) = reference(&k, &w);
+        let normal = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let pin = |point, stick| Pinned {
+            point,
+            normal,
+            stick,
+            push: Vec3::zeros(),
+            pn: 0.0,
+        };
+        // Sliding inside, sticking inside, sticking at the free end, sliding neighbours.
+        w.pinned = vec![pin(3, false), pin(4, false), pin(6, true), pin(9, true)];
+        let mut asm = Assembled::default();
+        w.assemble(&k, &mut asm);
+        w.pin_blocks(&k, &mut asm);
+        // Dense J (6n rows: Γ_j then Ω_j per element; 3(n + 1) point and 3n frame columns).
+        let (rows, cols) = (6 * n, 3 * (n + 1) + 3 * n);
+        let mut jac = vec![vec![0.0; cols]; rows];
+        let frame = |j: usize| 3 * (n + 1) + 3 * j;
+        for j in 0..n {
+            for r in 0..3 {
+                for c in 0..3 {
+                    jac[6 * j + r][3 * (j + 1) + c] = ss[j].d_rb[(r, c)];
+                    jac[6 * j + r][3 * j + c] = -ss[j].d_rb[(r, c)];
+                    jac[6 * j + r][frame(j) + c] = ss[j].d_theta[(r, c)];
+                    if j + 1 < n {
+                        jac[6 * j + 3 + r][frame(j) + c] = bt[j].d_theta_a[(r, c)];
+                        jac[6 * j + 3 + r][frame(j + 1) + c] = bt[j].d_theta_b[(r, c)];
+                    }
+                }
+            }
+        }
+        // K⁻¹, block diagonal.
+        let mut kinv = vec![vec![0.0; cols]; cols];
+        for i in 0..=n {
+            let wi = k.inv_mass[i];
+            let m = match w.pinned.iter().find(|p| p.point == i) {
+                Some(p) if p.stick => nalgebra::Matrix3::zeros(),
+                Some(p) => (nalgebra::Matrix3::identity() - p.normal * p.normal.transpose()) * wi,
+                None => nalgebra::Matrix3::identity() * wi,
+            };
+            for r in 0..3 {
+                for c in 0..3 {
+                    kinv[3 * i + r][3 * i + c] = m[(r, c)];
+                }
+            }
+        }
+        for j in 0..n {
+            let d = w.inv_k.get(j);
+            for r in 0..3 {
+                kinv[frame(j) + r][frame(j) + r] = d[r];
+            }
+        }
+        let entry = |a: usize, b: usize| -> f64 {
+            let mut s = 0.0;
+            for p in 0..cols {
+                if jac[a][p] == 0.0 {
+                    continue;
+                }
+                for q in 0..cols {
+                    s += jac[a][p] * kinv[p][q] * jac[b][q];
+                }
+            }
+            s
+        };
+        // Expected α̃ on the diagonal (the lanes' damped compliances) and the regularisation.
+        let mut alpha = vec![0.0; rows];
+        for j in 0..n {
+            let ag = k.cols.alpha_g.get(j);
+            for r in 0..3 {
+                alpha[6 * j + r] = ag[r];
+            }
+            if j + 1 < n {
+                let ao = k.cols.alpha_o.get(j);
+                for r in 0..3 {
+                    alpha[6 * j + 3 + r] = ao[r];
+                }
+            }
+        }
+        for p in w.pinned.iter().filter(|p| p.stick) {
+            for j in [p.point.wrapping_sub(1), p.point] {
+                if j < n {
+                    alpha[6 * j + 2] += 0.5 * k.alpha_axial[j];
+                }
+            }
+        }
+        // The record entries of a Γ block row: diagonal upper triangle, then the blocks with
+        // Ω_j (NEXT) and Γ_{j+1} (SECOND).
+        let upper = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+        for j in 0..n {
+            let rec = &asm.records[j];
+            let g = 6 * j;
+            let scale = (0..3).map(|r| entry(g + r, g + r).abs()).fold(0.0, f64::max);
+            let check = |got: f64, want: f64, what: &str| {
+                assert!(
+                    (got - want).abs() <= 1e-10 * scale,
+                    "element {j}, {what}: {got} vs {want}"
+                );
+            };
+            for (slot, (r, c)) in upper.iter().enumerate() {
+                let want = entry(g + r, g + c) + if r == c { alpha[g + r] } else { 0.0 };
+                check(rec[slot], want, "Γ diagonal");
+            }
+            for r in 0..3 {
+                for c in 0..3 {
+                    if j + 1 < n {
+                        check(rec[Assembled::NEXT + 4 * r + c], entry(g + r, g + 3 + c), "Γ–Ω");
+                        check(
+                            rec[Assembled::SECOND + 4 * r + c],
+                            entry(g + r, g + 6 + c),
+                            "Γ–Γ next",
+                        );
+                    }
+                }
+            }
+        }
+        // The update of the pinned points: K⁻¹ Jᵀ μ with the projected inverse masses.
+        let mu: [V3s; 2] = {
+            let mut m = [V3s::zeros(n), V3s::zeros(n)];
+            for j in 0..n {
+                let f = j as f64;
+                m[0].set(j, &Vec3::new(f.sin(), 0.5, -f.cos()));
+            }
+            m
+        };
+        w.u_x.fill_zero();
+        w.add_jt(&k, &mu);
+        w.project_pinned();
+        for p in &w.pinned {
+            let u = w.u_x.get(p.point);
+            if p.stick {
+                assert_eq!(u, Vec3::zeros());
+            } else {
+                assert!(u.dot(&p.normal).abs() <= 1e-12 * u.norm(), "{u}");
+                assert!(u.norm() > 0.0);
+            }
+        }
     }
 }

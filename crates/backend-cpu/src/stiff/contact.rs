@@ -1,0 +1,332 @@
+//! Contact of a rod with a static mesh in the stiff scheme, resolved inside the step's solve.
+//!
+//! The explicit scheme answers contacts with impulses after its elastic update
+//! (`crate::mesh_contact`); that works because its steps are microseconds long and a point
+//! moves a fraction of its radius per step. At a haptic step (1 ms) the elastic solve of a
+//! stiff wire moves its points by millimetres: a wire pressed against a wall would be pushed
+//! through it by the solve and pulled back by a projection afterwards, every step. So here the
+//! wall is part of the implicit step: a point in contact is **pinned** to the wall's tangent
+//! plane for the solve (its inverse mass becomes `w (I − n nᵀ)` when it slides, zero when it
+//! sticks; `Work::pin_blocks` and the projections in `Work::rhs`, `Work::apply`), which keeps
+//! the system banded and costs nothing where no point touches.
+//!
+//! Which points are pinned, and how, is an active set found per step (Coulomb friction with
+//! the static and kinetic coefficients of [`MeshContactSettings`]):
+//! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
+//!    spheres against the mesh; those touching or penetrating are put on the wall and pinned,
+//!    sticking (at their start-of-step place, projected onto the wall) if the static
+//!    coefficient is positive, unless they were sliding at the end of the last step;
+//! 2. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` is read: a
+//!    point the wall would have to pull (`n·g ≤ 0`) is released; a sticking point that needs
+//!    more than `μ_s n·g` of tangential impulse starts sliding; a sliding point carries the
+//!    kinetic friction `μ_k n·g` against its slip as a shift of its inertial target `x̃`, and
+//!    sticks again when that friction would reverse its slip; points the solve pushed into
+//!    the mesh are pinned;
+//! 3. if anything changed, the solve continues from its current multipliers with a new
+//!    factorisation, for at most [`MAX_ROUNDS`] rounds; positions a last change moves onto the
+//!    wall are not solved again (the next step does).
+
+use super::Consts;
+use super::work::Work;
+use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
+use constraints::Friction;
+use cosserat_model::Vec3;
+
+/// Largest number of re-solves per step after the active set changed.
+pub(crate) const MAX_ROUNDS: usize = 4;
+
+/// Penetration (and separation of a pinned point) tolerated without a change of the active set,
+/// as a fraction of the rod's radius.
+const DEPTH_TOLERANCE: f64 = 1e-3;
+
+/// A point held on the mesh's surface for one step's solve.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pinned {
+    /// Index of the point.
+    pub(crate) point: usize,
+    /// Unit normal of the wall, out of the mesh.
+    pub(crate) normal: Vec3<f64>,
+    /// Sticking (no motion), or sliding in the tangent plane.
+    pub(crate) stick: bool,
+    /// Kinetic friction of a sliding point as the shift it gives the inertial target `x̃`
+    /// (`μ_k p_n t / m` for a unit direction `t` against the slip), already added to `x_pred`.
+    pub(crate) push: Vec3<f64>,
+    /// Its normal impulse times the step, `p_n = n · g` [kg m], at the last update (from the
+    /// last step before the first).
+    pub(crate) pn: f64,
+}
+
+/// How a point touched the mesh at the end of the last step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+enum Touch {
+    #[default]
+    Free,
+    Stick,
+    /// Sliding, with its normal impulse times the step `p_n` [kg m].
+    Slide(f64),
+}
+
+/// The mesh contact state of one rod in the stiff scheme.
+#[derive(Clone, Debug)]
+pub(crate) struct StiffContacts {
+    mesh: RodMeshContact<f64>,
+    friction: Friction<f64>,
+    radius: f64,
+    /// Per point: how it touched at the end of the last step.
+    last: Vec<Touch>,
+    /// Per point: its entry in `Work::pinned`, or `usize::MAX`.
+    slot: Vec<usize>,
+    /// Per point: whether the last detection found it (scratch of `update`).
+    found: Vec<bool>,
+    /// Largest penetration of the last detection after a solve.
+    depth_after_solve: f64,
+    pub(crate) stats: CollisionStats,
+}
+
+impl StiffContacts {
+    pub(crate) fn new(settings: MeshContactSettings, radius: f64) -> Self {
+        let friction = settings.friction;
+        Self {
+            mesh: RodMeshContact::new(settings),
+            friction,
+            radius,
+            last: Vec::new(),
+            slot: Vec::new(),
+            found: Vec::new(),
+            depth_after_solve: 0.0,
+            stats: CollisionStats::default(),
+        }
+    }
+
+    /// Forgets the contacts of earlier steps and the statistics (see `StiffScratch::prepare`).
+    pub(crate) fn reset(&mut self) {
+        self.last.iter_mut().for_each(|t| *t = Touch::Free);
+        self.stats = CollisionStats::default();
+        self.mesh.stats = CollisionStats::default();
+    }
+
+    fn tolerance(&self) -> f64 {
+        DEPTH_TOLERANCE * self.radius
+    }
+
+    /// Detects at the current positions of `w`.
+    fn detect(&mut self, w: &Work) {
+        let m = w.n + 1;
+        self.mesh
+            .detect(&w.x.x[..m], &w.x.y[..m], &w.x.z[..m], self.radius);
+    }
+
+    /// Step 1 of the module docs, after the prediction: pins the points touching the mesh at
+    /// the solve's starting guess.
+    pub(crate) fn begin_step(&mut self, w: &mut Work, k: &Consts) {
+        let m = w.n + 1;
+        if self.last.len() != m {
+            self.last = vec![Touch::Free; m];
+        }
+        self.slot.clear();
+        self.slot.resize(m, usize::MAX);
+        w.pinned.clear();
+        self.detect(w);
+        let tol = self.tolerance();
+        let Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+        } = self.friction;
+        let found = std::mem::take(&mut self.mesh.contacts);
+        for c in found.contacts() {
+            let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
+            if k.inv_mass[i] == 0.0 || gap > tol {
+                continue;
+            }
+            let mass = 1.0 / k.inv_mass[i];
+            // The velocity of the prediction, in the tangent plane.
+            let v = w.x_pred.get(i) - w.x_old.get(i);
+            let slip = v - normal * normal.dot(&v);
+            let (push, pn) = match self.last[i] {
+                Touch::Slide(pn) if slip.norm() > 0.0 => {
+                    (-slip.normalize() * (mu_k * pn / mass), pn)
+                }
+                Touch::Slide(pn) => (Vec3::zeros(), pn),
+                _ if mu_s > 0.0 => {
+                    self.pin(w, i, normal, gap, true);
+                    continue;
+                }
+                _ => (Vec3::zeros(), 0.0),
+            };
+            self.pin(w, i, normal, gap, false);
+            let p = &mut w.pinned[self.slot[i]];
+            p.push = push;
+            p.pn = pn;
+            w.x_pred.set(i, &(w.x_pred.get(i) + push));
+        }
+        self.mesh.contacts = found;
+    }
+
+    /// Pins point `i` on the plane through its wall point (normal `normal`, the sphere `gap`
+    /// away from it): sliding from where it is, projected; sticking at its place at the start
+    /// of the step, projected.
+    fn pin(&mut self, w: &mut Work, i: usize, normal: Vec3<f64>, gap: f64, stick: bool) {
+        let x = w.x.get(i);
+        // A point of the plane on which the sphere touches the wall.
+        let on_wall = x - normal * gap;
+        let from = if stick { w.x_old.get(i) } else { x };
+        let placed = from - normal * normal.dot(&(from - on_wall));
+        w.x.set(i, &placed);
+        self.slot[i] = w.pinned.len();
+        w.pinned.push(Pinned {
+            point: i,
+            normal,
+            stick,
+            push: Vec3::zeros(),
+            pn: 0.0,
+        });
+    }
+
+    /// `(J_rᵀ λ)_i`: the constraint impulse (times the step) on point `i` at the Jacobians of
+    /// the last `Work::constraints`.
+    fn constraint_impulse(w: &Work, k: &Consts, i: usize) -> Vec3<f64> {
+        let term = |j: usize| {
+            let l = w.lambda[0].get(j);
+            (w.dirs[0].get(j) * l.x + w.dirs[1].get(j) * l.y + w.dirs[2].get(j) * l.z)
+                * k.cols.inv_l0[j]
+        };
+        let mut f = Vec3::zeros();
+        if i >= 1 {
+            f += term(i - 1);
+        }
+        if i < w.n {
+            f -= term(i);
+        }
+        f
+    }
+
+    /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
+    /// pinned points onto the wall. Returns whether anything changed that the solve should
+    /// take into account.
+    pub(crate) fn update(&mut self, w: &mut Work, k: &Consts) -> bool {
+        let Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+        } = self.friction;
+        let mut changed = false;
+        let mut released = false;
+        for s in 0..w.pinned.len() {
+            let mut p = w.pinned[s];
+            let i = p.point;
+            let mass = 1.0 / k.inv_mass[i];
+            let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
+            let g = (x - x_pred) * mass - Self::constraint_impulse(w, k, i);
+            let pn = p.normal.dot(&g);
+            p.pn = pn;
+            if !(pn > 0.0) {
+                // The wall would have to pull: let go.
+                w.x_pred.set(i, &(x_pred - p.push));
+                p.push = Vec3::zeros();
+                p.point = usize::MAX;
+                released = true;
+                w.pinned[s] = p;
+                continue;
+            }
+            if p.stick {
+                let gt = g - p.normal * pn;
+                let need = gt.norm();
+                if need > mu_s * pn {
+                    p.stick = false;
+                    p.push = gt * (mu_k * pn / (need * mass));
+                    w.x_pred.set(i, &(x_pred + p.push));
+                    changed = true;
+                }
+            } else {
+                let d = x - w.x_old.get(i);
+                let slip = d - p.normal * p.normal.dot(&d);
+                if mu_s > 0.0 && slip.dot(&p.push) > 0.0 {
+                    // Friction turned the slip around: the point stopped within the step.
+                    let from = w.x_old.get(i);
+                    w.x.set(i, &(from - p.normal * p.normal.dot(&(from - x))));
+                    w.x_pred.set(i, &(x_pred - p.push));
+                    p.push = Vec3::zeros();
+                    p.stick = true;
+                    changed = true;
+                } else if mu_k > 0.0 && slip.norm() > 0.0 {
+                    let push = -slip.normalize() * (mu_k * pn / mass);
+                    if (push - p.push).norm() > 0.1 * push.norm() {
+                        changed = true;
+                    }
+                    w.x_pred.set(i, &(x_pred + push - p.push));
+                    p.push = push;
+                }
+            }
+            w.pinned[s] = p;
+        }
+        if released {
+            w.pinned.retain(|p| p.point != usize::MAX);
+            self.slot.iter_mut().for_each(|s| *s = usize::MAX);
+            for (s, p) in w.pinned.iter().enumerate() {
+                self.slot[p.point] = s;
+            }
+            changed = true;
+        }
+        // Points the solve pushed into the mesh, and pinned points that left their plane (a
+        // curved wall).
+        self.detect(w);
+        let tol = self.tolerance();
+        self.found.clear();
+        self.found.resize(w.n + 1, false);
+        let mut deepest = 0.0_f64;
+        let touching = std::mem::take(&mut self.mesh.contacts);
+        for c in touching.contacts() {
+            let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
+            self.found[i] = true;
+            if k.inv_mass[i] == 0.0 {
+                continue;
+            }
+            deepest = deepest.max(-gap);
+            let s = self.slot[i];
+            if s != usize::MAX {
+                if gap.abs() > tol {
+                    let x = w.x.get(i);
+                    w.x.set(i, &(x - normal * gap));
+                    w.pinned[s].normal = normal;
+                    changed = true;
+                }
+            } else if gap < -tol {
+                self.pin(w, i, normal, gap, mu_s > 0.0);
+                changed = true;
+            }
+        }
+        self.mesh.contacts = touching;
+        // Pinned points the detection no longer sees have left the wall.
+        let before = w.pinned.len();
+        let found = &self.found;
+        w.pinned.retain(|p| found[p.point]);
+        if w.pinned.len() != before {
+            self.slot.iter_mut().for_each(|s| *s = usize::MAX);
+            for (s, p) in w.pinned.iter().enumerate() {
+                self.slot[p.point] = s;
+            }
+            changed = true;
+        }
+        self.depth_after_solve = deepest;
+        changed
+    }
+
+    /// Records how each point touches at the end of an accepted step, for the next step and
+    /// for the statistics.
+    pub(crate) fn end_step(&mut self, w: &Work) {
+        self.last.iter_mut().for_each(|t| *t = Touch::Free);
+        for p in &w.pinned {
+            self.last[p.point] = if p.stick {
+                Touch::Stick
+            } else {
+                Touch::Slide(p.pn)
+            };
+        }
+        let s = &mut self.stats;
+        s.max_penetration = s.max_penetration.max(self.depth_after_solve);
+        s.contacts = w.pinned.len();
+        s.max_contacts = s.max_contacts.max(s.contacts);
+        s.steps += 1;
+        s.escaped_points = self.mesh.stats.escaped_points;
+        s.detection_seconds = self.mesh.stats.detection_seconds;
+    }
+}
