@@ -487,9 +487,9 @@ impl SimulationBuilder {
                         "rod {i}: guide length {length} m is invalid: expected a number > 0 and at most the rod's length ({rod_length} m)"
                     )));
                 }
-                if self.backend == Backend::Gpu || self.stiff.is_some() {
+                if self.backend == Backend::Gpu {
                     return Err(BuildError::Setting(format!(
-                        "rod {i}: a guide (introducer) runs with the explicit scheme on the CPU backends only"
+                        "rod {i}: a guide (introducer) runs on the CPU backends only"
                     )));
                 }
             }
@@ -646,9 +646,16 @@ impl<T: Real> Rods<T> {
                 .collect();
         }
         if let Some(st) = b.stiff {
-            if self.coupling.is_some() || b.environment.is_some() {
+            if self.coupling.is_some() {
                 return Err(BuildError::Setting(
-                    "the stiff solver does not handle contacts or bindings yet: use solver.scheme = \"explicit\"".into(),
+                    "the stiff solver does not handle bindings or rod–rod contact yet: use solver.scheme = \"explicit\"".into(),
+                ));
+            }
+            if st.scheme == backend_cpu::StiffScheme::GaussSeidel
+                && (b.environment.is_some() || b.rods.iter().any(|r| r.guide.is_some()))
+            {
+                return Err(BuildError::Setting(
+                    "the stiff solver's Gauss–Seidel variant handles neither mesh contact nor guides: use the direct solver".into(),
                 ));
             }
             // Sized and built now, so that the first step of a haptic loop costs what the

@@ -52,6 +52,21 @@ impl Guide {
         })
     }
 
+    /// For a point at `r`: its sideways offset from the axis if the guide holds it (behind the
+    /// far end and within the clearance), else `None`. The stiff scheme pins the run of guided
+    /// points from index 1 to the axis (`crate::stiff`).
+    pub(crate) fn lateral_offset(&self, r: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let rel = r - self.origin;
+        let along = rel.dot(&self.axis);
+        let lateral = rel - self.axis * along;
+        (along < self.length && lateral.norm() <= self.clearance).then_some(lateral)
+    }
+
+    /// The unit axis.
+    pub(crate) fn axis(&self) -> Vector3<f64> {
+        self.axis
+    }
+
     /// Puts the guided points (from index 1, the first point being held) on the axis and
     /// removes their sideways velocity.
     ///

@@ -13,21 +13,30 @@
 //! Which points are pinned, and how, is an active set found per step (Coulomb friction with
 //! the static and kinetic coefficients of [`MeshContactSettings`]):
 //! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
-//!    spheres against the mesh; those touching or penetrating are put on the wall and pinned,
-//!    sticking (at their start-of-step place, projected onto the wall) if the static
-//!    coefficient is positive, unless they were sliding at the end of the last step;
-//! 2. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` is read: a
+//!    spheres against the mesh; those touching or penetrating are put on the wall and pinned:
+//!    sticking (at their start-of-step place, projected onto the wall) if they stuck at the end
+//!    of the last step, else sliding, with the kinetic friction of their last normal impulse;
+//! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
+//!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
+//!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step);
+//! 3. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` is read: a
 //!    point the wall would have to pull (`n·g ≤ 0`) is released; a sticking point that needs
-//!    more than `μ_s n·g` of tangential impulse starts sliding; a sliding point carries the
-//!    kinetic friction `μ_k n·g` against its slip as a shift of its inertial target `x̃`, and
-//!    sticks again when that friction would reverse its slip; points the solve pushed into
-//!    the mesh are pinned;
-//! 3. if anything changed, the solve continues from its current multipliers with a new
+//!    more than `μ_s n·g` of tangential impulse starts sliding (and so does every sticking
+//!    point of a solve that did not converge: an inextensible wire pushed against sticking
+//!    points may have no solution); a sliding point sticks when static friction could have held
+//!    it where the step began, and otherwise carries the kinetic friction `μ_k n·g` against its
+//!    slip as a shift of its inertial target `x̃`;
+//! 4. if anything changed, the solve continues from its current multipliers with a new
 //!    factorisation, for at most [`MAX_ROUNDS`] rounds; positions a last change moves onto the
 //!    wall are not solved again (the next step does).
+//!
+//! New contacts start sliding rather than sticking: sticking first made the pushed guidewire
+//! of `scenes/guidewire-insertion.toml` end steps unconverged and compressed (largest strain
+//! 0.2–0.35 with the axial retry) where sliding first converged (largest strain 1e-6).
 
 use super::Consts;
 use super::work::Work;
+use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
 use constraints::Friction;
 use cosserat_model::Vec3;
@@ -48,6 +57,9 @@ pub(crate) struct Pinned {
     pub(crate) normal: Vec3<f64>,
     /// Sticking (no motion), or sliding in the tangent plane.
     pub(crate) stick: bool,
+    /// Held on a line along `normal` (a guide, [`pin_guided`]) instead of a plane across it;
+    /// the contact updates leave such points alone.
+    pub(crate) line: bool,
     /// Kinetic friction of a sliding point as the shift it gives the inertial target `x̃`
     /// (`μ_k p_n t / m` for a unit direction `t` against the slip), already added to `x_pred`.
     pub(crate) push: Vec3<f64>,
@@ -125,17 +137,16 @@ impl StiffContacts {
         }
         self.slot.clear();
         self.slot.resize(m, usize::MAX);
-        w.pinned.clear();
+        for (s, p) in w.pinned.iter().enumerate() {
+            self.slot[p.point] = s;
+        }
         self.detect(w);
         let tol = self.tolerance();
-        let Friction {
-            static_coefficient: mu_s,
-            kinetic_coefficient: mu_k,
-        } = self.friction;
+        let mu_k = self.friction.kinetic_coefficient;
         let found = std::mem::take(&mut self.mesh.contacts);
         for c in found.contacts() {
             let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
-            if k.inv_mass[i] == 0.0 || gap > tol {
+            if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
             let mass = 1.0 / k.inv_mass[i];
@@ -147,7 +158,7 @@ impl StiffContacts {
                     (-slip.normalize() * (mu_k * pn / mass), pn)
                 }
                 Touch::Slide(pn) => (Vec3::zeros(), pn),
-                _ if mu_s > 0.0 => {
+                Touch::Stick => {
                     self.pin(w, i, normal, gap, true);
                     continue;
                 }
@@ -177,6 +188,7 @@ impl StiffContacts {
             point: i,
             normal,
             stick,
+            line: false,
             push: Vec3::zeros(),
             pn: 0.0,
         });
@@ -203,7 +215,7 @@ impl StiffContacts {
     /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
     /// pinned points onto the wall. Returns whether anything changed that the solve should
     /// take into account.
-    pub(crate) fn update(&mut self, w: &mut Work, k: &Consts) -> bool {
+    pub(crate) fn update(&mut self, w: &mut Work, k: &Consts, converged: bool) -> bool {
         let Friction {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
@@ -212,6 +224,9 @@ impl StiffContacts {
         let mut released = false;
         for s in 0..w.pinned.len() {
             let mut p = w.pinned[s];
+            if p.line {
+                continue;
+            }
             let i = p.point;
             let mass = 1.0 / k.inv_mass[i];
             let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
@@ -230,7 +245,9 @@ impl StiffContacts {
             if p.stick {
                 let gt = g - p.normal * pn;
                 let need = gt.norm();
-                if need > mu_s * pn {
+                // A solve that did not converge with sticking points may have no solution
+                // with them all sticking (an inextensible wire pushed against them): they slide.
+                if need > mu_s * pn || (!converged && need > 0.0) {
                     p.stick = false;
                     p.push = gt * (mu_k * pn / (need * mass));
                     w.x_pred.set(i, &(x_pred + p.push));
@@ -239,8 +256,12 @@ impl StiffContacts {
             } else {
                 let d = x - w.x_old.get(i);
                 let slip = d - p.normal * p.normal.dot(&d);
-                if mu_s > 0.0 && slip.dot(&p.push) > 0.0 {
-                    // Friction turned the slip around: the point stopped within the step.
+                // The tangential impulse that would have held the point where it was, from
+                // the point alone (its neighbours' share is checked once it sticks).
+                let hold = (p.push - slip).norm() * mass;
+                if mu_s > 0.0 && hold <= mu_s * pn {
+                    // Static friction can hold it (also when kinetic friction turned the slip
+                    // around): the point sticks where the step began.
                     let from = w.x_old.get(i);
                     w.x.set(i, &(from - p.normal * p.normal.dot(&(from - x))));
                     w.x_pred.set(i, &(x_pred - p.push));
@@ -266,6 +287,16 @@ impl StiffContacts {
             }
             changed = true;
         }
+        self.catch_penetrations(w, k) || changed
+    }
+
+    /// Pins the points an iterate has pushed into the mesh (onto the wall), puts pinned points
+    /// that left their plane (a curved wall) back on the wall, and lets go of pinned points the
+    /// detection no longer sees. Returns whether anything changed. Run after every iteration
+    /// of the solve, so that an iterate never travels far into a wall before the rest of the
+    /// rod learns of it.
+    pub(crate) fn catch_penetrations(&mut self, w: &mut Work, k: &Consts) -> bool {
+        let mut changed = false;
         // Points the solve pushed into the mesh, and pinned points that left their plane (a
         // curved wall).
         self.detect(w);
@@ -283,6 +314,9 @@ impl StiffContacts {
             deepest = deepest.max(-gap);
             let s = self.slot[i];
             if s != usize::MAX {
+                if w.pinned[s].line {
+                    continue;
+                }
                 if gap.abs() > tol {
                     let x = w.x.get(i);
                     w.x.set(i, &(x - normal * gap));
@@ -290,7 +324,7 @@ impl StiffContacts {
                     changed = true;
                 }
             } else if gap < -tol {
-                self.pin(w, i, normal, gap, mu_s > 0.0);
+                self.pin(w, i, normal, gap, false);
                 changed = true;
             }
         }
@@ -298,7 +332,7 @@ impl StiffContacts {
         // Pinned points the detection no longer sees have left the wall.
         let before = w.pinned.len();
         let found = &self.found;
-        w.pinned.retain(|p| found[p.point]);
+        w.pinned.retain(|p| p.line || found[p.point]);
         if w.pinned.len() != before {
             self.slot.iter_mut().for_each(|s| *s = usize::MAX);
             for (s, p) in w.pinned.iter().enumerate() {
@@ -314,7 +348,7 @@ impl StiffContacts {
     /// for the statistics.
     pub(crate) fn end_step(&mut self, w: &Work) {
         self.last.iter_mut().for_each(|t| *t = Touch::Free);
-        for p in &w.pinned {
+        for p in w.pinned.iter().filter(|p| !p.line) {
             self.last[p.point] = if p.stick {
                 Touch::Stick
             } else {
@@ -323,10 +357,37 @@ impl StiffContacts {
         }
         let s = &mut self.stats;
         s.max_penetration = s.max_penetration.max(self.depth_after_solve);
-        s.contacts = w.pinned.len();
+        s.contacts = w.pinned.iter().filter(|p| !p.line).count();
         s.max_contacts = s.max_contacts.max(s.contacts);
         s.steps += 1;
         s.escaped_points = self.mesh.stats.escaped_points;
         s.detection_seconds = self.mesh.stats.detection_seconds;
+    }
+}
+
+/// Pins the run of points a guide holds (from index 1 on, the first point being held by the
+/// hand; see [`crate::guide`]) to its axis for the step's solve, starting from the solve's
+/// starting guess: each is put on the axis and may move only along it. Replaces every pin of
+/// `w`.
+pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
+    w.pinned.clear();
+    let axis = guide.axis();
+    for i in 1..=w.n {
+        let x = w.x.get(i);
+        let Some(lateral) = guide.lateral_offset(&x) else {
+            break;
+        };
+        if k.inv_mass[i] == 0.0 {
+            continue;
+        }
+        w.x.set(i, &(x - lateral));
+        w.pinned.push(Pinned {
+            point: i,
+            normal: axis,
+            stick: false,
+            line: true,
+            push: Vec3::zeros(),
+            pn: 0.0,
+        });
     }
 }

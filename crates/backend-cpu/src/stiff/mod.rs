@@ -1014,6 +1014,11 @@ fn solve_step<T: Real>(
         }
     });
     let tolerance = ctx.tolerance(k, w);
+    if let Some(g) = rod.guide.as_ref() {
+        contact::pin_guided(w, k, g);
+    } else {
+        w.pinned.clear();
+    }
     if let Some(c) = contacts.as_deref_mut() {
         c.begin_step(w, k);
     }
@@ -1039,13 +1044,14 @@ fn solve_step<T: Real>(
                     report,
                     tolerance,
                     round == 0,
+                    contacts.as_deref_mut(),
                 );
                 residual = r;
                 used += u;
                 let Some(c) = contacts.as_deref_mut() else {
                     break;
                 };
-                if !c.update(w, k) || round == contact::MAX_ROUNDS {
+                if !c.update(w, k, r <= tolerance) || round == contact::MAX_ROUNDS {
                     break;
                 }
                 *factor_valid = false;
@@ -1081,9 +1087,12 @@ fn direct_solve(
     report: &mut StiffReport,
     tolerance: f64,
     first: bool,
+    mut contacts: Option<&mut StiffContacts>,
 ) -> (f64, usize) {
     let mut used = 0;
     let mut residual = f64::NAN;
+    // Whether the last iteration pinned points (the matrix changed).
+    let mut pins_changed = false;
     {
         {
             let mut previous = f64::INFINITY;
@@ -1094,6 +1103,7 @@ fn direct_solve(
                 }
                 w.constraints(k);
                 let mut refactor = !*factor_valid
+                    || pins_changed
                     || match stiff.refactor {
                         Refactor::EveryIteration => true,
                         Refactor::EveryStep => it == 0,
@@ -1130,6 +1140,9 @@ fn direct_solve(
                 factor.solve(&mut w.rhs);
                 w.apply(k);
                 used += 1;
+                pins_changed = contacts
+                    .as_deref_mut()
+                    .is_some_and(|c| c.catch_penetrations(w, k));
             }
         }
     }

@@ -479,6 +479,8 @@ impl Work {
             let u = self.u_x.get(p.point);
             let u = if p.stick {
                 Vec3::zeros()
+            } else if p.line {
+                p.normal * p.normal.dot(&u)
             } else {
                 u - p.normal * p.normal.dot(&u)
             };
@@ -489,7 +491,8 @@ impl Work {
     /// Corrects the blocks of [`assemble`](Self::assemble) for the pinned points: point `i`
     /// enters `J K⁻¹ Jᵀ` through `Γ_{i−1}` (as its end, `∂Γ/∂r = D_{i−1}/l0`) and `Γ_i` (as its
     /// start, `−D_i/l0`) with inverse mass `w I`; pinned, it has `w (I − Σ_k n_k n_kᵀ)` with
-    /// `n_k` its contact normal (sliding) or the three axes (sticking). So, per direction,
+    /// `n_k` its contact normal (sliding), the two directions across a guide's axis (held on
+    /// the axis), or the three axes (sticking). So, per direction,
     /// with `a = D_{i−1} n_k / l0_{i−1}` and `b = D_i n_k / l0_i`: `w a aᵀ` comes off the
     /// diagonal block of `Γ_{i−1}`, `w b bᵀ` off that of `Γ_i`, and `w a bᵀ` is added to their
     /// coupling (which holds `−w D_{i−1} D_iᵀ / (l0 l0')`).
@@ -518,8 +521,12 @@ impl Work {
             if w == 0.0 {
                 continue;
             }
+            let across;
             let directions: &[Vec3<f64>] = if p.stick {
                 &axes
+            } else if p.line {
+                across = perpendiculars(&p.normal);
+                &across
             } else {
                 std::slice::from_ref(&p.normal)
             };
@@ -717,6 +724,20 @@ impl Work {
         let hi = hi.to_array().into_iter().fold(0.0, f64::max);
         Ok((lo, hi))
     }
+}
+
+/// Two unit vectors perpendicular to the unit vector `a` and to each other.
+fn perpendiculars(a: &Vec3<f64>) -> [Vec3<f64>; 2] {
+    // Cross with the axis `a` is least aligned with.
+    let pick = if a.x.abs() <= a.y.abs() && a.x.abs() <= a.z.abs() {
+        Vec3::x()
+    } else if a.y.abs() <= a.z.abs() {
+        Vec3::y()
+    } else {
+        Vec3::z()
+    };
+    let b = a.cross(&pick).normalize();
+    [b, a.cross(&b)]
 }
 
 /// A 3×3 matrix per lane, row-major.
@@ -980,15 +1001,22 @@ mod tests {
         w.precondition(&k, 1.0, true);
         let (ss, bt) = reference(&k, &w);
         let normal = Vec3::new(0.3, -0.5, 0.8).normalize();
-        let pin = |point, stick| Pinned {
+        let pin = |point, stick, line| Pinned {
             point,
             normal,
             stick,
+            line,
             push: Vec3::zeros(),
             pn: 0.0,
         };
-        // Sliding inside, sticking inside, sticking at the free end, sliding neighbours.
-        w.pinned = vec![pin(3, false), pin(4, false), pin(6, true), pin(9, true)];
+        // On a line, sliding neighbours, sticking inside and at the free end.
+        w.pinned = vec![
+            pin(1, false, true),
+            pin(3, false, false),
+            pin(4, false, false),
+            pin(6, true, false),
+            pin(9, true, false),
+        ];
         let mut asm = Assembled::default();
         w.assemble(&k, &mut asm);
         w.pin_blocks(&k, &mut asm);
@@ -1015,6 +1043,7 @@ mod tests {
             let wi = k.inv_mass[i];
             let m = match w.pinned.iter().find(|p| p.point == i) {
                 Some(p) if p.stick => nalgebra::Matrix3::zeros(),
+                Some(p) if p.line => p.normal * p.normal.transpose() * wi,
                 Some(p) => (nalgebra::Matrix3::identity() - p.normal * p.normal.transpose()) * wi,
                 None => nalgebra::Matrix3::identity() * wi,
             };
@@ -1069,7 +1098,9 @@ mod tests {
         for j in 0..n {
             let rec = &asm.records[j];
             let g = 6 * j;
-            let scale = (0..3).map(|r| entry(g + r, g + r).abs()).fold(0.0, f64::max);
+            let scale = (0..3)
+                .map(|r| entry(g + r, g + r).abs())
+                .fold(0.0, f64::max);
             let check = |got: f64, want: f64, what: &str| {
                 assert!(
                     (got - want).abs() <= 1e-10 * scale,
@@ -1083,7 +1114,11 @@ mod tests {
             for r in 0..3 {
                 for c in 0..3 {
                     if j + 1 < n {
-                        check(rec[Assembled::NEXT + 4 * r + c], entry(g + r, g + 3 + c), "Γ–Ω");
+                        check(
+                            rec[Assembled::NEXT + 4 * r + c],
+                            entry(g + r, g + 3 + c),
+                            "Γ–Ω",
+                        );
                         check(
                             rec[Assembled::SECOND + 4 * r + c],
                             entry(g + r, g + 6 + c),
@@ -1109,6 +1144,9 @@ mod tests {
             let u = w.u_x.get(p.point);
             if p.stick {
                 assert_eq!(u, Vec3::zeros());
+            } else if p.line {
+                assert!(u.cross(&p.normal).norm() <= 1e-12 * u.norm(), "{u}");
+                assert!(u.norm() > 0.0);
             } else {
                 assert!(u.dot(&p.normal).abs() <= 1e-12 * u.norm(), "{u}");
                 assert!(u.norm() > 0.0);
