@@ -79,7 +79,8 @@ pub enum StiffScheme {
     #[default]
     Direct,
     /// XPBD with Gauss–Seidel sweeps, one constraint at a time (Macklin et al. 2016). Cheap per
-    /// sweep, but needs many sweeps on long stiff rods; kept for comparison.
+    /// sweep, but needs many sweeps on long stiff rods; kept for comparison. It ignores
+    /// internal damping, mesh contacts and guides.
     GaussSeidel,
 }
 
