@@ -755,3 +755,48 @@ fn a_step_that_stays_unconverged_stops_the_run() {
         assert!(e.to_string().contains("far from converged"), "{e}");
     }
 }
+
+/// The reaction at a clamped end (what a haptic device renders) balances the rod at rest: a
+/// nitinol cantilever settled under gravity at dt 1 ms needs a force `−Σ m g` and a torque
+/// `−Σ (x_i − x_0) × m_i g` from its clamp, whatever the tip load adds to both.
+#[test]
+fn the_clamp_reaction_balances_a_cantilever_at_rest() {
+    let p = cosserat_model::presets::preset("nitinol").unwrap();
+    let (length, n, tip_force) = (0.2, 40, 1e-3);
+    let mut rod =
+        tip_loaded_cantilever(p, length, n, 50.0, tip_force).with_reaction_cutoff(f64::INFINITY);
+    let g = Vec3::new(0.0, 0.0, -9.81);
+    let s = settings::<f64>(1e-3, g, false);
+    let mut sc = StiffScratch::new();
+    step_rod_stiff(
+        &mut rod,
+        &s,
+        &StiffSettings::default(),
+        &mut sc,
+        0.0,
+        0,
+        0,
+        3000,
+    )
+    .unwrap();
+    let r = rod
+        .end_reaction_raw(0)
+        .expect("a clamped end has a reaction");
+    let x0 = rod.state.positions[0];
+    let tip = Vec3::new(0.0, 0.0, -tip_force);
+    let mut force = -tip;
+    let mut torque = -(rod.state.positions[n] - x0).cross(&tip);
+    for (x, m) in rod.state.positions.iter().zip(&rod.params.masses) {
+        force -= g * *m;
+        torque -= (x - x0).cross(&(g * *m));
+    }
+    let (f, t) = (Vec3::from(r.force), Vec3::from(r.torque));
+    assert!(
+        (f - force).norm() <= 1e-6 * force.norm(),
+        "force {f} against {force}"
+    );
+    assert!(
+        (t - torque).norm() <= 1e-4 * torque.norm(),
+        "torque {t} against {torque}"
+    );
+}

@@ -863,6 +863,9 @@ fn step_fixed<T: Real>(
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
         // energy without changing static equilibria.
         w.velocities(h, drag);
+        if rod.reaction.is_some() {
+            record_reactions(rod, w, k, h, &gravity);
+        }
         // Divergence check, as the explicit stepper's, on squared stretches (`|r − 1| > limit`
         // is `r² > (1 + limit)²` or `r² < (1 − limit)²`).
         let (above, below) = ((1.0 + limit).powi(2), (1.0 - limit).max(0.0).powi(2));
@@ -907,6 +910,102 @@ fn step_fixed<T: Real>(
         mesh.stats = c.stats;
     }
     result.map(|()| stats)
+}
+
+/// The reaction at the rod's held ends after an accepted step (see [`crate::reaction`]): the
+/// held point's momentum balance `F = m (v − v_start)/h − m g − f_load − (J_rᵀ λ)/h²`, with
+/// `Jᵀ λ / h²` the constraint forces of the implicit step (XPBD's multipliers are impulses
+/// times the step), and for a clamped end the frame's, `τ = I (ω − ω_start)/h − (J_θᵀ λ)/h²`
+/// in body axes. Uses this step's multipliers (`lambda_prev` once the step is accepted) and the
+/// Jacobians of the last constraint evaluation.
+fn record_reactions<T: Real>(
+    rod: &mut CpuRod<T>,
+    w: &Work,
+    k: &Consts,
+    h: f64,
+    gravity: &Vec3<f64>,
+) {
+    let n = w.n;
+    let lam = &w.lambda_prev;
+    let lit = |v: Vec3<f64>| Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z));
+    let h2 = h * h;
+    let point_impulse = |i: usize| {
+        let term = |j: usize| {
+            let l = lam[0].get(j);
+            (w.dirs[0].get(j) * l.x + w.dirs[1].get(j) * l.y + w.dirs[2].get(j) * l.z)
+                * k.cols.inv_l0[j]
+        };
+        let mut f = Vec3::zeros();
+        if i >= 1 {
+            f += term(i - 1);
+        }
+        if i < n {
+            f -= term(i);
+        }
+        f
+    };
+    // J_θᵀ λ on an end frame: its stretch–shear term and that of its one bend–twist node.
+    let frame_impulse = |j: usize| {
+        let g = w.gamma.get(j) + Vec3::z();
+        let mut t = lam[0].get(j).cross(&g);
+        if n >= 2 {
+            let node = if j == 0 { 0 } else { j - 1 };
+            let s = w.rel.get(node);
+            let mu = lam[1].get(node);
+            let il = 1.0 / k.lbar[node];
+            let (sw_mu, sv_mu) = (mu * s.w, s.imag().cross(&mu));
+            t += if j == 0 {
+                -(sw_mu + sv_mu) * il
+            } else {
+                (sw_mu - sv_mu) * il
+            };
+        }
+        t
+    };
+    let loads: [Vec3<f64>; 2] = [0, n].map(|p| {
+        rod.loads
+            .iter()
+            .filter(|l| l.point == p)
+            .fold(Vec3::zeros(), |a, l| a + v64(&l.force))
+    });
+    let Some(rx) = rod.reaction.as_deref_mut() else {
+        return;
+    };
+    let ht = T::lit(h);
+    for (e, (point, frame)) in [(0, 0), (n, n - 1)].into_iter().enumerate() {
+        if !rx.held[e] {
+            continue;
+        }
+        let m = rod.params.masses[point].to_f64();
+        // `record_point` takes the force on the point (here gravity, loads and the
+        // constraints') and the velocities before and after.
+        let force = gravity * m + loads[e] + point_impulse(point) / h2;
+        rx.record_point(
+            e,
+            T::lit(m),
+            lit(force),
+            lit(w.v_start.get(point)),
+            lit(w.v.get(point)),
+            ht,
+        );
+        if rx.clamped[e] {
+            let inertia = v64(&rod.params.inertias[frame]);
+            // The body angular velocity the constraint torques alone would have given it.
+            let integrated =
+                w.omega_start.get(frame) + (frame_impulse(frame) / h2).component_div(&inertia) * h;
+            let q = w.q.get(frame);
+            let q = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
+            rx.record_frame(
+                e,
+                &q,
+                lit(inertia),
+                lit(integrated),
+                lit(w.omega.get(frame)),
+                ht,
+            );
+        }
+    }
+    rx.finish([Vec3::zeros(); 2], [Vec3::zeros(); 2], ht);
 }
 
 /// The element with the largest entry of the last right-hand side (bend–twist rows as angles,

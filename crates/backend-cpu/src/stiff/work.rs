@@ -21,8 +21,8 @@ pub(crate) struct Work {
     pub(crate) q_old: Q4s,
     pub(crate) omega: V3s,
     /// Velocities and angular velocities at the start of the step (for a retake).
-    v_start: V3s,
-    omega_start: V3s,
+    pub(crate) v_start: V3s,
+    pub(crate) omega_start: V3s,
     /// Inertial targets `x̃`, `q̃` of the step.
     pub(crate) x_pred: V3s,
     pub(crate) q_pred: Q4s,
