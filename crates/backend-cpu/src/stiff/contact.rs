@@ -35,6 +35,7 @@
 //! 0.2–0.35 with the axial retry) where sliding first converged (largest strain 1e-6).
 
 use super::Consts;
+use super::lanes::V3s;
 use super::work::Work;
 use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
@@ -194,24 +195,6 @@ impl StiffContacts {
         });
     }
 
-    /// `(J_rᵀ λ)_i`: the constraint impulse (times the step) on point `i` at the Jacobians of
-    /// the last `Work::constraints`.
-    fn constraint_impulse(w: &Work, k: &Consts, i: usize) -> Vec3<f64> {
-        let term = |j: usize| {
-            let l = w.lambda[0].get(j);
-            (w.dirs[0].get(j) * l.x + w.dirs[1].get(j) * l.y + w.dirs[2].get(j) * l.z)
-                * k.cols.inv_l0[j]
-        };
-        let mut f = Vec3::zeros();
-        if i >= 1 {
-            f += term(i - 1);
-        }
-        if i < w.n {
-            f -= term(i);
-        }
-        f
-    }
-
     /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
     /// pinned points onto the wall. Returns whether anything changed that the solve should
     /// take into account.
@@ -230,7 +213,7 @@ impl StiffContacts {
             let i = p.point;
             let mass = 1.0 / k.inv_mass[i];
             let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
-            let g = (x - x_pred) * mass - Self::constraint_impulse(w, k, i);
+            let g = (x - x_pred) * mass - constraint_impulse(w, k, &w.lambda[0], i);
             let pn = p.normal.dot(&g);
             p.pn = pn;
             if !(pn > 0.0) {
@@ -390,4 +373,22 @@ pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
             pn: 0.0,
         });
     }
+}
+
+/// `(J_rᵀ λ)_i`: the impulse (times the step) the stretch–shear multipliers `lambda` give
+/// point `i`, at the Jacobians of the last `Work::constraints`.
+pub(crate) fn constraint_impulse(w: &Work, k: &Consts, lambda: &V3s, i: usize) -> Vec3<f64> {
+    let term = |j: usize| {
+        let l = lambda.get(j);
+        (w.dirs[0].get(j) * l.x + w.dirs[1].get(j) * l.y + w.dirs[2].get(j) * l.z)
+            * k.cols.inv_l0[j]
+    };
+    let mut f = Vec3::zeros();
+    if i >= 1 {
+        f += term(i - 1);
+    }
+    if i < w.n {
+        f -= term(i);
+    }
+    f
 }

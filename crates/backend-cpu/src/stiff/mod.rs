@@ -929,21 +929,6 @@ fn record_reactions<T: Real>(
     let lam = &w.lambda_prev;
     let lit = |v: Vec3<f64>| Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z));
     let h2 = h * h;
-    let point_impulse = |i: usize| {
-        let term = |j: usize| {
-            let l = lam[0].get(j);
-            (w.dirs[0].get(j) * l.x + w.dirs[1].get(j) * l.y + w.dirs[2].get(j) * l.z)
-                * k.cols.inv_l0[j]
-        };
-        let mut f = Vec3::zeros();
-        if i >= 1 {
-            f += term(i - 1);
-        }
-        if i < n {
-            f -= term(i);
-        }
-        f
-    };
     // J_θᵀ λ on an end frame: its stretch–shear term and that of its one bend–twist node.
     let frame_impulse = |j: usize| {
         let g = w.gamma.get(j) + Vec3::z();
@@ -979,7 +964,7 @@ fn record_reactions<T: Real>(
         let m = rod.params.masses[point].to_f64();
         // `record_point` takes the force on the point (here gravity, loads and the
         // constraints') and the velocities before and after.
-        let force = gravity * m + loads[e] + point_impulse(point) / h2;
+        let force = gravity * m + loads[e] + contact::constraint_impulse(w, k, &lam[0], point) / h2;
         rx.record_point(
             e,
             T::lit(m),
