@@ -1,32 +1,13 @@
 //! Rods against static meshes: resting contact, Coulomb friction on an incline, and a wire
 //! pushed into a wall.
 
-use backend_cpu::{
-    CpuRod, EndCondition, MeshContactSettings, Ordering, PrescribedMotion, SolverSettings,
-    step_rod_batch,
-};
-use collide::{MeshCollider, TriMesh};
-use constraints::Friction;
+use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod_batch};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
-use std::sync::Arc;
 
-/// A square of side `2 half` centred at `centre`, spanned by the unit vectors `u`, `v`, with its
-/// normal `u × v` on the side the rod is.
-fn square(centre: Vec3<f64>, u: Vec3<f64>, v: Vec3<f64>, half: f64) -> Arc<MeshCollider> {
-    let corners = [
-        centre - u * half - v * half,
-        centre + u * half - v * half,
-        centre + u * half + v * half,
-        centre - u * half + v * half,
-    ];
-    let vertices: Vec<[f64; 3]> = corners.iter().map(|c| [c.x, c.y, c.z]).collect();
-    let (mesh, _) = TriMesh::new(vertices, vec![[0, 1, 2], [0, 2, 3]], "square").unwrap();
-    let collider = MeshCollider::new(mesh);
-    // The normal of the first face must point to the rod's side.
-    assert!((Vec3::from(collider.mesh().face_normal(0)) - u.cross(&v)).norm() < 1e-12);
-    Arc::new(collider)
-}
+#[allow(dead_code, unreachable_pub)]
+mod support;
+use support::{contact, square, wire_pushed_at_a_wall};
 
 fn rod_along(
     start: Vec3<f64>,
@@ -53,17 +34,6 @@ fn settings(gravity: Vec3<f64>) -> SolverSettings<f64> {
         extensible: false,
         gravity,
         divergence_strain: 0.5,
-    }
-}
-
-fn contact(collider: Arc<MeshCollider>, mu_s: f64, mu_k: f64) -> MeshContactSettings {
-    MeshContactSettings {
-        collider,
-        friction: Friction {
-            static_coefficient: mu_s,
-            kinetic_coefficient: mu_k,
-        },
-        margin: 1e-4,
     }
 }
 
@@ -155,30 +125,7 @@ fn coulomb_friction_on_an_incline() {
 #[test]
 fn a_wire_pushed_into_a_wall_buckles() {
     let r = 1e-3;
-    // Wall at x = 0.2 facing -x.
-    let wall = square(Vec3::new(0.2, 0.0, 0.0), Vec3::z(), Vec3::y(), 0.5);
-    let push = PrescribedMotion {
-        velocity: Vec3::new(0.2, 0.0, 0.0),
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
-        end_time: f64::INFINITY,
-    };
-    let spec = RodSpec::new(Material::new(1e6, 1e6 / 3.0, 1100.0, r));
-    // A slightly bent wire (1 mm sag) so that the buckling direction is defined.
-    let pts: Vec<[f64; 3]> = (0..=40)
-        .map(|i| {
-            let s = i as f64 / 40.0;
-            [0.19 * s, 1e-3 * (std::f64::consts::PI * s).sin(), 0.0]
-        })
-        .collect();
-    let (state, params) = build_rod::<f64>(&pts, &spec).unwrap();
-    let mut rod = CpuRod::new(
-        state,
-        params,
-        [EndCondition::clamped().driven(push), EndCondition::free()],
-        vec![],
-    )
-    .with_mesh(contact(wall, 0.1, 0.1));
+    let mut rod = wire_pushed_at_a_wall(r);
     let mut s = settings(Vec3::zeros());
     s.dt = 2e-5;
     // Push the base 5 cm towards the wall (0.25 s).

@@ -5,11 +5,15 @@ use backend_cpu::{
     BindingSpec, Coupling, CpuRod, EndCondition, MeshContactSettings, Ordering, PrescribedMotion,
     RodContactSpec, SolverSettings, StepStats, step_coupled_batch, step_rod,
 };
-use collide::{MeshCollider, TriMesh};
+use collide::MeshCollider;
 use constraints::{BindingVariant, Friction};
 use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 use std::sync::Arc;
+
+#[allow(dead_code, unreachable_pub)]
+mod support;
+use support::square;
 
 fn settings(dt: f64, gravity: Vec3<f64>, ordering: Ordering) -> SolverSettings<f64> {
     SolverSettings {
@@ -105,19 +109,9 @@ fn cantilever_reaction_is_weight_and_weight_times_lever_arm() {
     }
 }
 
+/// A wall at `x` facing −x.
 fn wall(x: f64) -> Arc<MeshCollider> {
-    let (u, v) = (Vec3::z(), Vec3::y());
-    let c = Vec3::new(x, 0.0, 0.0);
-    let h = 0.5;
-    let corners = [
-        c - u * h - v * h,
-        c + u * h - v * h,
-        c + u * h + v * h,
-        c - u * h + v * h,
-    ];
-    let vertices: Vec<[f64; 3]> = corners.iter().map(|c| [c.x, c.y, c.z]).collect();
-    let (mesh, _) = TriMesh::new(vertices, vec![[0, 1, 2], [0, 2, 3]], "wall").unwrap();
-    Arc::new(MeshCollider::new(mesh))
+    square(Vec3::new(x, 0.0, 0.0), Vec3::z(), Vec3::y(), 0.5)
 }
 
 /// A wire pushed into a wall with friction, then held: at every step the pushing force plus the

@@ -122,6 +122,15 @@ impl StiffContacts {
         DEPTH_TOLERANCE * self.radius
     }
 
+    /// Rebuilds `slot` from `w.pinned`.
+    fn reindex(&mut self, w: &Work) {
+        self.slot.clear();
+        self.slot.resize(w.n + 1, usize::MAX);
+        for (s, p) in w.pinned.iter().enumerate() {
+            self.slot[p.point] = s;
+        }
+    }
+
     /// Detects at the current positions of `w`.
     fn detect(&mut self, w: &Work) {
         let m = w.n + 1;
@@ -136,11 +145,7 @@ impl StiffContacts {
         if self.last.len() != m {
             self.last = vec![Touch::Free; m];
         }
-        self.slot.clear();
-        self.slot.resize(m, usize::MAX);
-        for (s, p) in w.pinned.iter().enumerate() {
-            self.slot[p.point] = s;
-        }
+        self.reindex(w);
         self.detect(w);
         let tol = self.tolerance();
         let mu_k = self.friction.kinetic_coefficient;
@@ -264,10 +269,7 @@ impl StiffContacts {
         }
         if released {
             w.pinned.retain(|p| p.point != usize::MAX);
-            self.slot.iter_mut().for_each(|s| *s = usize::MAX);
-            for (s, p) in w.pinned.iter().enumerate() {
-                self.slot[p.point] = s;
-            }
+            self.reindex(w);
             changed = true;
         }
         self.catch_penetrations(w, k) || changed
@@ -317,10 +319,7 @@ impl StiffContacts {
         let found = &self.found;
         w.pinned.retain(|p| p.line || found[p.point]);
         if w.pinned.len() != before {
-            self.slot.iter_mut().for_each(|s| *s = usize::MAX);
-            for (s, p) in w.pinned.iter().enumerate() {
-                self.slot[p.point] = s;
-            }
+            self.reindex(w);
             changed = true;
         }
         self.depth_after_solve = deepest;

@@ -1178,58 +1178,54 @@ fn direct_solve(
     let mut residual = f64::NAN;
     // Whether the last iteration pinned points (the matrix changed).
     let mut pins_changed = false;
-    {
-        {
-            let mut previous = f64::INFINITY;
-            for it in 0..=stiff.iterations {
-                let last = it == stiff.iterations;
-                if last && stiff.tolerance <= 0.0 {
-                    break;
-                }
-                w.constraints(k);
-                let mut refactor = !*factor_valid
-                    || pins_changed
-                    || match stiff.refactor {
-                        Refactor::EveryIteration => true,
-                        Refactor::EveryStep => it == 0,
-                        Refactor::Lagged => false,
-                    };
-                if refactor && !last {
-                    w.precondition(k, stiff.geometric, first && it == 0);
-                }
-                residual = w.rhs(k);
-                // At least one iteration: with λ = 0 the residual `C` of a compliant
-                // constraint is its strain, not the imbalance of its force, so a gently
-                // bent rod would pass the test without being solved at all.
-                if (residual <= tolerance && it > 0) || last {
-                    break;
-                }
-                // An iteration that reduced the residual by less than 4×: a reused
-                // factorisation no longer fits (the multipliers, hence the frames' geometric
-                // bound, moved); refactorise with the current ones, as Newton would.
-                if !refactor && residual > 0.25 * previous {
-                    w.precondition(k, stiff.geometric, false);
-                    residual = w.rhs(k);
-                    refactor = true;
-                }
-                if refactor {
-                    w.assemble(k, assembled);
-                    if !w.pinned.is_empty() {
-                        w.pin_blocks(k, assembled);
-                    }
-                    factor.factor(assembled);
-                    *factor_valid = true;
-                    report.factorisations += 1;
-                }
-                previous = residual;
-                factor.solve(&mut w.rhs);
-                w.apply(k);
-                used += 1;
-                pins_changed = contacts
-                    .as_deref_mut()
-                    .is_some_and(|c| c.catch_penetrations(w, k));
-            }
+    let mut previous = f64::INFINITY;
+    for it in 0..=stiff.iterations {
+        let last = it == stiff.iterations;
+        if last && stiff.tolerance <= 0.0 {
+            break;
         }
+        w.constraints(k);
+        let mut refactor = !*factor_valid
+            || pins_changed
+            || match stiff.refactor {
+                Refactor::EveryIteration => true,
+                Refactor::EveryStep => it == 0,
+                Refactor::Lagged => false,
+            };
+        if refactor && !last {
+            w.precondition(k, stiff.geometric, first && it == 0);
+        }
+        residual = w.rhs(k);
+        // At least one iteration: with λ = 0 the residual `C` of a compliant
+        // constraint is its strain, not the imbalance of its force, so a gently
+        // bent rod would pass the test without being solved at all.
+        if (residual <= tolerance && it > 0) || last {
+            break;
+        }
+        // An iteration that reduced the residual by less than 4×: a reused
+        // factorisation no longer fits (the multipliers, hence the frames' geometric
+        // bound, moved); refactorise with the current ones, as Newton would.
+        if !refactor && residual > 0.25 * previous {
+            w.precondition(k, stiff.geometric, false);
+            residual = w.rhs(k);
+            refactor = true;
+        }
+        if refactor {
+            w.assemble(k, assembled);
+            if !w.pinned.is_empty() {
+                w.pin_blocks(k, assembled);
+            }
+            factor.factor(assembled);
+            *factor_valid = true;
+            report.factorisations += 1;
+        }
+        previous = residual;
+        factor.solve(&mut w.rhs);
+        w.apply(k);
+        used += 1;
+        pins_changed = contacts
+            .as_deref_mut()
+            .is_some_and(|c| c.catch_penetrations(w, k));
     }
     (residual, used)
 }
