@@ -232,6 +232,10 @@ pub struct StiffSection {
     /// Retake a step of an inextensible rod that does not converge with the material's axial
     /// compliance (default true; `backend_cpu::StiffSettings::axial_fallback`).
     pub axial_fallback: Option<bool>,
+    /// Answer the mesh query of a touching point that has barely moved between two iterations
+    /// of a step from its last query (default true; `false` queries every point every time;
+    /// `backend_cpu::StiffSettings::reuse_contact_queries`).
+    pub reuse_contact_queries: Option<bool>,
     /// Residual above which a step still unconverged after `iterations` is retaken in halves
     /// (default: never; `backend_cpu::StiffSettings::halve_above`).
     pub halve_above: Option<f64>,
@@ -759,6 +763,9 @@ impl Checker<'_> {
                     }
                     if let Some(a) = x.axial_fallback {
                         st.axial_fallback = a;
+                    }
+                    if let Some(r) = x.reuse_contact_queries {
+                        st.reuse_contact_queries = r;
                     }
                     if let Some(h) = x.halve_above {
                         st.halve_above = self.positive("solver.stiff.halve_above", h)?;

@@ -56,6 +56,11 @@ pub struct CollisionStats {
     pub detection_seconds: f64,
     /// Steps with collision detection.
     pub steps: u64,
+    /// Stiff scheme: point queries between the iterations of a step answered from the point's
+    /// last query instead of the mesh ([`StiffSettings::reuse_contact_queries`]).
+    ///
+    /// [`StiffSettings::reuse_contact_queries`]: crate::StiffSettings::reuse_contact_queries
+    pub reused_queries: u64,
 }
 
 /// How far beyond the query radius the nearest wall is searched for a point's clearance [m].
@@ -109,6 +114,12 @@ impl<T: Real> RodMeshContact<T> {
 
     /// Detects contacts of the points `(x, y, z)` as spheres of `radius`.
     pub(crate) fn detect(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
+        self.detect_except(x, y, z, radius, &[]);
+    }
+
+    /// [`detect`](Self::detect), leaving out the points `i` with `skip[i]` (those past the end
+    /// of `skip` are detected): they are not queried and get no contact.
+    pub(crate) fn detect_except(&mut self, x: &[T], y: &[T], z: &[T], radius: f64, skip: &[bool]) {
         let t0 = std::time::Instant::now();
         let margin = self.settings.margin;
         let reach = radius + margin;
@@ -131,7 +142,7 @@ impl<T: Real> RodMeshContact<T> {
             let d2 = (x[i].to_f64() - cx[i]).powi(2)
                 + (y[i].to_f64() - cy[i]).powi(2)
                 + (z[i].to_f64() - cz[i]).powi(2);
-            if !(d2 < c2[i]) {
+            if !(d2 < c2[i]) && !skip.get(i).is_some_and(|&s| s) {
                 self.due.push(i as u32);
             }
         }

@@ -39,7 +39,7 @@ use super::lanes::V3s;
 use super::work::Work;
 use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
-use constraints::Friction;
+use constraints::{Friction, PointContact};
 use cosserat_model::Vec3;
 
 /// Largest number of re-solves per step after the active set changed.
@@ -48,6 +48,10 @@ pub(crate) const MAX_ROUNDS: usize = 4;
 /// Penetration (and separation of a pinned point) tolerated without a change of the active set,
 /// as a fraction of the rod's radius.
 const DEPTH_TOLERANCE: f64 = 1e-3;
+
+/// How far a touching point may move between two detections of one step before it is queried
+/// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
+const REUSE_DISTANCE: f64 = 0.5;
 
 /// A point held on the mesh's surface for one step's solve.
 #[derive(Clone, Copy, Debug)]
@@ -91,6 +95,11 @@ pub(crate) struct StiffContacts {
     slot: Vec<usize>,
     /// Per point: whether the last detection found it (scratch of `update`).
     found: Vec<bool>,
+    /// Per point: its normal and gap at its last query if it touched (see `detect`), where it
+    /// was then, and whether the current detection leaves it out (scratch).
+    cached: Vec<Option<(Vec3<f64>, f64)>>,
+    queried_at: Vec<Vec3<f64>>,
+    skip: Vec<bool>,
     /// Largest penetration of the last detection after a solve.
     depth_after_solve: f64,
     pub(crate) stats: CollisionStats,
@@ -106,6 +115,9 @@ impl StiffContacts {
             last: Vec::new(),
             slot: Vec::new(),
             found: Vec::new(),
+            cached: Vec::new(),
+            queried_at: Vec::new(),
+            skip: Vec::new(),
             depth_after_solve: 0.0,
             stats: CollisionStats::default(),
         }
@@ -131,11 +143,68 @@ impl StiffContacts {
         }
     }
 
-    /// Detects at the current positions of `w`.
-    fn detect(&mut self, w: &Work) {
+    /// Detects at the current positions of `w`. With `reuse`, a point found touching at its
+    /// last query that has moved less than [`REUSE_DISTANCE`] (as a fraction of the tolerance)
+    /// since, and whose last gap is far enough from every threshold of
+    /// [`catch_penetrations`](Self::catch_penetrations) that no move that short can change what
+    /// that function does with it, is not queried: it keeps its last normal, and its last gap
+    /// less the distance it moved. The gap is a distance to the mesh, which changes no faster
+    /// than the point moves, so the gap passed on is a lower bound (the penetration statistics
+    /// an upper bound) and on the same side of every threshold as the exact one. Between the
+    /// iterations of a solve the points move little, so most contacts are not queried again,
+    /// and the decisions are those of a full query.
+    fn detect(&mut self, w: &Work, k: &Consts, reuse: bool) {
         let m = w.n + 1;
-        self.mesh
-            .detect(&w.x.x[..m], &w.x.y[..m], &w.x.z[..m], self.radius);
+        if self.cached.len() != m {
+            self.cached = vec![None; m];
+            self.queried_at = vec![Vec3::zeros(); m];
+            self.skip = vec![false; m];
+        }
+        let tol = self.tolerance();
+        let reach = REUSE_DISTANCE * tol;
+        let margin = self.mesh.settings.margin;
+        for i in 0..m {
+            self.skip[i] = reuse
+                && self.cached[i].is_some_and(|(_, gap)| {
+                    let held = k.inv_mass[i] == 0.0;
+                    let stays = match self.slot[i] {
+                        usize::MAX => gap - reach >= -tol,
+                        s => w.pinned[s].line || gap.abs() + reach <= tol,
+                    };
+                    gap + reach < margin
+                        && gap - reach > -self.radius
+                        && (held || stays)
+                        && (w.x.get(i) - self.queried_at[i]).norm() < reach
+                });
+        }
+        self.mesh.detect_except(
+            &w.x.x[..m],
+            &w.x.y[..m],
+            &w.x.z[..m],
+            self.radius,
+            &self.skip,
+        );
+        for i in (0..m).filter(|&i| !self.skip[i]) {
+            self.cached[i] = None;
+            self.queried_at[i] = w.x.get(i);
+        }
+        for c in self.mesh.contacts.contacts() {
+            self.cached[c.point as usize] = Some((c.normal, c.gap));
+        }
+        for i in (0..m).filter(|&i| self.skip[i]) {
+            if let Some((normal, gap)) = self.cached[i] {
+                self.stats.reused_queries += 1;
+                // Deeper by the distance moved at most: the gap passed on bounds the
+                // penetration from above (the statistics), and keeps it within the thresholds
+                // checked above (the decisions).
+                let moved = (w.x.get(i) - self.queried_at[i]).norm();
+                self.mesh.contacts.push(PointContact {
+                    point: i as u32,
+                    normal,
+                    gap: gap - moved,
+                });
+            }
+        }
     }
 
     /// Step 1 of the module docs, after the prediction: pins the points touching the mesh at
@@ -146,7 +215,7 @@ impl StiffContacts {
             self.last = vec![Touch::Free; m];
         }
         self.reindex(w);
-        self.detect(w);
+        self.detect(w, k, false);
         let tol = self.tolerance();
         let mu_k = self.friction.kinetic_coefficient;
         let found = std::mem::take(&mut self.mesh.contacts);
@@ -201,9 +270,15 @@ impl StiffContacts {
     }
 
     /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
-    /// pinned points onto the wall. Returns whether anything changed that the solve should
-    /// take into account.
-    pub(crate) fn update(&mut self, w: &mut Work, k: &Consts, converged: bool) -> bool {
+    /// pinned points onto the wall (`reuse` as in [`detect`](Self::detect)). Returns whether
+    /// anything changed that the solve should take into account.
+    pub(crate) fn update(
+        &mut self,
+        w: &mut Work,
+        k: &Consts,
+        converged: bool,
+        reuse: bool,
+    ) -> bool {
         let Friction {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
@@ -272,19 +347,19 @@ impl StiffContacts {
             self.reindex(w);
             changed = true;
         }
-        self.catch_penetrations(w, k) || changed
+        self.catch_penetrations(w, k, reuse) || changed
     }
 
     /// Pins the points an iterate has pushed into the mesh (onto the wall), puts pinned points
     /// that left their plane (a curved wall) back on the wall, and lets go of pinned points the
     /// detection no longer sees. Returns whether anything changed. Run after every iteration
     /// of the solve, so that an iterate never travels far into a wall before the rest of the
-    /// rod learns of it.
-    pub(crate) fn catch_penetrations(&mut self, w: &mut Work, k: &Consts) -> bool {
+    /// rod learns of it. `reuse` as in [`detect`](Self::detect).
+    pub(crate) fn catch_penetrations(&mut self, w: &mut Work, k: &Consts, reuse: bool) -> bool {
         let mut changed = false;
         // Points the solve pushed into the mesh, and pinned points that left their plane (a
         // curved wall).
-        self.detect(w);
+        self.detect(w, k, reuse);
         let tol = self.tolerance();
         self.found.clear();
         self.found.resize(w.n + 1, false);

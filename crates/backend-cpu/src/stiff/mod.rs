@@ -175,6 +175,13 @@ pub struct StiffSettings {
     /// unconverged, with strains of several per cent, or diverge. Counted in
     /// [`StiffReport::axial_steps`].
     pub axial_fallback: bool,
+    /// Between the iterations of a step with mesh contacts, answer the query of a point that
+    /// touched the mesh at its last query from that query when the point has moved too little
+    /// since to change any decision about its contact (`stiff/contact.rs`, `detect`): the
+    /// steps are the same as with every point queried after every iteration, and the detection
+    /// costs a third to a half (`docs/benchmarks/stiff-insertion.md`). `false` queries every
+    /// point every time, for checking.
+    pub reuse_contact_queries: bool,
 }
 
 impl Default for StiffSettings {
@@ -197,6 +204,7 @@ impl Default for StiffSettings {
             max_halvings: 8,
             halve_above: f64::INFINITY,
             axial_fallback: true,
+            reuse_contact_queries: true,
         }
     }
 }
@@ -1136,7 +1144,8 @@ fn solve_step<T: Real>(
                 let Some(c) = contacts.as_deref_mut() else {
                     break;
                 };
-                if !c.update(w, k, r <= tolerance) || round == contact::MAX_ROUNDS {
+                let reuse = stiff.reuse_contact_queries;
+                if !c.update(w, k, r <= tolerance, reuse) || round == contact::MAX_ROUNDS {
                     break;
                 }
                 *factor_valid = false;
@@ -1225,7 +1234,7 @@ fn direct_solve(
         used += 1;
         pins_changed = contacts
             .as_deref_mut()
-            .is_some_and(|c| c.catch_penetrations(w, k));
+            .is_some_and(|c| c.catch_penetrations(w, k, stiff.reuse_contact_queries));
     }
     (residual, used)
 }
