@@ -24,9 +24,18 @@ fn config(cases: u32) -> Config {
 }
 
 /// A random rod: E 1e3…2e11 Pa, radius 0.05…10 mm, 2…12 elements of 0.1…100 mm, random
-/// intrinsic curvature and twist (up to two turns over the rod, and at most a rest turn of
-/// 2.24 rad per element, within the discrete Darboux vector's range), damping, gravity, a
-/// driven clamped start or none, extensible or not, f32 or f64.
+/// intrinsic curvature and twist (up to two turns over the rod, at most a rest turn of 2.24 rad
+/// per element, within the discrete Darboux vector's range, and a rest radius of curvature of
+/// at least twice the rod's radius), damping, gravity, a driven clamped start or none,
+/// extensible or not, f32 or f64.
+///
+/// The last bound keeps the rods physical: a rod cannot be curled tighter than its own radius
+/// (its outer fibres would be stretched by more than 100 %). Without it, 300 cases found one
+/// such rod, E 1e3 Pa, r 10 mm, 5 elements of 5.5 mm, rest curvature 325 1/m (`κ r` = 3.25),
+/// extensible and undamped, released straight: it conserves its energy to 1e-3 for 0.01 s and
+/// then tears an end element past the divergence strain within 0.2 ms; it fails at every dt from
+/// the accepted 1.5e-3 s down to 3e-6 s, so the failure says nothing about the step. With the
+/// bound, 3000 cases pass (and 300 of the stiff solver's test below).
 fn rods() -> impl Strategy<Value = TrialRod> {
     (
         (3.0f64..11.3, 0.0f64..0.5, 500.0f64..8000.0, -4.3f64..-2.0),
@@ -65,10 +74,11 @@ fn rods() -> impl Strategy<Value = TrialRod> {
                     TrialRod::straight(Material::new(e, e / (2.0 * (1.0 + nu)), rho, r), n, l);
                 let turns = 2.0 * std::f64::consts::PI / length;
                 // At most what the discrete Darboux vector can reach (|û| l / 2 < 1, a turn of π
-                // per element; `RodBuildError::UnreachableRestShape`): |û| l / 2 ≤ 0.9.
+                // per element; `RodBuildError::UnreachableRestShape`): |û| l / 2 ≤ 0.9; and a
+                // radius of curvature of at least 2 r (see above).
                 let u = curl.map(|c| c * turns);
                 let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
-                let cap = 1.8 / l;
+                let cap = (1.8 / l).min(0.5 / r);
                 rod.darboux = if norm > cap {
                     u.map(|x| x * cap / norm)
                 } else {
