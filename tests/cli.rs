@@ -211,6 +211,27 @@ fn bad_input_is_an_error_message() {
         "{err}"
     );
     assert!(err.contains("node 0") && err.contains("1.500"), "{err}");
+    // A rest curvature tighter than the wire's radius (nitinol: r = 0.178 mm, 1/r = 5618 1/m).
+    let out = cosserat()
+        .args([
+            "run",
+            "scenes/nitinol-pendulum.toml",
+            "--set",
+            "rod.0.rest_shape={ curvature = [0.0, 6000.0, 0.0] }",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nitinol-pendulum.toml") && err.contains("rod 0"),
+        "{err}"
+    );
+    assert!(
+        err.contains("tighter than its radius") && err.contains("6.0000e3"),
+        "{err}"
+    );
 }
 
 /// `--backend gpu` runs the same scene as the CPU and lands in the same place. Skips (with a

@@ -120,6 +120,12 @@ pub enum RodBuildError {
     /// Darboux vector `(2/l̄) Im(q̄_j q_{j+1})` has a length of at most `2/l̄` (a relative
     /// rotation of π), so `|û| l̄ / 2` (the second field) must stay below 1.
     UnreachableRestShape(usize, f64),
+    /// A uniform rest curvature that bends the rod tighter than its own radius: the bending
+    /// part `|(κ₁, κ₂)|` (the first field, 1/m) times the radius (the second field, m) is at
+    /// least 1, so the rod's inner side would have a negative length. No material takes that
+    /// shape, and the model, a thin rod, says nothing about it (released from straight, such a
+    /// rod tears its elements at every step size; `tests/stability.rs`).
+    RestCurvatureTighterThanRadius(f64, f64),
 }
 
 impl std::fmt::Display for RodBuildError {
@@ -139,6 +145,14 @@ impl std::fmt::Display for RodBuildError {
                 "the rest curvature cannot be reached at node {j}: |κ| l / 2 = {half:.3} (l the \
                  node's length) must be below 1, the discrete Darboux vector's range (a turn of \
                  π per element); use more elements or less curvature"
+            ),
+            Self::RestCurvatureTighterThanRadius(kappa, r) => write!(
+                f,
+                "the rest curvature |(κ1, κ2)| = {kappa:.4e} 1/m bends the rod tighter than its \
+                 radius: a radius of curvature of {:.4e} m against a rod radius of {r:.4e} m; \
+                 expected |(κ1, κ2)| below 1/r = {:.4e} 1/m",
+                1.0 / kappa,
+                1.0 / r
             ),
             Self::InvalidCoefficient(name, v) => write!(
                 f,
@@ -256,6 +270,12 @@ pub fn build_rod<T: Real>(
             })
             .collect(),
         RestShape::Uniform(u) => {
+            let bending = u[0].hypot(u[1]);
+            if !(bending * m.radius < 1.0) {
+                return Err(RodBuildError::RestCurvatureTighterThanRadius(
+                    bending, m.radius,
+                ));
+            }
             let u = Vec3::from(u);
             for j in 0..n.saturating_sub(1) {
                 let half = u.norm() * 0.25 * (lengths[j] + lengths[j + 1]);
@@ -388,5 +408,28 @@ mod tests {
         }
         let msg = at(36.4).unwrap_err().to_string();
         assert!(msg.contains("node 0") && msg.contains("1.820"), "{msg}");
+    }
+
+    /// A uniform rest curvature whose bending part curls the rod tighter than its radius is
+    /// refused with the curvature and the radius; twist alone is not limited by the radius.
+    #[test]
+    fn rest_curvature_tighter_than_the_radius_is_rejected() {
+        let r = mat().radius;
+        let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 1e-3, 2);
+        let at = |u: [f64; 3]| {
+            let mut spec = RodSpec::new(mat());
+            spec.rest_shape = RestShape::Uniform(u);
+            build_rod::<f64>(&pts, &spec)
+        };
+        assert!(at([0.6 / r, 0.79 / r, 0.0]).is_ok());
+        assert!(at([0.0, 0.0, 1.5 / r]).is_ok());
+        match at([0.6 / r, 0.8 / r, 0.0]).unwrap_err() {
+            RodBuildError::RestCurvatureTighterThanRadius(kappa, radius) => {
+                assert!((kappa * r - 1.0).abs() < 1e-12 && radius == r)
+            }
+            e => panic!("{e}"),
+        }
+        let msg = at([2.0 / r, 0.0, 0.0]).unwrap_err().to_string();
+        assert!(msg.contains("tighter than its radius"), "{msg}");
     }
 }
