@@ -192,46 +192,38 @@ fn bad_input_is_an_error_message() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("quantum"));
     // A rest curvature no pair of frames can have (|κ| l / 2 = 30 · 0.1 / 2 = 1.5 ≥ 1).
-    let out = cosserat()
-        .args([
-            "run",
-            "scenes/nitinol-pendulum.toml",
-            "--set",
-            "rod.0.elements=10",
-            "--set",
-            "rod.0.rest_shape={ curvature = [30.0, 0.0, 0.0] }",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("nitinol-pendulum.toml") && err.contains("rod 0"),
-        "{err}"
-    );
+    let err = refused_nitinol_pendulum(&[
+        "rod.0.elements=10",
+        "rod.0.rest_shape={ curvature = [30.0, 0.0, 0.0] }",
+    ]);
     assert!(err.contains("node 0") && err.contains("1.500"), "{err}");
     // A rest curvature tighter than the wire's radius (nitinol: r = 0.178 mm, 1/r = 5618 1/m).
-    let out = cosserat()
-        .args([
-            "run",
-            "scenes/nitinol-pendulum.toml",
-            "--set",
-            "rod.0.rest_shape={ curvature = [0.0, 6000.0, 0.0] }",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("nitinol-pendulum.toml") && err.contains("rod 0"),
-        "{err}"
-    );
+    let err = refused_nitinol_pendulum(&["rod.0.rest_shape={ curvature = [0.0, 6000.0, 0.0] }"]);
     assert!(
         err.contains("tighter than its radius") && err.contains("6.0000e3"),
         "{err}"
     );
+}
+
+/// Runs `scenes/nitinol-pendulum.toml` with the overrides `sets`, which must make it refuse
+/// the scene (exit status 2) with a message naming the file and the rod; returns the message.
+fn refused_nitinol_pendulum(sets: &[&str]) -> String {
+    let mut args = vec!["run", "scenes/nitinol-pendulum.toml"];
+    for kv in sets {
+        args.extend(["--set", kv]);
+    }
+    let out = cosserat()
+        .args(&args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(
+        err.contains("nitinol-pendulum.toml") && err.contains("rod 0"),
+        "{err}"
+    );
+    err
 }
 
 /// `--backend gpu` runs the same scene as the CPU and lands in the same place. Skips (with a
