@@ -288,12 +288,40 @@ fn write_output(dir: &Path, rec: &Recorder) -> Result<(), String> {
     Ok(())
 }
 
+/// What a finished run did that makes its results doubtful: points found through the mesh's
+/// wall, or stiff steps that ended far from converged or often above their tolerance (more
+/// than 1 % of them, or a residual a hundred times the tolerance).
+fn run_warnings(sim: &Simulation) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if let Some(c) = sim.contact_report()
+        && c.escaped_points > 0
+    {
+        warnings.push(format!(
+            "{} points were found behind the mesh's wall at the start of a step: the contacts \
+             did not keep the rod inside",
+            c.escaped_points
+        ));
+    }
+    if let Some(st) = sim.stiff_summary()
+        && (st.unconverged_steps * 100 > st.steps_kept
+            || st.max_residual > 100.0 * st.max_tolerance)
+    {
+        warnings.push(format!(
+            "{} of {} stiff rod-steps ended above their tolerance (largest residual {:.2e} \
+             against {:.1e}): the run is not converged (docs/stiff-solver.md)",
+            st.unconverged_steps, st.steps_kept, st.max_residual, st.max_tolerance
+        ));
+    }
+    warnings
+}
+
 fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
     if !json {
         for w in sim.warnings() {
             eprintln!("warning: {w}");
         }
     }
+    let run_warnings = run_warnings(sim);
     let e = sim.energies();
     let tip = sim
         .positions(RodHandle(0))
@@ -324,6 +352,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "diverged": o.divergence.is_some(),
             "divergence": o.divergence,
             "warnings": sim.warnings(),
+            "run_warnings": run_warnings,
         });
         let mut v = v;
         if let Some([first, median, p99, max]) = o.step_times {
@@ -421,6 +450,9 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         }
         if let Some(d) = &o.divergence {
             println!("DIVERGED   {d}");
+        }
+        for w in &run_warnings {
+            eprintln!("warning: {w}");
         }
     }
 }

@@ -349,3 +349,46 @@ fn the_direct_constraint_solver_is_exact() {
         "iterative {iterative} vs direct {direct}"
     );
 }
+
+/// A run whose stiff steps end far above their tolerance says so (`run_warnings`, and a
+/// `warning:` line in the summary); the same scene converged says nothing.
+#[test]
+fn an_unconverged_run_is_flagged() {
+    let run = |extra: &[&str]| {
+        let args = [
+            &[
+                "run",
+                "scenes/nitinol-pendulum.toml",
+                "--elements",
+                "20",
+                "--steps",
+                "50",
+                "--set",
+                "solver.precision=\"f64\"",
+                "--json",
+            ][..],
+            extra,
+        ]
+        .concat();
+        run_json(&args)
+    };
+    let converged = run(&[]);
+    assert_eq!(converged["stiff"]["unconverged_steps"], 0, "{converged}");
+    assert_eq!(
+        converged["run_warnings"],
+        serde_json::json!([]),
+        "{converged}"
+    );
+    // One iteration against a tolerance no step reaches.
+    let v = run(&[
+        "--set",
+        "solver.stiff.iterations=1",
+        "--set",
+        "solver.stiff.tolerance=1e-12",
+    ]);
+    let warnings = v["run_warnings"].as_array().unwrap();
+    assert!(
+        warnings.len() == 1 && warnings[0].as_str().unwrap().contains("not converged"),
+        "{v}"
+    );
+}
