@@ -37,12 +37,11 @@ fn from_axis(p: [f64; 3]) -> (f64, f64) {
 
 fn pushed(speed: f64) -> EndCondition<f64> {
     let a = unit(DIRECTION);
-    EndCondition::clamped().driven(PrescribedMotion {
-        velocity: Vec3::new(a[0] * speed, a[1] * speed, a[2] * speed),
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
-        end_time: f64::INFINITY,
-    })
+    EndCondition::clamped().driven(PrescribedMotion::push(Vec3::new(
+        a[0] * speed,
+        a[1] * speed,
+        a[2] * speed,
+    )))
 }
 
 /// A soft polymer wire, 0.3 m, 150 elements, like the insertion scene's.

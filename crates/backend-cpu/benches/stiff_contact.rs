@@ -40,12 +40,7 @@ fn pushed_wire() -> CpuRod<f64> {
     let vessel = Vessel::default_tree().unwrap();
     let collider = Arc::new(MeshCollider::new(vessel.mesh.clone()));
     let along = Vec3::from(vessel.entry_direction);
-    let push = PrescribedMotion {
-        velocity: along * 0.2,
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
-        end_time: f64::INFINITY,
-    };
+    let push = PrescribedMotion::push(along * 0.2);
     let spec = RodSpec::new(Material::new(5e6, 5e6 / 3.0, 1100.0, 4e-4));
     let pts = straight_polyline(vessel.entry_point, along.into(), 0.2, 80);
     let (state, params) = build_rod::<f64>(&pts, &spec).unwrap();

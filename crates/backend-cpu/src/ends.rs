@@ -33,6 +33,16 @@ pub struct PrescribedMotion<T: Real> {
 }
 
 impl<T: Real> PrescribedMotion<T> {
+    /// A push at the constant `velocity`, without rotation, from time 0 on.
+    pub fn push(velocity: Vec3<T>) -> Self {
+        Self {
+            velocity,
+            angular_velocity: Vec3::zeros(),
+            start_time: 0.0,
+            end_time: f64::INFINITY,
+        }
+    }
+
     /// Velocity and angular velocity in effect at time `t`.
     pub fn at(&self, t: f64) -> (Vec3<T>, Vec3<T>) {
         if t >= self.start_time && t < self.end_time {

@@ -121,10 +121,8 @@ fn wall(x: f64) -> Arc<MeshCollider> {
 fn pushed_end_reaction_balances_contact_and_friction() {
     let r_wire = 1e-3;
     let push = PrescribedMotion {
-        velocity: Vec3::new(0.2, 0.0, 0.0),
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
         end_time: 0.06, // 2 mm past first touch
+        ..PrescribedMotion::push(Vec3::new(0.2, 0.0, 0.0))
     };
     let mut spec = RodSpec::new(Material::new(1e6, 1e6 / 3.0, 1100.0, r_wire));
     spec.drag = 60.0;

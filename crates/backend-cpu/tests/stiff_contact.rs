@@ -215,12 +215,7 @@ fn reused_contact_queries_give_the_steps_of_full_queries() {
     let collider = std::sync::Arc::new(MeshCollider::new(vessel.mesh.clone()));
     let entry = Vec3::from(vessel.entry_point);
     let along = Vec3::from(vessel.entry_direction);
-    let push = PrescribedMotion {
-        velocity: along * 0.2,
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
-        end_time: f64::INFINITY,
-    };
+    let push = PrescribedMotion::push(along * 0.2);
     let wire = || {
         let ends = [EndCondition::clamped().driven(push), EndCondition::free()];
         let material = Material::new(5e6, 5e6 / 3.0, 1100.0, 4e-4);

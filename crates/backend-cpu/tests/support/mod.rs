@@ -46,12 +46,7 @@ pub fn soft(r: f64) -> Material {
 /// x = 0.2 facing −x (friction 0.1).
 pub fn wire_pushed_at_a_wall(r: f64) -> CpuRod<f64> {
     let wall = square(Vec3::new(0.2, 0.0, 0.0), Vec3::z(), Vec3::y(), 0.5);
-    let push = PrescribedMotion {
-        velocity: Vec3::new(0.2, 0.0, 0.0),
-        angular_velocity: Vec3::zeros(),
-        start_time: 0.0,
-        end_time: f64::INFINITY,
-    };
+    let push = PrescribedMotion::push(Vec3::new(0.2, 0.0, 0.0));
     let spec = RodSpec::new(soft(r));
     let pts: Vec<[f64; 3]> = (0..=40)
         .map(|i| {
