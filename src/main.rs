@@ -372,6 +372,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         if let Some(st) = sim.stiff_summary() {
             v["stiff"] = serde_json::json!({
                 "iterations_per_step": st.iterations_per_step(),
+                "factorisations_per_step": st.factorisations_per_step(),
                 "steps_kept": st.steps_kept,
                 "unconverged_steps": st.unconverged_steps,
                 "halved_steps": st.halved_steps,
@@ -438,8 +439,9 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         }
         if let Some(st) = sim.stiff_summary() {
             println!(
-                "stiff      {:.2} iterations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken in halves, {} with axial compliance",
+                "stiff      {:.2} iterations and {:.2} factorisations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken in halves, {} with axial compliance",
                 st.iterations_per_step(),
+                st.factorisations_per_step(),
                 st.unconverged_steps,
                 st.steps_kept,
                 st.max_tolerance,

@@ -700,6 +700,7 @@ impl<T: Real> Rods<T> {
         };
         for r in scratch.iter().map(backend_cpu::StiffScratch::report) {
             s.iterations += r.total_iterations;
+            s.factorisations += r.factorisations;
             s.steps_kept += r.steps;
             s.unconverged_steps += r.unconverged_steps;
             s.halved_steps += r.halved_steps;
@@ -918,6 +919,10 @@ pub struct StiffSummary {
     pub rod_steps: u64,
     /// Newton iterations, all rods together.
     pub iterations: u64,
+    /// Factorisations of the direct solve's matrix, all rods together (each iteration after
+    /// the first of a step reuses the last one unless the step's settings or a change of
+    /// its contacts ask for a new one).
+    pub factorisations: u64,
     /// Rod-steps kept, each half of a step retaken in halves counted as a rod-step.
     pub steps_kept: u64,
     /// Rod-steps (of `steps_kept`) whose residual was still above the tolerance after the
@@ -940,6 +945,11 @@ impl StiffSummary {
     /// Newton iterations per rod-step (0 before the first step).
     pub fn iterations_per_step(&self) -> f64 {
         self.iterations as f64 / self.rod_steps.max(1) as f64
+    }
+
+    /// Factorisations per rod-step (0 before the first step).
+    pub fn factorisations_per_step(&self) -> f64 {
+        self.factorisations as f64 / self.rod_steps.max(1) as f64
     }
 }
 

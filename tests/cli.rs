@@ -74,6 +74,9 @@ fn stiff_runs_report_their_convergence() {
     let st = &v["stiff"];
     let it = st["iterations_per_step"].as_f64().unwrap();
     assert!((1.0..=2.0).contains(&it), "{st}");
+    // The default refactorises once per step, and again only when an iteration stalls.
+    let factorisations = st["factorisations_per_step"].as_f64().unwrap();
+    assert!((1.0..=it).contains(&factorisations), "{st}");
     let unconverged = st["unconverged_steps"].as_u64().unwrap();
     let (residual, tolerance) = (
         st["max_residual"].as_f64().unwrap(),

@@ -266,3 +266,50 @@ fn reused_contact_queries_give_the_steps_of_full_queries() {
     assert_eq!(reused.1.max_contacts, full.1.max_contacts);
     assert_eq!(reused.1.escaped_points, full.1.escaped_points);
 }
+
+/// A nitinol wire lying on a floor, pushed slowly along its axis from a clamped end (3 mm/s,
+/// `μ_s = 0.5`, `μ_k = 0.3`, gravity, dt 1 ms), slides as a whole: every point moves with the
+/// hand and the wire stays unstrained. Each of its points slips only micrometres per step, so
+/// static friction could hold any one of them alone; putting such a point back where its step
+/// began would strain its elements by its slip (3e-3 of a 1 mm element) against the push of
+/// its neighbours. Points that slipped further than `STICK_JUMP` of an element stick where
+/// they are instead (`stiff/contact.rs`).
+#[test]
+fn a_wire_pushed_along_a_floor_slides_as_a_whole() {
+    let nitinol = preset("nitinol").unwrap().material();
+    let r = nitinol.radius;
+    let floor = square(Vec3::zeros(), Vec3::x(), Vec3::y(), 1.0);
+    let speed = 3e-3;
+    let push = backend_cpu::PrescribedMotion::push(Vec3::x() * speed);
+    let ends = [EndCondition::clamped().driven(push), EndCondition::free()];
+    let start = Vec3::new(-0.025, 0.0, r);
+    let mut rod =
+        rod_along(nitinol, start, Vec3::x(), 0.05, 50, ends).with_mesh(contact(floor, 0.5, 0.3));
+    let s = settings(1e-3, Vec3::new(0.0, 0.0, -9.81));
+    let mut sc = StiffScratch::new();
+    let steps = 500;
+    let tip0 = *rod.state.positions.last().unwrap();
+    let mut largest_strain = 0.0_f64;
+    for step in 0..steps {
+        run(&mut rod, &s, &mut sc, step as f64 * 1e-3, 1);
+        let p = &rod.state.positions;
+        for j in 0..p.len() - 1 {
+            let strain = ((p[j + 1] - p[j]).norm() / rod.params.rest_lengths[j] - 1.0).abs();
+            largest_strain = largest_strain.max(strain);
+        }
+    }
+    let report = sc.report();
+    let moved = rod.state.positions.last().unwrap().x - tip0.x;
+    let expected = speed * steps as f64 * 1e-3;
+    assert!(
+        (moved - expected).abs() < 1e-3 * expected,
+        "the free end moved {moved} m, the hand {expected} m"
+    );
+    assert!(
+        largest_strain < 1e-4,
+        "largest strain {largest_strain}, {report:?}"
+    );
+    assert_eq!(report.unconverged_steps, 0, "{report:?}");
+    assert_eq!(report.axial_steps, 0, "{report:?}");
+    assert!(lowest(&rod) > r * (1.0 - 1e-3), "stays on the floor");
+}

@@ -13,9 +13,12 @@
 //! Which points are pinned, and how, is an active set found per step (Coulomb friction with
 //! the static and kinetic coefficients of [`MeshContactSettings`]):
 //! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
-//!    spheres against the mesh; those touching or penetrating are put on the wall and pinned:
-//!    sticking (at their start-of-step place, projected onto the wall) if they stuck at the end
-//!    of the last step, else sliding, with the kinetic friction of their last normal impulse;
+//!    spheres against the mesh; those that touched at the end of the last step and touch or
+//!    penetrate now, and those penetrating further than the tolerance, are put on the wall and
+//!    pinned: sticking (at their start-of-step place, projected onto the wall) if they stuck at
+//!    the end of the last step, else sliding, with the kinetic friction of their last normal
+//!    impulse (points that were free and merely touch are left to step 2, which pins them if
+//!    the solve pushes them in: pinned first, most of them were let go after the first solve);
 //! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
 //!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
 //!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step);
@@ -24,11 +27,14 @@
 //!    more than `μ_s n·g` of tangential impulse starts sliding (and so does every sticking
 //!    point of a solve that did not converge: an inextensible wire pushed against sticking
 //!    points may have no solution); a sliding point sticks when static friction could have held
-//!    it where the step began, and otherwise carries the kinetic friction `μ_k n·g` against its
-//!    slip as a shift of its inertial target `x̃`;
-//! 4. if anything changed, the solve continues from its current multipliers with a new
-//!    factorisation, for at most [`MAX_ROUNDS`] rounds; positions a last change moves onto the
-//!    wall are not solved again (the next step does).
+//!    it where the step began and it is not still slipping against its kinetic friction, and
+//!    otherwise carries the kinetic friction `μ_k n·g` against its slip as a shift of its
+//!    inertial target `x̃`. A point that sticks after slipping more than [`STICK_JUMP`] of an
+//!    element sticks where it is rather than where the step began;
+//! 4. if anything changed, the solve continues from its current multipliers, for at most
+//!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
+//!    changed (a change of kinetic friction only moves the targets `x̃`); positions a last
+//!    change moves onto the wall are not solved again (the next step does).
 //!
 //! New contacts start sliding rather than sticking: sticking first made the pushed guidewire
 //! of `scenes/guidewire-insertion.toml` end steps unconverged and compressed (largest strain
@@ -52,6 +58,22 @@ const DEPTH_TOLERANCE: f64 = 1e-3;
 /// How far a touching point may move between two detections of one step before it is queried
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
 const REUSE_DISTANCE: f64 = 0.5;
+
+/// The largest slip, as a fraction of the shorter rest length of a point's two elements, by
+/// which a sliding point that static friction can hold is put back where the step began (and
+/// the step solved again). A point that slipped further sticks where it is: moving it back
+/// strains its two elements by that fraction, and from such a start the solve of a stiff chain
+/// pressed on the wall did not converge (`docs/stiff-solver.md`, "Sticking without a jump").
+const STICK_JUMP: f64 = 1e-3;
+
+/// The shorter rest length of the elements that point `i` ends.
+fn shortest_element(k: &Consts, i: usize) -> f64 {
+    [i.checked_sub(1), Some(i)]
+        .into_iter()
+        .flatten()
+        .filter_map(|j| k.l0.get(j))
+        .fold(f64::INFINITY, |a, &b| a.min(b))
+}
 
 /// A point held on the mesh's surface for one step's solve.
 #[derive(Clone, Copy, Debug)]
@@ -102,6 +124,9 @@ pub(crate) struct StiffContacts {
     skip: Vec<bool>,
     /// Largest penetration of the last detection after a solve.
     depth_after_solve: f64,
+    /// Whether the last [`update`](Self::update) changed the matrix of the solve (which points
+    /// are pinned, how, or along which normal), rather than only the inertial targets.
+    pub(crate) matrix_changed: bool,
     pub(crate) stats: CollisionStats,
 }
 
@@ -119,6 +144,7 @@ impl StiffContacts {
             queried_at: Vec::new(),
             skip: Vec::new(),
             depth_after_solve: 0.0,
+            matrix_changed: false,
             stats: CollisionStats::default(),
         }
     }
@@ -224,6 +250,11 @@ impl StiffContacts {
             if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
+            // A point that was free at the end of the last step stays free while it is within
+            // the tolerance of the wall; the iterations pin it if they push it further in.
+            if self.last[i] == Touch::Free && gap >= -tol {
+                continue;
+            }
             let mass = 1.0 / k.inv_mass[i];
             // The velocity of the prediction, in the tangent plane.
             let v = w.x_pred.get(i) - w.x_old.get(i);
@@ -285,6 +316,7 @@ impl StiffContacts {
         } = self.friction;
         let mut changed = false;
         let mut released = false;
+        let mut stick_changed = false;
         for s in 0..w.pinned.len() {
             let mut p = w.pinned[s];
             if p.line {
@@ -314,23 +346,35 @@ impl StiffContacts {
                     p.stick = false;
                     p.push = gt * (mu_k * pn / (need * mass));
                     w.x_pred.set(i, &(x_pred + p.push));
+                    stick_changed = true;
                     changed = true;
                 }
             } else {
                 let d = x - w.x_old.get(i);
                 let slip = d - p.normal * p.normal.dot(&d);
-                // The tangential impulse that would have held the point where it was, from
-                // the point alone (its neighbours' share is checked once it sticks).
+                // The tangential impulse that would have held the point where it was at the
+                // current multipliers: its own momentum and its neighbours' push, but not how
+                // much harder they would push if it were held.
                 let hold = (p.push - slip).norm() * mass;
-                if mu_s > 0.0 && hold <= mu_s * pn {
-                    // Static friction can hold it (also when kinetic friction turned the slip
-                    // around): the point sticks where the step began.
-                    let from = w.x_old.get(i);
-                    w.x.set(i, &(from - p.normal * p.normal.dot(&(from - x))));
+                // Still slipping against its kinetic friction: what drives it is more than that
+                // friction, however small the point's own share. In a chain pushed along a wall
+                // every point's net push is its kinetic friction; holding one makes its
+                // neighbours push harder, so the test above alone would lock the chain.
+                let driven = p.push != Vec3::zeros() && slip.dot(&p.push) < 0.0;
+                if mu_s > 0.0 && hold <= mu_s * pn && !driven {
+                    // Static friction can hold it, and kinetic friction has stopped it or turned
+                    // it around (or acts on it for the first time). A point that barely slipped
+                    // sticks where the step began and the step is solved again; one that slipped
+                    // further sticks where it is, which needs no new solve (see `STICK_JUMP`).
                     w.x_pred.set(i, &(x_pred - p.push));
                     p.push = Vec3::zeros();
                     p.stick = true;
-                    changed = true;
+                    stick_changed = true;
+                    if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
+                        let from = w.x_old.get(i);
+                        w.x.set(i, &(from - p.normal * p.normal.dot(&(from - x))));
+                        changed = true;
+                    }
                 } else if mu_k > 0.0 && slip.norm() > 0.0 {
                     let push = -slip.normalize() * (mu_k * pn / mass);
                     if (push - p.push).norm() > 0.1 * push.norm() {
@@ -347,7 +391,10 @@ impl StiffContacts {
             self.reindex(w);
             changed = true;
         }
-        self.catch_penetrations(w, k, reuse) || changed
+        let caught = self.catch_penetrations(w, k, reuse);
+        // Only the kinetic friction's shift of the inertial targets leaves the matrix as it was.
+        self.matrix_changed = released || stick_changed || caught;
+        caught || changed
     }
 
     /// Pins the points an iterate has pushed into the mesh (onto the wall), puts pinned points

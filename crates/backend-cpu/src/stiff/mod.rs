@@ -1149,7 +1149,11 @@ fn solve_step<T: Real>(
                 if !c.update(w, k, r <= tolerance, reuse) || round == contact::MAX_ROUNDS {
                     break;
                 }
-                *factor_valid = false;
+                // A round that only changed the kinetic friction (the inertial targets) keeps
+                // the factorisation; the iterations refactorise if they stall.
+                if c.matrix_changed {
+                    *factor_valid = false;
+                }
             }
         }
         StiffScheme::GaussSeidel => {
@@ -1199,7 +1203,7 @@ fn direct_solve(
             || pins_changed
             || match stiff.refactor {
                 Refactor::EveryIteration => true,
-                Refactor::EveryStep => it == 0,
+                Refactor::EveryStep => it == 0 && first,
                 Refactor::Lagged => false,
             };
         if refactor && !last {
