@@ -22,7 +22,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn root() -> PathBuf {
+pub(crate) fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
@@ -43,7 +43,7 @@ fn cargo(args: &[&str]) -> Result<String, String> {
 }
 
 /// One line naming the machine: CPU model and core count.
-fn machine() -> String {
+pub(crate) fn machine() -> String {
     let model = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| {
@@ -168,7 +168,7 @@ The accuracy columns come from the same configuration run for 0.2 s: the largest
 }
 
 /// The conditions of a run that a timing depends on: hypervisor, load average, commit.
-fn conditions() -> String {
+pub(crate) fn conditions() -> String {
     let hypervisor = Command::new("lscpu").output().ok().and_then(|o| {
         String::from_utf8_lossy(&o.stdout)
             .lines()

@@ -12,6 +12,11 @@
 //!   `docs/benchmarks/cpu.md`, and the insertion benchmark into `docs/benchmarks/insertion.md`.
 //! - `cargo xtask bench --insertion` — only the insertion and free-space benchmarks, into
 //!   `docs/benchmarks/insertion.md`.
+//! - `cargo xtask bench --stiff` — the stiff step against the explicit step at 1000 elements,
+//!   into `docs/benchmarks/stiff-target.md` (exits non-zero while the 2× target is not met).
+//! - `cargo xtask bench --haptic` — the stiff insertion stepped as a 1 kHz haptic loop calls it,
+//!   step-time percentiles against the 1 ms budget, into `docs/benchmarks/haptic.md` (exits
+//!   non-zero when the 99th percentile is over budget on this machine).
 //! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
 //!   into `docs/benchmarks/gpu-local.{md,json}` (`--quick`: two sizes, for software adapters). On
 //!   a GPU host without a Rust toolchain, build the example here and run it there
@@ -24,6 +29,7 @@
 mod support;
 
 mod bench;
+mod haptic;
 mod literature;
 mod pareto;
 mod stability_map;
@@ -93,7 +99,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --gpu [--quick]]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -107,13 +113,15 @@ fn run() -> Result<bool, String> {
             validate::run(args.option("only"))
         }
         "bench" => {
-            args.reject_unknown(&["pareto", "insertion", "stiff", "gpu", "quick"])?;
+            args.reject_unknown(&["pareto", "insertion", "stiff", "haptic", "gpu", "quick"])?;
             if args.flag("pareto") {
                 pareto::run()
             } else if args.flag("insertion") {
                 bench::insertion_only()
             } else if args.flag("stiff") {
                 bench::stiff()
+            } else if args.flag("haptic") {
+                haptic::run()
             } else if args.flag("gpu") {
                 bench::gpu(args.flag("quick"))
             } else {
