@@ -88,3 +88,8 @@ fn stiff_scheme_statics_and_frequencies() {
 fn references_are_self_consistent() {
     support::reference::self_check();
 }
+
+#[test]
+fn coulomb_friction_on_an_incline_in_both_schemes() {
+    check("incline friction", cases::incline_friction(Size::Ci));
+}

@@ -1299,6 +1299,95 @@ fn strain_windows(sim: &mut Simulation, steps: u64, l0: f64) -> Result<(f64, f64
     Ok((first, last))
 }
 
+/// Coulomb friction on an incline (`μ_s = 0.5`, `μ_k = 0.3`), a soft rod (r 2 mm, 10 elements
+/// over 0.1 m) laid across the slope on a plane mesh, released at rest: at 35° (`tan θ > μ_s`)
+/// its centre slides `½ a t² (1 + h/t)` in `t` (`a = g (sin θ − μ_k cos θ)`; both schemes
+/// integrate a constant acceleration to that, `½ a t²` being the continuum's), at 20°
+/// (`tan θ < μ_s`) static friction holds it. The explicit scheme at its step for this rod
+/// (5e-5 s), the stiff scheme at the haptic steps (1e-3 s and 1e-4 s). Tolerance of the sliding
+/// rows: `1e-3` relative, the contact's tolerated penetration changing the normal force by
+/// less than that; the discrete `(1 + h/t)` is part of the reference.
+pub fn incline_friction(size: Size) -> Result<Vec<Row>, String> {
+    use cosserat::Environment;
+    let (mu_s, mu_k, g, r) = (0.5, 0.3, 9.81, 2e-3);
+    let material = Material::new(1e6, 1e6 / 3.0, 1100.0, r);
+    let duration = match size {
+        Size::Ci => 0.05,
+        Size::Full => 0.2,
+    };
+    let mut rows = Vec::new();
+    for (scheme, dt) in [
+        (Scheme::Explicit, 5e-5),
+        (Scheme::StiffAt(1e-3), 1e-3),
+        (Scheme::StiffAt(1e-4), 1e-4),
+    ] {
+        for theta_deg in [35.0_f64, 20.0] {
+            let theta = theta_deg.to_radians();
+            let down = [theta.cos(), 0.0, -theta.sin()];
+            let normal = [theta.sin(), 0.0, theta.cos()];
+            let mut env = Environment::plane([0.0; 3], normal, 2.0).map_err(|e| e.to_string())?;
+            env.friction.static_coefficient = mu_s;
+            env.friction.kinetic_coefficient = mu_k;
+            // Across the slope (along y), one radius above the plane.
+            let start = [normal[0] * r, -0.05, normal[2] * r];
+            let rod = RodBuilder::straight(start, [0.0, 1.0, 0.0], 0.1, 10, material);
+            let b = SimulationBuilder::new()
+                .dt(dt)
+                .iterations(10)
+                .gravity([0.0, 0.0, -g])
+                .double_precision(true)
+                .environment(env)
+                .with_rod(rod);
+            let b = match scheme {
+                Scheme::Explicit => b,
+                _ => b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default())),
+            };
+            let mut sim = b.build().map_err(|e| e.to_string())?;
+            let com = |sim: &Simulation| {
+                let p = sim.positions(RodHandle(0));
+                let n = p.len() as f64;
+                let c = p
+                    .iter()
+                    .fold([0.0; 3], |a, q| [a[0] + q[0], a[1] + q[1], a[2] + q[2]]);
+                [c[0] / n, c[1] / n, c[2] / n]
+            };
+            let c0 = com(&sim);
+            let steps = (duration / dt).round() as u64;
+            sim.run(steps).map_err(|e| e.to_string())?;
+            let c1 = com(&sim);
+            let travelled: f64 = (0..3).map(|k| (c1[k] - c0[k]) * down[k]).sum();
+            let t = steps as f64 * dt;
+            let case = format!("{}incline, μs 0.5, μk 0.3, {theta_deg}°", scheme.label());
+            if theta.tan() > mu_s {
+                let a = g * (theta.sin() - mu_k * theta.cos());
+                rows.push(Row {
+                    case,
+                    quantity: format!("distance slid in {t} s [m]"),
+                    measured: travelled,
+                    reference: 0.5 * a * t * t * (1.0 + dt / t),
+                    tolerance: 1e-3,
+                    check: Check::Relative,
+                    note: format!(
+                        "½ a t² (1 + h/t), h = {dt:e} s; the continuum's ½ a t² = {:.6e} m",
+                        0.5 * a * t * t
+                    ),
+                });
+            } else {
+                rows.push(Row {
+                    case,
+                    quantity: format!("|distance slid| in {t} s [m]"),
+                    measured: travelled.abs(),
+                    reference: 0.0,
+                    tolerance: 1e-6 * r,
+                    check: Check::Bound,
+                    note: "tan θ < μs: static friction holds it".into(),
+                });
+            }
+        }
+    }
+    Ok(rows)
+}
+
 /// Every case at the given size.
 /// ω h of the stiff scheme's frequency runs (see [`Scheme::Stiff`]).
 const STIFF_FREQUENCY_STEP: f64 = 0.02;
@@ -1334,5 +1423,6 @@ pub fn all(size: Size) -> Vec<(String, Result<Vec<Row>, String>)> {
         ("frequencies".into(), frequencies(size)),
         ("pendulum".into(), pendulum_cases(size)),
         ("stiff scheme".into(), stiff_scheme(size)),
+        ("incline friction".into(), incline_friction(size)),
     ]
 }

@@ -29,6 +29,7 @@ fn case_list() -> Vec<Case> {
         ("stiff scheme at 1e-4 s", || {
             cases::stiff_scheme_at(Size::Full, 1e-4)
         }),
+        ("incline friction", || cases::incline_friction(Size::Full)),
         ("long runs", cases::long_runs),
         ("stability map", stability_map::rows),
     ]

@@ -13,12 +13,12 @@
 //! Which points are pinned, and how, is an active set found per step (Coulomb friction with
 //! the static and kinetic coefficients of [`MeshContactSettings`]):
 //! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
-//!    spheres against the mesh; those that touched at the end of the last step and touch or
-//!    penetrate now, and those penetrating further than the tolerance, are put on the wall and
-//!    pinned: sticking (at their start-of-step place, projected onto the wall) if they stuck at
-//!    the end of the last step, else sliding, with the kinetic friction of their last normal
-//!    impulse (points that were free and merely touch are left to step 2, which pins them if
-//!    the solve pushes them in: pinned first, most of them were let go after the first solve);
+//!    spheres against the mesh; those touching or penetrating are put on the wall and pinned,
+//!    except points that were free at the end of the last step, are moving off the wall and
+//!    are within the tolerance of it (left to step 2, which pins them if the solve pushes them
+//!    in: pinned first, most of them were let go after the first solve): sticking (at their
+//!    start-of-step place, projected onto the wall) if they stuck at the end of the last step,
+//!    else sliding, with the kinetic friction of their last normal impulse;
 //! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
 //!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
 //!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step);
@@ -250,9 +250,12 @@ impl StiffContacts {
             if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
-            // A point that was free at the end of the last step stays free while it is within
-            // the tolerance of the wall; the iterations pin it if they push it further in.
-            if self.last[i] == Touch::Free && gap >= -tol {
+            // A point that was free at the end of the last step and is moving off the wall
+            // stays free while it is within the tolerance of it; the iterations pin it if they
+            // push it further in. (One at rest or moving in must be pinned here: left free
+            // within the tolerance it would sink through it without friction.)
+            let off = normal.dot(&(w.x_pred.get(i) - w.x_old.get(i))) > 0.0;
+            if self.last[i] == Touch::Free && gap >= -tol && off {
                 continue;
             }
             let mass = 1.0 / k.inv_mass[i];
