@@ -256,13 +256,19 @@ fn simulation_in(
         .gravity(gravity)
         .double_precision(true)
         .with_rod(rod);
-    let b = match scheme {
+    with_scheme(b, scheme)
+        .build()
+        .expect("validation scene builds")
+}
+
+/// `b` stepped with `scheme`'s solver (the stiff one with its default settings).
+fn with_scheme(b: SimulationBuilder, scheme: Scheme) -> SimulationBuilder {
+    match scheme {
         Scheme::Explicit => b,
         Scheme::Stiff | Scheme::StiffAt(_) => {
             b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default()))
         }
-    };
-    b.build().expect("validation scene builds")
+    }
 }
 
 /// Runs until no point moves more than `tol · length` over a chunk of `chunk` seconds and no
@@ -1338,11 +1344,7 @@ pub fn incline_friction(size: Size) -> Result<Vec<Row>, String> {
                 .double_precision(true)
                 .environment(env)
                 .with_rod(rod);
-            let b = match scheme {
-                Scheme::Explicit => b,
-                _ => b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default())),
-            };
-            let mut sim = b.build().map_err(|e| e.to_string())?;
+            let mut sim = with_scheme(b, scheme).build().map_err(|e| e.to_string())?;
             let com = |sim: &Simulation| {
                 let p = sim.positions(RodHandle(0));
                 let n = p.len() as f64;

@@ -250,18 +250,19 @@ impl StiffContacts {
             if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
+            // The motion of the prediction over the step.
+            let v = w.x_pred.get(i) - w.x_old.get(i);
+            let towards = normal.dot(&v);
             // A point that was free at the end of the last step and is moving off the wall
             // stays free while it is within the tolerance of it; the iterations pin it if they
             // push it further in. (One at rest or moving in must be pinned here: left free
             // within the tolerance it would sink through it without friction.)
-            let off = normal.dot(&(w.x_pred.get(i) - w.x_old.get(i))) > 0.0;
-            if self.last[i] == Touch::Free && gap >= -tol && off {
+            if self.last[i] == Touch::Free && gap >= -tol && towards > 0.0 {
                 continue;
             }
             let mass = 1.0 / k.inv_mass[i];
-            // The velocity of the prediction, in the tangent plane.
-            let v = w.x_pred.get(i) - w.x_old.get(i);
-            let slip = v - normal * normal.dot(&v);
+            // In the tangent plane.
+            let slip = v - normal * towards;
             let (push, pn) = match self.last[i] {
                 Touch::Slide(pn) if slip.norm() > 0.0 => {
                     (-slip.normalize() * (mu_k * pn / mass), pn)
