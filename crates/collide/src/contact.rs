@@ -214,6 +214,11 @@ pub fn closest_point_triangle(
     (a + ab * v + ac * w, Feature::Face)
 }
 
+/// A triangle whose plane is farther than `r` from a point cannot touch the point's sphere; the
+/// test asks for the squared plane distance to exceed `r²` by this factor, so that rounding never
+/// drops a triangle that the exact test would have kept at a distance of just under `r`.
+const PLANE_REJECT: f64 = 1.0 + 1e-9;
+
 /// Per-triangle data in leaf order, so a leaf's triangles are contiguous in memory.
 #[derive(Clone, Copy, Debug)]
 struct TriData {
@@ -393,6 +398,10 @@ impl MeshCollider {
         let r2 = r * r;
         self.bvh.for_each_near(p, r, |slot| {
             let t = &self.tris[slot];
+            let plane = t.n.dot(&(pv - t.a));
+            if plane * plane > r2 * PLANE_REJECT {
+                return;
+            }
             let (c, _) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
             if (pv - c).norm_squared() < r2 {
                 out.push(slot as u32);
@@ -434,6 +443,15 @@ impl MeshCollider {
         nearest: &mut Nearest2,
     ) {
         let t = &self.tris[slot];
+        // The distance to the triangle's plane bounds the distance to the triangle from below:
+        // a plane at least `r` away rules the triangle out for three multiply–adds, and its
+        // distance stands in for the triangle's in `any_d2` (a lower bound, as its callers use
+        // it: a clearance that is never too large).
+        let plane = t.n.dot(&(pv - t.a));
+        if plane * plane > r * r * PLANE_REJECT {
+            nearest.any_d2 = nearest.any_d2.min(plane * plane);
+            return;
+        }
         let (c, feature) = closest_point_triangle(pv, &t.a, &t.b, &t.c);
         let diff = pv - c;
         let d2 = diff.norm_squared();
