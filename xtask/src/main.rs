@@ -14,10 +14,10 @@
 //!   `docs/benchmarks/insertion.md`.
 //! - `cargo xtask bench --stiff` — the stiff step against the explicit step at 1000 elements,
 //!   into `docs/benchmarks/stiff-target.md` (exits non-zero while the 2× target is not met).
-//! - `cargo xtask bench --haptic` — the stiff insertion stepped as a haptic loop calls it, at
-//!   1 kHz and 500 Hz, step-time percentiles against the loop's period, into
-//!   `docs/benchmarks/haptic.md` (exits non-zero when the 99th percentile is over the period
-//!   at either rate on this machine).
+//! - `cargo xtask bench --haptic` — guidewire insertions ticked as a haptic loop calls them
+//!   (the soft wire at 1 kHz and 500 Hz, the nitinol wire at 1 kHz in ten steps per tick),
+//!   tick-time percentiles against the loop's period, into `docs/benchmarks/haptic.md` (exits
+//!   non-zero when a loop's 99th percentile is over its period on this machine).
 //! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
 //!   into `docs/benchmarks/gpu-local.{md,json}` (`--quick`: two sizes, for software adapters). On
 //!   a GPU host without a Rust toolchain, build the example here and run it there
