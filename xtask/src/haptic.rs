@@ -163,11 +163,7 @@ first tick apart), {RUNS} runs each. Budget: a tick within the loop's period at 
 percentile. Tips are compared with reference runs to the same end:\n"
     );
     for (what, t) in &references {
-        let _ = writeln!(
-            md,
-            "- {what}: ({:.6}, {:.6}, {:.6}) m",
-            t[0], t[1], t[2]
-        );
+        let _ = writeln!(md, "- {what}: ({:.6}, {:.6}, {:.6}) m", t[0], t[1], t[2]);
     }
     let _ = writeln!(
         md,
