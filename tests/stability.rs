@@ -73,17 +73,7 @@ fn rods() -> impl Strategy<Value = TrialRod> {
                 let mut rod =
                     TrialRod::straight(Material::new(e, e / (2.0 * (1.0 + nu)), rho, r), n, l);
                 let turns = 2.0 * std::f64::consts::PI / length;
-                // At most what the discrete Darboux vector can reach (|û| l / 2 < 1, a turn of π
-                // per element; `RodBuildError::UnreachableRestShape`): |û| l / 2 ≤ 0.9; and a
-                // radius of curvature of at least 2 r (see above).
-                let u = curl.map(|c| c * turns);
-                let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
-                let cap = (1.8 / l).min(0.5 / r);
-                rod.darboux = if norm > cap {
-                    u.map(|x| x * cap / norm)
-                } else {
-                    u
-                };
+                rod.set_buildable_darboux(curl.map(|c| c * turns));
                 let i = std::f64::consts::PI * r.powi(4) / 4.0;
                 let w1 =
                     3.5 * (e * i / (rho * std::f64::consts::PI * r * r)).sqrt() / (length * length);

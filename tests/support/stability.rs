@@ -53,6 +53,21 @@ impl TrialRod {
         }
     }
 
+    /// Sets the intrinsic Darboux vector to `u`, scaled down to what a rod can be built with:
+    /// at most what the discrete Darboux vector reaches (`|û| l / 2 ≤ 0.9`, short of a turn of
+    /// π per element, `RodBuildError::UnreachableRestShape`) and a radius of curvature of at
+    /// least `2 r` (a rod curled tighter than its radius is refused at build,
+    /// `RodBuildError::RestCurvatureTighterThanRadius`).
+    pub fn set_buildable_darboux(&mut self, u: [f64; 3]) {
+        let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let cap = (1.8 / self.element_length).min(0.5 / self.material.radius);
+        self.darboux = if norm > cap {
+            u.map(|x| x * cap / norm)
+        } else {
+            u
+        };
+    }
+
     /// The points: straight along x with a small pseudo-random transverse perturbation
     /// (1e-3 of an element) that excites every mode, the fastest included.
     fn points(&self) -> Vec<[f64; 3]> {

@@ -88,21 +88,11 @@ fn random_rods(count: usize) -> Result<Vec<Sample>, String> {
         let length = n as f64 * l;
         let mut rod = TrialRod::straight(Material::new(e, e / (2.0 * (1.0 + nu)), rho, r), n, l);
         let turns = 2.0 * std::f64::consts::PI / length;
-        let u = [
+        rod.set_buildable_darboux([
             rng.range(-2.0, 2.0) * turns,
             rng.range(-2.0, 2.0) * turns,
             rng.range(-2.0, 2.0) * turns,
-        ];
-        // As `tests/stability.rs`: at most what the discrete Darboux vector reaches
-        // (|û| l / 2 ≤ 0.9) and a radius of curvature of at least 2 r (a rod curled tighter than
-        // its radius is refused at build, `RodBuildError::RestCurvatureTighterThanRadius`).
-        let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let cap = (1.8 / l).min(0.5 / r);
-        rod.darboux = if norm > cap {
-            u.map(|x| x * cap / norm)
-        } else {
-            u
-        };
+        ]);
         rod.extensible = rng.next() < 0.3;
         rod.double = rng.next() < 0.7;
         rod.seed = k as u64 + 7;

@@ -228,6 +228,18 @@ struct TriData {
     n: Vector3<f64>,
 }
 
+impl TriData {
+    /// The squared distance from `p` to the triangle's plane when it exceeds `r2` (times
+    /// [`PLANE_REJECT`]): the triangle is then farther than `r` from `p`, a test of three
+    /// multiply–adds before the exact closest point. `None` when the plane is within reach.
+    #[inline(always)]
+    fn beyond_plane(&self, p: &Vector3<f64>, r2: f64) -> Option<f64> {
+        let plane = self.n.dot(&(p - self.a));
+        let d2 = plane * plane;
+        (d2 > r2 * PLANE_REJECT).then_some(d2)
+    }
+}
+
 /// The result of a nearest-triangle query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Nearest {
@@ -398,8 +410,7 @@ impl MeshCollider {
         let r2 = r * r;
         self.bvh.for_each_near(p, r, |slot| {
             let t = &self.tris[slot];
-            let plane = t.n.dot(&(pv - t.a));
-            if plane * plane > r2 * PLANE_REJECT {
+            if t.beyond_plane(&pv, r2).is_some() {
                 return;
             }
             let (c, _) = closest_point_triangle(&pv, &t.a, &t.b, &t.c);
@@ -444,12 +455,11 @@ impl MeshCollider {
     ) {
         let t = &self.tris[slot];
         // The distance to the triangle's plane bounds the distance to the triangle from below:
-        // a plane at least `r` away rules the triangle out for three multiply–adds, and its
-        // distance stands in for the triangle's in `any_d2` (a lower bound, as its callers use
-        // it: a clearance that is never too large).
-        let plane = t.n.dot(&(pv - t.a));
-        if plane * plane > r * r * PLANE_REJECT {
-            nearest.any_d2 = nearest.any_d2.min(plane * plane);
+        // a plane at least `r` away rules the triangle out, and its distance stands in for the
+        // triangle's in `any_d2` (a lower bound, as its callers use it: a clearance that is
+        // never too large).
+        if let Some(plane2) = t.beyond_plane(pv, r * r) {
+            nearest.any_d2 = nearest.any_d2.min(plane2);
             return;
         }
         let (c, feature) = closest_point_triangle(pv, &t.a, &t.b, &t.c);

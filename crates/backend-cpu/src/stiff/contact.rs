@@ -95,6 +95,16 @@ pub(crate) struct Pinned {
     pub(crate) pn: f64,
 }
 
+/// What [`StiffContacts::update`] changed.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Update {
+    /// Something the solve must take into account: solve again.
+    pub(crate) resolve: bool,
+    /// The matrix of the solve (which points are pinned, how, or along which normal), rather
+    /// than only the inertial targets: factorise again.
+    pub(crate) matrix_changed: bool,
+}
+
 /// How a point touched the mesh at the end of the last step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 enum Touch {
@@ -124,9 +134,6 @@ pub(crate) struct StiffContacts {
     skip: Vec<bool>,
     /// Largest penetration of the last detection after a solve.
     depth_after_solve: f64,
-    /// Whether the last [`update`](Self::update) changed the matrix of the solve (which points
-    /// are pinned, how, or along which normal), rather than only the inertial targets.
-    pub(crate) matrix_changed: bool,
     pub(crate) stats: CollisionStats,
 }
 
@@ -144,7 +151,6 @@ impl StiffContacts {
             queried_at: Vec::new(),
             skip: Vec::new(),
             depth_after_solve: 0.0,
-            matrix_changed: false,
             stats: CollisionStats::default(),
         }
     }
@@ -305,15 +311,15 @@ impl StiffContacts {
     }
 
     /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
-    /// pinned points onto the wall (`reuse` as in [`detect`](Self::detect)). Returns whether
-    /// anything changed that the solve should take into account.
+    /// pinned points onto the wall (`reuse` as in [`detect`](Self::detect)). Returns what
+    /// changed that the solve should take into account.
     pub(crate) fn update(
         &mut self,
         w: &mut Work,
         k: &Consts,
         converged: bool,
         reuse: bool,
-    ) -> bool {
+    ) -> Update {
         let Friction {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
@@ -396,9 +402,12 @@ impl StiffContacts {
             changed = true;
         }
         let caught = self.catch_penetrations(w, k, reuse);
-        // Only the kinetic friction's shift of the inertial targets leaves the matrix as it was.
-        self.matrix_changed = released || stick_changed || caught;
-        caught || changed
+        Update {
+            resolve: caught || changed,
+            // Only the kinetic friction's shift of the inertial targets leaves the matrix as it
+            // was.
+            matrix_changed: released || stick_changed || caught,
+        }
     }
 
     /// Pins the points an iterate has pushed into the mesh (onto the wall), puts pinned points

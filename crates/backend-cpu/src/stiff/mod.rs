@@ -1146,12 +1146,13 @@ fn solve_step<T: Real>(
                     break;
                 };
                 let reuse = stiff.reuse_contact_queries;
-                if !c.update(w, k, r <= tolerance, reuse) || round == contact::MAX_ROUNDS {
+                let update = c.update(w, k, r <= tolerance, reuse);
+                if !update.resolve || round == contact::MAX_ROUNDS {
                     break;
                 }
                 // A round that only changed the kinetic friction (the inertial targets) keeps
                 // the factorisation; the iterations refactorise if they stall.
-                if c.matrix_changed {
+                if update.matrix_changed {
                     *factor_valid = false;
                 }
             }
