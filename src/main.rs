@@ -349,6 +349,13 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
             "kinetic_energy": e.kinetic(),
             "potential_energy": e.potential(),
             "tip": tip,
+            "tips": sim
+                .rods()
+                .map(|h| {
+                    let last = sim.positions(h).last().copied().unwrap_or([f64::NAN; 3]);
+                    (sim.rod_name(h).to_string(), serde_json::json!(last))
+                })
+                .collect::<serde_json::Map<_, _>>(),
             "diverged": o.divergence.is_some(),
             "divergence": o.divergence,
             "warnings": sim.warnings(),

@@ -1142,6 +1142,9 @@ impl Checker<'_> {
                 self.finite3(&f(&format!("load[{k}].force")), load.force)?,
             );
         }
+        if let Some(name) = &r.name {
+            rb = rb.name(name.clone());
+        }
         Ok(rb)
     }
 

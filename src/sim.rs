@@ -609,6 +609,8 @@ struct Rods<T: Real> {
     coupling: Option<backend_cpu::Coupling<T>>,
     /// The stiff solver's settings and one scratch per rod, when it is used.
     stiff: Option<(backend_cpu::StiffSettings, Vec<backend_cpu::StiffScratch>)>,
+    /// Bindings stepped with the stiff solver (which replaces `coupling` then).
+    stiff_bindings: Option<backend_cpu::StiffBindings<T>>,
 }
 
 impl<T: Real> Rods<T> {
@@ -631,6 +633,7 @@ impl<T: Real> Rods<T> {
             stats: Vec::new(),
             coupling: None,
             stiff: None,
+            stiff_bindings: None,
         })
     }
 
@@ -647,9 +650,16 @@ impl<T: Real> Rods<T> {
         }
         if let Some(st) = b.stiff {
             if self.coupling.is_some() {
-                return Err(BuildError::Setting(
-                    "the stiff solver does not handle bindings or rod–rod contact yet: use solver.scheme = \"explicit\"".into(),
-                ));
+                if b.rod_contact.is_some() {
+                    return Err(BuildError::Setting(
+                        "the stiff solver does not handle rod–rod contact yet: use solver.scheme = \"explicit\"".into(),
+                    ));
+                }
+                self.coupling = None;
+                self.stiff_bindings = Some(
+                    backend_cpu::StiffBindings::new(&self.rods, &b.bindings)
+                        .map_err(BuildError::Setting)?,
+                );
             }
             if st.scheme == backend_cpu::StiffScheme::GaussSeidel
                 && (b.environment.is_some() || b.rods.iter().any(|r| r.guide.is_some()))
@@ -713,50 +723,26 @@ impl<T: Real> Rods<T> {
 
     /// Steps every rod `n` times on the CPU; returns the largest strain seen.
     fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
-        if let Some((st, scratch)) = self.stiff.as_mut() {
-            backend_cpu::step_rods_stiff(
-                &mut self.rods,
-                scratch,
-                &self.settings,
-                st,
-                time,
-                step,
-                n,
-                par,
-                &mut self.stats,
-            )?;
-            return Ok(self
-                .stats
-                .iter()
-                .map(StepStats::max_strain)
-                .fold(0.0, f64::max));
-        }
-        if let Some(c) = self.coupling.as_mut() {
+        let (rods, stats, settings) = (&mut self.rods, &mut self.stats, &self.settings);
+        match (
+            self.stiff.as_mut(),
+            self.stiff_bindings.as_mut(),
+            self.coupling.as_mut(),
+        ) {
+            (Some((st, scratch)), Some(bindings), _) => backend_cpu::step_bound_stiff(
+                rods, scratch, bindings, settings, st, time, step, n, stats,
+            )?,
+            (Some((st, scratch)), None, _) => backend_cpu::step_rods_stiff(
+                rods, scratch, settings, st, time, step, n, par, stats,
+            )?,
             // Coupled rods are stepped together, serially.
-            backend_cpu::step_coupled_batch(
-                &mut self.rods,
-                c,
-                &self.settings,
-                time,
-                step,
-                n,
-                &mut self.stats,
-            )?;
-            return Ok(self
-                .stats
-                .iter()
-                .map(StepStats::max_strain)
-                .fold(0.0, f64::max));
+            (None, _, Some(c)) => {
+                backend_cpu::step_coupled_batch(rods, c, settings, time, step, n, stats)?
+            }
+            (None, _, None) => {
+                backend_cpu::step_rods_batch(rods, settings, time, step, n, par, stats)?
+            }
         }
-        backend_cpu::step_rods_batch(
-            &mut self.rods,
-            &self.settings,
-            time,
-            step,
-            n,
-            par,
-            &mut self.stats,
-        )?;
         Ok(self
             .stats
             .iter()
@@ -1012,7 +998,11 @@ impl Simulation {
 
     /// Measurements of bindings and rod contacts; `None` when the rods do not interact.
     pub fn coupling_stats(&self) -> Option<CouplingStats> {
-        with_rods!(&self.world, w => w.coupling.as_ref().map(|c| c.stats()))
+        with_rods!(&self.world, w => w
+            .coupling
+            .as_ref()
+            .map(|c| c.stats())
+            .or_else(|| w.stiff_bindings.as_ref().map(|b| b.stats())))
     }
 
     /// The runaway-energy check: the first point of any rod faster than the divergence speed,

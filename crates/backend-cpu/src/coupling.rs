@@ -47,6 +47,37 @@ pub struct BindingSpec {
     pub capture: Option<f64>,
 }
 
+impl BindingSpec {
+    /// Checks this spec (the `k`-th) against `rods` and returns its capture distance [m]: both
+    /// rods exist and differ, and the capture distance (the outer rod's radius by default) is
+    /// finite and positive.
+    pub(crate) fn checked_capture<T: Real>(
+        &self,
+        k: usize,
+        rods: &[CpuRod<T>],
+    ) -> Result<f64, String> {
+        let n = rods.len();
+        if self.inner >= n || self.outer >= n {
+            return Err(format!(
+                "binding {k}: rods {} and {} requested, the simulation has {n}",
+                self.inner, self.outer
+            ));
+        }
+        if self.inner == self.outer {
+            return Err(format!("binding {k}: a rod cannot be bound to itself"));
+        }
+        let capture = self
+            .capture
+            .unwrap_or_else(|| rods[self.outer].params.radius.to_f64());
+        if !(capture.is_finite() && capture > 0.0) {
+            return Err(format!(
+                "binding {k}: capture distance {capture} must be > 0"
+            ));
+        }
+        Ok(capture)
+    }
+}
+
 /// Contact between rods and of each rod with itself.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RodContactSpec {
@@ -150,25 +181,7 @@ impl<T: Real> Coupling<T> {
     ) -> Result<Self, String> {
         let mut out = Vec::new();
         for (k, b) in bindings.iter().enumerate() {
-            if b.inner >= rods.len() || b.outer >= rods.len() {
-                return Err(format!(
-                    "binding {k}: rods {} and {} requested, the simulation has {}",
-                    b.inner,
-                    b.outer,
-                    rods.len()
-                ));
-            }
-            if b.inner == b.outer {
-                return Err(format!("binding {k}: a rod cannot be bound to itself"));
-            }
-            let capture = b
-                .capture
-                .unwrap_or_else(|| rods[b.outer].params.radius.to_f64());
-            if !(capture.is_finite() && capture > 0.0) {
-                return Err(format!(
-                    "binding {k}: capture distance {capture} must be > 0"
-                ));
-            }
+            let capture = b.checked_capture(k, rods)?;
             out.push(Binding {
                 inner: b.inner,
                 outer: b.outer,

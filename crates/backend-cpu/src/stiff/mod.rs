@@ -53,6 +53,7 @@
 //! oscillator of the model's definition. The Gauss–Seidel variant ([`StiffScheme::GaussSeidel`])
 //! does not apply internal damping. Drag is applied to the solved velocities.
 
+mod binding;
 pub mod constraints;
 mod contact;
 mod direct;
@@ -70,6 +71,8 @@ use cosserat_model::{Quat, Real, Vec3};
 use direct::{Assembled, BlockTridiagonal};
 use lanes::{V3s, padded};
 use work::Work;
+
+pub use binding::{StiffBindings, step_bound_stiff};
 
 /// How the constraints of a step are solved.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -321,6 +324,34 @@ pub struct StiffScratch {
     report: StiffReport,
     /// Contact with the rod's mesh, if it has one (`contact.rs`).
     contacts: Option<StiffContacts>,
+    /// What a coupling (`binding.rs`) asks of the next step, and what it gets back.
+    coupled: Coupled,
+}
+
+/// A point held on a line for a step's solve: a guidewire point on the centreline of the
+/// catheter it is bound in (`binding.rs`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LinePin {
+    pub(crate) point: usize,
+    /// A point of the line [m].
+    pub(crate) origin: Vec3<f64>,
+    /// Unit direction of the line.
+    pub(crate) direction: Vec3<f64>,
+}
+
+/// The coupling's share of a step: lines to hold points on and forces to add, set before the
+/// step; the force each line exerted, read after it. Empty for a rod that is not coupled, which
+/// then pays nothing.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Coupled {
+    pub(crate) lines: Vec<LinePin>,
+    /// Forces on points [N], added to the rod's own loads.
+    pub(crate) loads: Vec<(usize, Vec3<f64>)>,
+    /// After an accepted step: the force [N] each entry of `lines` exerted on its point (zero
+    /// for a point the line did not hold: a held end, or one an introducer guide holds).
+    pub(crate) line_forces: Vec<Vec3<f64>>,
+    /// Per point: its entry in `Work::pinned` (scratch of `binding::line_forces`).
+    pub(crate) slot: Vec<usize>,
 }
 
 impl StiffScratch {
@@ -764,6 +795,7 @@ fn step_fixed<T: Real>(
         factor_valid,
         report,
         contacts,
+        coupled,
     } = scratch;
     // Only a rod with a mesh (and the direct solver) pays for contacts.
     let mut contacts = contacts
@@ -802,6 +834,8 @@ fn step_fixed<T: Real>(
             t,
             gravity: &gravity,
             precision,
+            lines: &coupled.lines,
+            loads: &coupled.loads,
         };
         let (mut residual, mut tolerance) = solve_step(
             &ctx,
@@ -873,7 +907,10 @@ fn step_fixed<T: Real>(
         // energy without changing static equilibria.
         w.velocities(h, drag);
         if rod.reaction.is_some() {
-            record_reactions(rod, w, k, h, &gravity);
+            record_reactions(rod, w, k, h, &gravity, &coupled.loads);
+        }
+        if !coupled.lines.is_empty() {
+            binding::line_forces(w, k, h, coupled);
         }
         // Divergence check, as the explicit stepper's, on squared stretches (`|r − 1| > limit`
         // is `r² > (1 + limit)²` or `r² < (1 − limit)²`).
@@ -933,6 +970,7 @@ fn record_reactions<T: Real>(
     k: &Consts,
     h: f64,
     gravity: &Vec3<f64>,
+    coupling_loads: &[(usize, Vec3<f64>)],
 ) {
     let n = w.n;
     let lam = &w.lambda_prev;
@@ -957,10 +995,15 @@ fn record_reactions<T: Real>(
         t
     };
     let loads: [Vec3<f64>; 2] = [0, n].map(|p| {
-        rod.loads
+        let own = rod
+            .loads
             .iter()
             .filter(|l| l.point == p)
-            .fold(Vec3::zeros(), |a, l| a + v64(&l.force))
+            .fold(Vec3::zeros(), |a, l| a + v64(&l.force));
+        coupling_loads
+            .iter()
+            .filter(|l| l.0 == p)
+            .fold(own, |a, l| a + l.1)
     });
     let Some(rx) = rod.reaction.as_deref_mut() else {
         return;
@@ -1037,6 +1080,9 @@ struct StepContext<'a, T: Real> {
     gravity: &'a Vec3<f64>,
     /// Machine epsilon of the rod's precision.
     precision: f64,
+    /// Lines a coupling holds points on, and forces it adds ([`Coupled`]).
+    lines: &'a [LinePin],
+    loads: &'a [(usize, Vec3<f64>)],
 }
 
 impl<T: Real> StepContext<'_, T> {
@@ -1084,7 +1130,11 @@ fn solve_step<T: Real>(
         w.constraints(k);
         w.keep_constraint_values();
     }
-    let loads = rod.loads.iter().map(|l| (l.point, v64(&l.force)));
+    let loads = rod
+        .loads
+        .iter()
+        .map(|l| (l.point, v64(&l.force)))
+        .chain(ctx.loads.iter().copied());
     let ends = &rod.ends;
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
@@ -1112,6 +1162,9 @@ fn solve_step<T: Real>(
         contact::pin_guided(w, k, g);
     } else {
         w.pinned.clear();
+    }
+    if !ctx.lines.is_empty() {
+        binding::pin_on_lines(w, k, ctx.lines);
     }
     if let Some(c) = contacts.as_deref_mut() {
         c.begin_step(w, k);
