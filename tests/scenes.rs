@@ -163,3 +163,25 @@ fn a_missing_file_is_an_error_not_a_panic() {
         .unwrap();
     assert!(err.to_string().contains("does/not/exist.toml"), "{err}");
 }
+
+/// The stiff scheme steps bindings (`scenes/catheter-guidewire.toml`) and refuses rod–rod
+/// contact with a message that names the setting to change.
+#[test]
+fn the_stiff_scheme_takes_bindings_and_refuses_rod_contact() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let stiff = [("solver.scheme".to_string(), "\"stiff\"".to_string())];
+    let (builder, _, _) = load_scene(&dir.join("catheter-guidewire.toml"), &stiff).unwrap();
+    let mut sim = builder.build().unwrap();
+    sim.run(3).unwrap();
+    assert!(sim.coupling_stats().unwrap().bound_points > 0);
+    let (builder, _, _) = load_scene(&dir.join("fishermans-knot.toml"), &stiff).unwrap();
+    let err = builder
+        .build()
+        .err()
+        .expect("rod contact with the stiff scheme")
+        .to_string();
+    assert!(
+        err.contains("rod–rod contact") && err.contains("solver.scheme = \"explicit\""),
+        "{err}"
+    );
+}
