@@ -96,7 +96,7 @@ fn a_nitinol_guidewire_reaches_full_depth_at_a_tenth_of_a_millisecond() {
 /// the `nitinol` and `catheter-polymer` presets, 512 elements each, two-way), pushed together
 /// into the vessel for 2.4 s at 0.1 ms (48 000 rod-steps). Every step converges, no point passes
 /// the wall, both instruments stay inextensible, the catheter goes in with its hand and the
-/// wire, pushed 5 cm/s faster, comes out of the catheter's tip and runs ahead of it.
+/// wire, pushed 3 cm/s faster, comes out of the catheter's tip and runs ahead of it.
 #[test]
 #[cfg_attr(
     debug_assertions,
@@ -116,9 +116,9 @@ fn a_guidewire_in_a_catheter_goes_in_with_every_step_converged() {
     let tip = |h| *sim.positions(h).last().unwrap();
     let (c, w) = (tip(catheter), tip(wire));
     // 0.24 m pushed: the catheter's tip is 0.25 m along the vessel (0.248 m measured), the
-    // wire's 12 cm further (0.377 m), past the first bends.
+    // wire's 8 cm further (0.330 m), past the first bends.
     assert!(c[2] > 0.24, "catheter tip {c:?}");
-    assert!(w[2] > c[2] + 0.1, "wire tip {w:?}, catheter tip {c:?}");
+    assert!(w[2] > c[2] + 0.07, "wire tip {w:?}, catheter tip {c:?}");
     // The wire is held inside the catheter along most of it.
     let bound = sim.coupling_stats().unwrap().bound_points;
     assert!(bound > 350, "{bound} points bound");
