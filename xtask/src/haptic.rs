@@ -8,11 +8,14 @@
 //!   tick) and at 500 Hz (one step of 2 ms), the two ends of the range haptic devices run at;
 //! - the real guidewire of `scenes/nitinol-guidewire-insertion.toml` (the `nitinol` preset),
 //!   which needs steps of 0.1 ms in the vessel, at 1 kHz as ten steps per tick, with 256
-//!   elements (2 mm, the resolution a haptic scene would use).
+//!   elements (2 mm, the resolution a haptic scene would use);
+//! - that guidewire bound inside a `catheter-polymer` catheter
+//!   (`scenes/stiff-catheter-guidewire.toml`), 256 elements each, at 1 kHz as five steps of
+//!   0.2 ms per tick.
 //!
-//! Each loop's tip is compared with a reference run to the same end: the explicit insertion
-//! (`scenes/guidewire-insertion.toml`, 700 000 steps) for the soft wire, the nitinol scene at
-//! dt 5e-5 s with 512 elements for the nitinol wire. It writes `docs/benchmarks/haptic.md`; the
+//! Each loop's tips (every rod's) are compared with a reference run to the same end: the
+//! explicit insertion (`scenes/guidewire-insertion.toml`, 700 000 steps) for the soft wire, the
+//! nitinol scenes at dt 5e-5 s with 512 elements per rod for the others. It writes `docs/benchmarks/haptic.md`; the
 //! exit status says whether every loop's 99th percentile is within its tick on this machine.
 
 use crate::bench::{conditions, machine, root};
@@ -48,7 +51,15 @@ const NITINOL_REFERENCE: (SceneWith, &str) = (
     "`scenes/nitinol-guidewire-insertion.toml` at dt 5e-5 s (512 elements)",
 );
 
-const LOOPS: [Loop; 3] = [
+const PAIR_REFERENCE: (SceneWith, &str) = (
+    (
+        "scenes/stiff-catheter-guidewire.toml",
+        &[("solver.dt", "5e-5")],
+    ),
+    "`scenes/stiff-catheter-guidewire.toml` at dt 5e-5 s (512 elements each)",
+);
+
+const LOOPS: [Loop; 4] = [
     Loop {
         label: "soft wire, 1 kHz (1 × 1 ms)",
         scene: ("scenes/stiff-guidewire-insertion.toml", &[]),
@@ -76,12 +87,26 @@ const LOOPS: [Loop; 3] = [
         period: 1e-3,
         reference: NITINOL_REFERENCE,
     },
+    Loop {
+        label: "nitinol wire in a catheter, 256 elements each, 1 kHz (5 × 0.2 ms)",
+        scene: (
+            "scenes/stiff-catheter-guidewire.toml",
+            &[
+                ("rod.0.elements", "256"),
+                ("rod.1.elements", "256"),
+                ("solver.dt", "2e-4"),
+            ],
+        ),
+        steps_per_tick: 5,
+        period: 1e-3,
+        reference: PAIR_REFERENCE,
+    },
 ];
 
 struct Run {
     /// Wall time of every tick [µs].
     times: Vec<f64>,
-    tip: [f64; 3],
+    tips: Vec<[f64; 3]>,
     iterations: f64,
     factorisations: f64,
     unconverged: u64,
@@ -99,12 +124,16 @@ fn load((scene, set): SceneWith) -> Result<(cosserat::Simulation, u64), String> 
     Ok((sim, length.steps))
 }
 
-fn tip(sim: &cosserat::Simulation) -> Result<[f64; 3], String> {
-    let rod = sim.rods().next().ok_or("the scene has no rod")?;
-    sim.positions(rod)
-        .last()
-        .copied()
-        .ok_or_else(|| "the rod has no points".into())
+/// The last point of every rod.
+fn tips(sim: &cosserat::Simulation) -> Result<Vec<[f64; 3]>, String> {
+    sim.rods()
+        .map(|rod| {
+            sim.positions(rod)
+                .last()
+                .copied()
+                .ok_or_else(|| "a rod has no points".to_string())
+        })
+        .collect()
 }
 
 fn timed_run(l: &Loop) -> Result<Run, String> {
@@ -123,7 +152,7 @@ fn timed_run(l: &Loop) -> Result<Run, String> {
         .ok_or("the scene does not use the stiff scheme")?;
     Ok(Run {
         times,
-        tip: tip(&sim)?,
+        tips: tips(&sim)?,
         iterations: stiff.iterations_per_step(),
         factorisations: stiff.factorisations_per_step(),
         unconverged: stiff.unconverged_steps,
@@ -131,10 +160,10 @@ fn timed_run(l: &Loop) -> Result<Run, String> {
     })
 }
 
-fn reference_tip(scene: SceneWith) -> Result<[f64; 3], String> {
+fn reference_tips(scene: SceneWith) -> Result<Vec<[f64; 3]>, String> {
     let (mut sim, steps) = load(scene)?;
     sim.run(steps).map_err(|e| e.to_string())?;
-    tip(&sim)
+    tips(&sim)
 }
 
 /// The `q` quantile of sorted values (nearest rank).
@@ -145,25 +174,30 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 pub(crate) fn run() -> Result<bool, String> {
     let header = format!("Machine: {}; {}.", machine(), conditions());
-    let mut references: Vec<(&str, [f64; 3])> = Vec::new();
+    let mut references: Vec<(&str, Vec<[f64; 3]>)> = Vec::new();
     for l in &LOOPS {
         let (scene, what) = l.reference;
         if !references.iter().any(|(w, _)| *w == what) {
             println!("running the reference: {what}…");
-            references.push((what, reference_tip(scene)?));
+            references.push((what, reference_tips(scene)?));
         }
     }
     let mut md = String::new();
-    let _ = writeln!(md, "# Guidewire insertions as a haptic loop sees them\n");
+    let _ = writeln!(md, "# Guidewire and catheter insertions as a haptic loop sees them\n");
     let _ = writeln!(
         md,
         "{header} Command: `cargo xtask bench --haptic` (`xtask/src/haptic.rs`). Each loop \
-steps its scene to the end (2.45 s, full depth) one tick at a time, each tick timed (the \
-first tick apart), {RUNS} runs each. Budget: a tick within the loop's period at the 99th \
-percentile. Tips are compared with reference runs to the same end:\n"
+steps its scene to the end (2.45 s, full depth; 2.4 s for the catheter) one tick at a time, \
+each tick timed (the first tick apart), {RUNS} runs each. Budget: a tick within the loop's \
+period at the 99th percentile. Tips (of every rod; the largest distance is listed) are \
+compared with reference runs to the same end:\n"
     );
-    for (what, t) in &references {
-        let _ = writeln!(md, "- {what}: ({:.6}, {:.6}, {:.6}) m", t[0], t[1], t[2]);
+    for (what, tips) in &references {
+        let list: Vec<_> = tips
+            .iter()
+            .map(|t| format!("({:.6}, {:.6}, {:.6})", t[0], t[1], t[2]))
+            .collect();
+        let _ = writeln!(md, "- {what}: {} m", list.join(", "));
     }
     let _ = writeln!(
         md,
@@ -176,7 +210,7 @@ percentile. Tips are compared with reference runs to the same end:\n"
         let reference = references
             .iter()
             .find(|(w, _)| *w == l.reference.1)
-            .map(|r| r.1)
+            .map(|r| r.1.clone())
             .ok_or("reference not run")?;
         let mut p99s = Vec::new();
         for k in 1..=RUNS {
@@ -188,13 +222,21 @@ percentile. Tips are compared with reference runs to the same end:\n"
             let over = rest.iter().filter(|&&t| t > budget).count();
             let p99 = quantile(&rest, 0.99);
             p99s.push(p99);
+            if r.tips.len() != reference.len() {
+                return Err(format!("{}: rods differ from the reference's", l.label));
+            }
             let error = 1e3
-                * r.tip
+                * r.tips
                     .iter()
                     .zip(&reference)
-                    .map(|(a, b)| (a - b).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
+                    .map(|(t, u)| {
+                        t.iter()
+                            .zip(u)
+                            .map(|(a, b)| (a - b).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                    })
+                    .fold(0.0, f64::max);
             let _ = writeln!(
                 md,
                 "| {} | {k} | {first:.0} | {:.0} | {p99:.0} | {:.0} | {:.0} | {over} of {} | {:.2} / {:.2} | {} | {} | {error:.3} |",

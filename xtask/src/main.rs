@@ -15,7 +15,8 @@
 //! - `cargo xtask bench --stiff` — the stiff step against the explicit step at 1000 elements,
 //!   into `docs/benchmarks/stiff-target.md` (exits non-zero while the 2× target is not met).
 //! - `cargo xtask bench --haptic` — guidewire insertions ticked as a haptic loop calls them
-//!   (the soft wire at 1 kHz and 500 Hz, the nitinol wire at 1 kHz in ten steps per tick),
+//!   (the soft wire at 1 kHz and 500 Hz, the nitinol wire at 1 kHz in ten steps per tick, the
+//!   nitinol wire bound in a catheter at 1 kHz in five steps per tick),
 //!   tick-time percentiles against the loop's period, into `docs/benchmarks/haptic.md` (exits
 //!   non-zero when a loop's 99th percentile is over its period on this machine).
 //! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
