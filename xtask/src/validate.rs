@@ -30,6 +30,7 @@ fn case_list() -> Vec<Case> {
             cases::stiff_scheme_at(Size::Full, 1e-4)
         }),
         ("incline friction", || cases::incline_friction(Size::Full)),
+        ("binding", || cases::binding_composite(Size::Full)),
         ("long runs", cases::long_runs),
         ("stability map", stability_map::rows),
     ]
