@@ -15,6 +15,7 @@
 
 use super::direct_stepper::DirectRod;
 use super::reference as refs;
+use cosserat::constraints::BindingVariant;
 use cosserat::cosserat_model::energy::bend_twist_node;
 use cosserat::cosserat_model::quat::frame_from_tangent;
 use cosserat::cosserat_model::rod::{RestShape, RodSpec, straight_polyline};
@@ -1414,6 +1415,102 @@ pub fn stiff_scheme_at(size: Size, dt: f64) -> Result<Vec<Row>, String> {
     Ok(rows)
 }
 
+/// The catheter–guidewire binding at rest (paper section 3.4; `constraints::binding` and the
+/// stiff scheme's `stiff/binding.rs`): a catheter (the test rod) with a wire (half its radius,
+/// four times its modulus, so a quarter of its bending stiffness) bound inside along its first
+/// three quarters, both clamped at the origin, and a tip load on the catheter. Two-way the pair
+/// bends as one composite beam where the wire is: bending stiffness `EI_c + EI_w` and shear
+/// stiffness `K_c + K_w` over `[0, L_w]`, the catheter's alone beyond. One-way the wire does not
+/// act on the catheter, which bends as it would alone. Both schemes.
+pub fn binding_composite(size: Size) -> Result<Vec<Row>, String> {
+    let mut rows = Vec::new();
+    for scheme in [Scheme::Explicit, Scheme::Stiff] {
+        for variant in [BindingVariant::TwoWay, BindingVariant::OneWay] {
+            rows.push(binding_composite_in(scheme, variant, size)?);
+        }
+    }
+    Ok(rows)
+}
+
+fn binding_composite_in(
+    scheme: Scheme,
+    variant: BindingVariant,
+    size: Size,
+) -> Result<Row, String> {
+    let outer = TestRod::default();
+    let inner = TestRod {
+        length: 0.75 * outer.length,
+        material: Material::new(4e6, 4e6 / 3.0, 1000.0, 0.01),
+    };
+    let (ei_c, kp_c, l) = (outer.ei(), outer.kp(), outer.length);
+    let (ei_w, kp_w, lw) = (inner.ei(), inner.kp(), inner.length);
+    // F L²/EI_c = 1e-3: deflections of 1e-4 L.
+    let f = 1e-3 * ei_c / (l * l);
+    let w1 = outer.omega1();
+    let drag = 2.0 * w1;
+    let ns = size.resolutions(8);
+    let mut tips = Vec::new();
+    let mut settle_res = 0.0_f64;
+    for &n in &ns {
+        let m = 3 * n / 4;
+        let dt = match scheme {
+            Scheme::Explicit => outer.dt(n, 0.0, drag).min(inner.dt(m, 0.0, drag)),
+            Scheme::Stiff => 0.1 / w1,
+            Scheme::StiffAt(dt) => dt,
+        };
+        let mut b = SimulationBuilder::new()
+            .dt(dt)
+            .iterations(static_iterations(n))
+            .ordering(Ordering::GaussSeidel)
+            .gravity([0.0; 3])
+            .double_precision(true);
+        let catheter = b.add_rod(
+            outer
+                .straight(n)
+                .clamp_start()
+                .damping(0.0, 0.0, drag)
+                .load(n, [0.0, 0.0, -f]),
+        );
+        let wire = b.add_rod(inner.straight(m).clamp_start().damping(0.0, 0.0, drag));
+        let b = b.bind(wire, catheter, variant);
+        let mut sim = with_scheme(b, scheme).build().map_err(|e| e.to_string())?;
+        let (p, moved) = settle(&mut sim, 1.0 / w1, 80.0 / w1, 1e-11, l)?;
+        tips.push(-p[n][2]);
+        settle_res = settle_res.max(moved);
+    }
+    let rest = l - lw;
+    let (reference, what, name) = match variant {
+        BindingVariant::TwoWay => (
+            f / 3.0 * ((l.powi(3) - rest.powi(3)) / (ei_c + ei_w) + rest.powi(3) / ei_c)
+                + f * (lw / (kp_c + kp_w) + rest / kp_c),
+            "composite beam",
+            "two-way",
+        ),
+        _ => (
+            refs::cantilever_point_load(f, l, ei_c, kp_c, l),
+            "FL³/3EI_c + FL/K_c",
+            "one-way",
+        ),
+    };
+    let c = convergence(&tips, CLAMPED);
+    Ok(Row {
+        case: format!(
+            "{}binding, {name}: catheter with a wire, tip load",
+            scheme.label()
+        ),
+        quantity: format!("tip deflection [m] vs {what}"),
+        measured: c.finest,
+        reference,
+        tolerance: (c.gci + settle_res) / reference,
+        check: Check::Relative,
+        note: format!(
+            "{}; the catheter alone {:.6e}",
+            order_text(&c, &ns),
+            refs::cantilever_point_load(f, l, ei_c, kp_c, l)
+        ),
+    })
+}
+
 pub fn all(size: Size) -> Vec<(String, Result<Vec<Row>, String>)> {
     vec![
         ("cantilever small deflection".into(), cantilever_small(size)),
@@ -1426,5 +1523,6 @@ pub fn all(size: Size) -> Vec<(String, Result<Vec<Row>, String>)> {
         ("pendulum".into(), pendulum_cases(size)),
         ("stiff scheme".into(), stiff_scheme(size)),
         ("incline friction".into(), incline_friction(size)),
+        ("binding".into(), binding_composite(size)),
     ]
 }

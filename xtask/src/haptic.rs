@@ -183,7 +183,10 @@ pub(crate) fn run() -> Result<bool, String> {
         }
     }
     let mut md = String::new();
-    let _ = writeln!(md, "# Guidewire and catheter insertions as a haptic loop sees them\n");
+    let _ = writeln!(
+        md,
+        "# Guidewire and catheter insertions as a haptic loop sees them\n"
+    );
     let _ = writeln!(
         md,
         "{header} Command: `cargo xtask bench --haptic` (`xtask/src/haptic.rs`). Each loop \
