@@ -226,7 +226,8 @@ pub fn step_bound_stiff<T: Real>(
 
 /// Step 3 of the module docs: the line of every bound point, through its nearest point of the
 /// outer centreline `outer` (already stepped) along that segment, shifted by what is left of
-/// its offset at the start of the step.
+/// its offset at the start of the step. One line per bound point, in order (the reaction reads
+/// the lines' forces against `set.bound()`).
 fn lines_on_outer<T: Real>(set: &BindingSet<T>, outer: &[Vec3<T>], lines: &mut Vec<LinePin>) {
     let f = |v: &Vec3<T>| Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64());
     let keep = 1.0 - set.offset_correction.to_f64();
@@ -235,10 +236,9 @@ fn lines_on_outer<T: Real>(set: &BindingSet<T>, outer: &[Vec3<T>], lines: &mut V
         let (a, c) = (f(&outer[j]), f(&outer[j + 1]));
         let e = c - a;
         let len = e.norm();
-        if !(len > 0.0) {
-            continue;
-        }
-        let t = e / len;
+        // A segment the step collapsed (it cannot, inextensible; extensible, only by diverging)
+        // keeps its direction at the start of the step.
+        let t = if len > 0.0 { e / len } else { f(&b.tangent) };
         let s = b.s.to_f64();
         let offset = f(&b.offset);
         let left = (offset - t * t.dot(&offset)) * keep;
