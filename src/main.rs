@@ -302,6 +302,16 @@ fn run_warnings(sim: &Simulation) -> Vec<String> {
             c.escaped_points
         ));
     }
+    if let Some(c) = sim.coupling_stats()
+        && c.held_ends_inside > 0
+    {
+        warnings.push(format!(
+            "for {} steps a bound rod's held end was inside the rod it is bound in: the stiff \
+             scheme's binding lags a step and can be unstable there; keep the hand behind the \
+             hub (docs/stiff-solver.md, \"Bindings\")",
+            c.held_ends_inside
+        ));
+    }
     if let Some(st) = sim.stiff_summary()
         && (st.unconverged_steps * 100 > st.steps_kept
             || st.max_residual > 100.0 * st.max_tolerance)

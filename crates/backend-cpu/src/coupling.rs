@@ -126,6 +126,10 @@ pub struct CouplingStats {
     pub detection_seconds: f64,
     /// Steps taken.
     pub steps: u64,
+    /// Steps at which a held end point of an inner rod was bound inside its outer rod (counted
+    /// by the stiff scheme only, whose partitioned binding can be unstable there:
+    /// `stiff/binding.rs`).
+    pub held_ends_inside: u64,
 }
 
 impl Default for CouplingStats {
@@ -139,6 +143,7 @@ impl Default for CouplingStats {
             min_separation_ratio: f64::INFINITY,
             detection_seconds: 0.0,
             steps: 0,
+            held_ends_inside: 0,
         }
     }
 }

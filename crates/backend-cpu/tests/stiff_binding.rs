@@ -229,6 +229,8 @@ fn one_way_leaves_the_catheter_as_it_is_alone() {
         alone.state.positions[n]
     );
     assert_eq!(bindings.bound_points(0), 26);
+    // The wire's ends are free: nothing to warn about.
+    assert_eq!(bindings.stats().held_ends_inside, 0);
     let gap = largest_offset(&rods[1].state.positions, &rods[0].state.positions);
     assert!(gap < 1e-3 * 0.2 / 25.0, "largest offset {gap:e} m");
 }
@@ -340,4 +342,52 @@ fn a_pushed_wire_slides_through_a_bent_catheter() {
     }
     run::<f64>();
     run::<f32>();
+}
+
+/// A wire clamped at its catheter's clamp has its held end inside the catheter at every step,
+/// the configuration in which the two-way coupling can be unstable: the bindings count those
+/// steps (the command line turns the count into a warning).
+#[test]
+fn a_held_end_inside_the_catheter_is_counted() {
+    let (catheter, wire) = (
+        preset("catheter-polymer").unwrap(),
+        preset("nitinol").unwrap(),
+    );
+    let outer = rod::<f64>(
+        catheter,
+        &straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 0.1, 20),
+        0.0,
+        [EndCondition::clamped(), EndCondition::free()],
+        vec![],
+    );
+    let inner = rod::<f64>(
+        wire,
+        &straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 0.05, 10),
+        0.0,
+        [EndCondition::clamped(), EndCondition::free()],
+        vec![],
+    );
+    let mut rods = vec![outer, inner];
+    let spec = BindingSpec {
+        inner: 1,
+        outer: 0,
+        variant: BindingVariant::TwoWay,
+        capture: None,
+    };
+    let mut bindings = StiffBindings::new(&rods, &[spec]).unwrap();
+    let mut scratches = vec![StiffScratch::new(), StiffScratch::new()];
+    step_bound_stiff(
+        &mut rods,
+        &mut scratches,
+        &mut bindings,
+        &settings::<f64>(1e-3),
+        &StiffSettings::default(),
+        0.0,
+        0,
+        5,
+        &mut Vec::new(),
+    )
+    .unwrap();
+    assert_eq!(bindings.stats().held_ends_inside, 5);
+    assert_eq!(bindings.stats().steps, 5);
 }

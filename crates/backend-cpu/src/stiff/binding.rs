@@ -163,13 +163,19 @@ pub fn step_bound_stiff<T: Real>(
         // 1. Nearest points at the start of the step.
         let t0 = std::time::Instant::now();
         let mut bound = 0;
+        let mut held_inside = false;
         for b in &mut bindings.bindings {
-            b.set.update(
-                &rods[b.inner].state.positions,
-                &rods[b.outer].state.positions,
-            );
+            let inner = &rods[b.inner];
+            b.set
+                .update(&inner.state.positions, &rods[b.outer].state.positions);
             bound += b.set.bound().len();
+            let last = inner.elements() as u32;
+            held_inside |= b.set.bound().iter().any(|p| {
+                (p.point == 0 && inner.ends[0].holds_point())
+                    || (p.point == last && inner.ends[1].holds_point())
+            });
         }
+        bindings.stats.held_ends_inside += u64::from(held_inside);
         bindings.stats.detection_seconds += t0.elapsed().as_secs_f64();
         bindings.stats.bound_points = bound;
         // 2. Outer rods first.
