@@ -82,8 +82,14 @@ fn run_bound<T: Real>(
 
 /// A catheter (`catheter-polymer`, length `L`) and a nitinol wire inside it along its first
 /// three quarters, both clamped at the origin, a force `F` down on the catheter's tip; settled.
-/// Returns the tip deflection.
-fn composite_tip(n: usize, variant: BindingVariant, dt: f64, force: f64, length: f64) -> f64 {
+/// Returns the settled rods.
+fn composite_rods(
+    n: usize,
+    variant: BindingVariant,
+    dt: f64,
+    force: f64,
+    length: f64,
+) -> Vec<CpuRod<f64>> {
     let (catheter, wire) = (
         preset("catheter-polymer").unwrap(),
         preset("nitinol").unwrap(),
@@ -107,8 +113,15 @@ fn composite_tip(n: usize, variant: BindingVariant, dt: f64, force: f64, length:
         vec![],
     );
     let steps = (40.0 / omega / dt).ceil().max(100.0) as u64;
-    let rods = run_bound(vec![outer, inner], variant, dt, steps);
-    -rods[0].state.positions[n].z
+    run_bound(vec![outer, inner], variant, dt, steps)
+}
+
+/// The tip deflection of [`composite_rods`].
+fn composite_tip(n: usize, variant: BindingVariant, dt: f64, force: f64, length: f64) -> f64 {
+    -composite_rods(n, variant, dt, force, length)[0]
+        .state
+        .positions[n]
+        .z
 }
 
 /// Two-way, the catheter and the wire bend together where the wire is: the tip deflection of
@@ -390,4 +403,56 @@ fn a_held_end_inside_the_catheter_is_counted() {
     .unwrap();
     assert_eq!(bindings.stats().held_ends_inside, 5);
     assert_eq!(bindings.stats().steps, 5);
+}
+
+/// What the hands feel: at rest, two-way, the clamps of the catheter and of the wire bound in
+/// it together hold the catheter's tip load, `F_c + F_w = −F_tip`, and its moment about their
+/// common clamp point, and the wire's clamp takes a real share (the lines pass it from the
+/// catheter to the wire). One-way the catheter does not feel the wire, so its clamp alone holds
+/// the load and its moment (the wire's clamp then holds the wire against the lines, a force
+/// that acts on nothing else). Fails if the binding's loads on the catheter are not those the
+/// lines put on the wire, or are left out of the clamp's reaction.
+#[test]
+fn the_clamps_of_a_bound_pair_hold_the_load_together() {
+    let length = 0.1;
+    let ei_c = preset("catheter-polymer")
+        .unwrap()
+        .material()
+        .bend_twist_stiffness()[0];
+    let force = 1e-3 * 3.0 * ei_c / (length * length);
+    for variant in [BindingVariant::TwoWay, BindingVariant::OneWay] {
+        let rods = composite_rods(20, variant, 1e-3, force, length);
+        let reaction = |r: &CpuRod<f64>| r.end_reaction_raw(0).expect("a clamped end");
+        let (c, w) = (reaction(&rods[0]), reaction(&rods[1]));
+        let (force_held, torque_held) = match variant {
+            BindingVariant::TwoWay => (
+                [0, 1, 2].map(|k| c.force[k] + w.force[k]),
+                c.torque[1] + w.torque[1],
+            ),
+            _ => (c.force, c.torque[1]),
+        };
+        // The holder pushes up by the load ...
+        let expected = [0.0, 0.0, force];
+        for k in 0..3 {
+            assert!(
+                (force_held[k] - expected[k]).abs() < 1e-6 * force,
+                "{variant:?}: clamp forces {:?}, {:?}: held {force_held:?}, expected {expected:?}",
+                c.force,
+                w.force
+            );
+        }
+        // ... and balances the load's moment about the clamps, `(r_tip × (−F ẑ))_y = x_tip F`.
+        let tip = rods[0].state.positions[20];
+        let moment = -tip.x * force;
+        assert!(
+            (torque_held - moment).abs() < 1e-4 * moment.abs(),
+            "{variant:?}: clamp torques {:?}, {:?}: held {torque_held}, expected {moment}",
+            c.torque,
+            w.torque
+        );
+        if variant == BindingVariant::TwoWay {
+            let share = w.force[2] / force;
+            assert!(share > 0.01, "the wire's clamp holds {share} of the load");
+        }
+    }
 }
