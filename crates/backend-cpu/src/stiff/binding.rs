@@ -20,14 +20,18 @@
 //! 4. one-way (v1): that is all, the outer rod does not feel the inner one. Two-way (v2): the
 //!    force each line exerted on the inner rod (`M (x − x̃) − Jᵀλ` over `h²` at the pinned
 //!    point, the implicit step's own balance) is applied, reversed and split by the segment
-//!    parameter, to the outer rod's two points as a load **in its next step**.
+//!    parameter, to the outer rod's two points as a load **in its next step**, relaxed
+//!    ([`RELAXATION`]).
 //!
 //! The two-way coupling therefore lags by one step: a partitioned scheme, exact at rest (a
 //! static state is a fixed point: the loads no longer change) and first order in `h` in motion,
-//! like the step itself. It is stable while the inner rod is the lighter and softer of the two
-//! (what it passes back in one step is its own response to the outer rod's motion, which the
-//! heavier, stiffer outer rod then answers with a smaller motion); a guidewire is lighter and
-//! softer than its catheter. `docs/stiff-solver.md` ("Bindings") has the measurements.
+//! like the step itself. It is stable while the inner rod answers a sideways move of the outer
+//! one more weakly than the outer rod resists it (up to five times more strongly with the
+//! relaxation); a guidewire is lighter and softer than its catheter, except next to its own
+//! held end, so a wire whose hand is pushed into the catheter's hub is not (counted in
+//! [`CouplingStats::held_ends_inside`]). Points of an element whose frame is held are not
+//! bound at all (see [`pin_on_lines`]). `docs/stiff-solver.md` ("Bindings") has the
+//! measurements.
 //!
 //! A rod may be the inner rod of one binding only (two lines on one point would fight), and
 //! bindings may not form a cycle. Rod–rod contact is not handled in the stiff scheme.
