@@ -24,8 +24,7 @@ fn settings<T: Real>(dt: f64) -> SolverSettings<T> {
     }
 }
 
-/// A rod of `n` elements from `points[0]` through the polyline `points` (resampled straight
-/// here: the polylines of these tests are straight or bent once).
+/// A rod of the preset's material along the polyline `points`, one element per segment.
 fn rod<T: Real>(
     p: &Preset,
     points: &[[f64; 3]],
@@ -45,27 +44,28 @@ fn first_frequency(p: &Preset, length: f64) -> f64 {
         * (m.bend_twist_stiffness()[0] / (m.linear_density() * length.powi(4))).sqrt()
 }
 
-/// Steps the rods bound by `variant` (rod 1 inside rod 0) and returns them.
-fn run_bound<T: Real>(
-    mut rods: Vec<CpuRod<T>>,
+/// Binds rod 1 inside rod 0 with `variant` and steps the pair `steps` times with the default
+/// stiff settings; returns the bindings and the rods' scratches.
+fn step_pair<T: Real>(
+    rods: &mut [CpuRod<T>],
     variant: BindingVariant,
-    dt: f64,
+    settings: &SolverSettings<T>,
     steps: u64,
-) -> Vec<CpuRod<T>> {
+) -> (StiffBindings<T>, Vec<StiffScratch>) {
     let spec = BindingSpec {
         inner: 1,
         outer: 0,
         variant,
         capture: None,
     };
-    let mut bindings = StiffBindings::new(&rods, &[spec]).unwrap();
+    let mut bindings = StiffBindings::new(rods, &[spec]).unwrap();
     let mut scratches = vec![StiffScratch::new(), StiffScratch::new()];
     let mut stats: Vec<StepStats> = Vec::new();
     step_bound_stiff(
-        &mut rods,
+        rods,
         &mut scratches,
         &mut bindings,
-        &settings::<T>(dt),
+        settings,
         &StiffSettings::default(),
         0.0,
         0,
@@ -73,6 +73,18 @@ fn run_bound<T: Real>(
         &mut stats,
     )
     .unwrap();
+    (bindings, scratches)
+}
+
+/// Steps the rods bound by `variant` (rod 1 inside rod 0), checks that every step converged and
+/// returns them.
+fn run_bound<T: Real>(
+    mut rods: Vec<CpuRod<T>>,
+    variant: BindingVariant,
+    dt: f64,
+    steps: u64,
+) -> Vec<CpuRod<T>> {
+    let (_, scratches) = step_pair(&mut rods, variant, &settings::<T>(dt), steps);
     for s in &scratches {
         let r = s.report();
         assert_eq!(r.unconverged_steps, 0, "{r:?}");
@@ -199,27 +211,7 @@ fn one_way_leaves_the_catheter_as_it_is_alone() {
     };
     let stiff = StiffSettings::default();
     let mut rods = vec![make_outer(), inner];
-    let spec = BindingSpec {
-        inner: 1,
-        outer: 0,
-        variant: BindingVariant::OneWay,
-        capture: None,
-    };
-    let mut bindings = StiffBindings::new(&rods, &[spec]).unwrap();
-    let mut scratches = vec![StiffScratch::new(), StiffScratch::new()];
-    let mut stats = Vec::new();
-    step_bound_stiff(
-        &mut rods,
-        &mut scratches,
-        &mut bindings,
-        &s,
-        &stiff,
-        0.0,
-        0,
-        200,
-        &mut stats,
-    )
-    .unwrap();
+    let (bindings, _) = step_pair(&mut rods, BindingVariant::OneWay, &s, 200);
     let mut alone = make_outer();
     backend_cpu::step_rod_stiff(
         &mut alone,
@@ -381,26 +373,7 @@ fn a_held_end_inside_the_catheter_is_counted() {
         vec![],
     );
     let mut rods = vec![outer, inner];
-    let spec = BindingSpec {
-        inner: 1,
-        outer: 0,
-        variant: BindingVariant::TwoWay,
-        capture: None,
-    };
-    let mut bindings = StiffBindings::new(&rods, &[spec]).unwrap();
-    let mut scratches = vec![StiffScratch::new(), StiffScratch::new()];
-    step_bound_stiff(
-        &mut rods,
-        &mut scratches,
-        &mut bindings,
-        &settings::<f64>(1e-3),
-        &StiffSettings::default(),
-        0.0,
-        0,
-        5,
-        &mut Vec::new(),
-    )
-    .unwrap();
+    let (bindings, _) = step_pair(&mut rods, BindingVariant::TwoWay, &settings::<f64>(1e-3), 5);
     assert_eq!(bindings.stats().held_ends_inside, 5);
     assert_eq!(bindings.stats().steps, 5);
 }

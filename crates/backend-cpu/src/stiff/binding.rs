@@ -36,7 +36,7 @@
 //! A rod may be the inner rod of one binding only (two lines on one point would fight), and
 //! bindings may not form a cycle. Rod–rod contact is not handled in the stiff scheme.
 
-use super::contact::{Pinned, constraint_impulse};
+use super::contact::{Pinned, pin_impulse};
 use super::work::Work;
 use super::{Consts, Coupled, LinePin, StiffScratch, StiffSettings, step_rod_stiff};
 use crate::coupling::{BindingSpec, CouplingStats};
@@ -285,13 +285,14 @@ fn reaction_on_outer<T: Real>(
 pub(super) fn pin_on_lines(w: &mut Work, k: &Consts, lines: &[LinePin]) {
     // The guide's pins, the only ones so far, run from point 1 upward.
     let guided = w.pinned.len();
+    // A point of an element whose frame is held (the element next to a clamped end) is placed
+    // by the clamp through the stiff stretch–shear constraint: a line on it too would be a
+    // second, conflicting support, and its force would be that of the shear stiffness, far
+    // stiffer than anything the outer rod can answer in one step.
+    let n = w.n;
+    let clamped = |j: Option<usize>| j.is_some_and(|j| j < n && k.cols.free[j] == 0.0);
     for line in lines {
         let i = line.point;
-        // A point of an element whose frame is held (the element next to a clamped end) is
-        // placed by the clamp through the stiff stretch–shear constraint: a line on it too
-        // would be a second, conflicting support, and its force would be that of the shear
-        // stiffness, far stiffer than anything the outer rod can answer in one step.
-        let clamped = |j: Option<usize>| j.is_some_and(|j| j < w.n && k.cols.free[j] == 0.0);
         if k.inv_mass[i] == 0.0
             || clamped(i.checked_sub(1))
             || clamped(Some(i))
@@ -344,9 +345,7 @@ pub(super) fn line_forces(w: &Work, k: &Consts, h: f64, coupled: &mut Coupled) {
             line_forces.push(Vec3::zeros());
             continue;
         }
-        let mass = 1.0 / k.inv_mass[i];
-        let g =
-            (w.x.get(i) - w.x_pred.get(i)) * mass - constraint_impulse(w, k, &w.lambda_prev[0], i);
+        let g = pin_impulse(w, k, &w.lambda_prev[0], i);
         // Only the part across the line is the line's; along it the balance is zero up to the
         // solve's tolerance.
         let across = g - l.direction * l.direction.dot(&g);

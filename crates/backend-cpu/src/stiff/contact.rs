@@ -335,7 +335,7 @@ impl StiffContacts {
             let i = p.point;
             let mass = 1.0 / k.inv_mass[i];
             let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
-            let g = (x - x_pred) * mass - constraint_impulse(w, k, &w.lambda[0], i);
+            let g = pin_impulse(w, k, &w.lambda[0], i);
             let pn = p.normal.dot(&g);
             p.pn = pn;
             if !(pn > 0.0) {
@@ -507,6 +507,14 @@ pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
             pn: 0.0,
         });
     }
+}
+
+/// `M (x − x̃) − (J_rᵀ λ)_i`: the impulse (times the step) that holds point `i` where it is
+/// beyond what the multipliers `lambda` explain, i.e. what its pin (a wall, a guide, a binding's
+/// line) exerts on it. Free points of a converged step have none.
+pub(crate) fn pin_impulse(w: &Work, k: &Consts, lambda: &V3s, i: usize) -> Vec3<f64> {
+    let mass = 1.0 / k.inv_mass[i];
+    (w.x.get(i) - w.x_pred.get(i)) * mass - constraint_impulse(w, k, lambda, i)
 }
 
 /// `(J_rᵀ λ)_i`: the impulse (times the step) the stretch–shear multipliers `lambda` give
