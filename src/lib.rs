@@ -19,6 +19,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod convergence;
 pub mod environment;
 pub mod output;
 pub mod scene;

@@ -5,6 +5,7 @@
 //! With no arguments it runs the built-in demo, the paper's free-space pendulum.
 
 use clap::{Parser, Subcommand};
+use cosserat::convergence::{self, Refinement};
 use cosserat::scene::{load_scene, parse_scene};
 use cosserat::{Backend, RodHandle, Simulation};
 use std::path::{Path, PathBuf};
@@ -29,10 +30,14 @@ struct Cli {
 enum Command {
     /// Run a scene file.
     Run(RunArgs),
+    /// Estimate a scene's discretisation error: run it again with half the step (or twice the
+    /// elements), and again, and compare the end states (Richardson, Roache's GCI).
+    Converge(ConvergeArgs),
 }
 
+/// Which scene, how long, on which backend: what `run` and `converge` share.
 #[derive(clap::Args)]
-struct RunArgs {
+struct SceneArgs {
     /// The scene (TOML).
     scene: PathBuf,
     /// Backend: cpu, cpu-rayon or gpu.
@@ -44,31 +49,51 @@ struct RunArgs {
     /// Simulated time in seconds (default: the scene's).
     #[arg(long)]
     duration: Option<f64>,
-    /// Print one JSON object instead of a summary.
-    #[arg(long)]
-    json: bool,
-    /// Write the trajectory (trajectory.npz, frame_*.vtp, trajectory.pvd) into this folder.
-    #[arg(long)]
-    out: Option<PathBuf>,
-    /// Frames to record with --out (evenly spaced, plus the initial state).
-    #[arg(long, default_value_t = 100)]
-    frames: u64,
     /// Set the number of elements of every rod.
     #[arg(long)]
     elements: Option<usize>,
     /// Override a scene value: KEY=VALUE with a dotted key, e.g. solver.dt=1e-5 or rod.0.elements=1000.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
+    /// Print one JSON object instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Write the trajectory (trajectory.npz, frame_*.vtp, trajectory.pvd) into this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Frames to record with --out (evenly spaced, plus the initial state).
+    #[arg(long, default_value_t = 100)]
+    frames: u64,
     /// Time every step on its own, as a haptic or real-time loop calls it, and report the
     /// median, 99th percentile and largest step time.
     #[arg(long)]
     step_times: bool,
 }
 
+#[derive(clap::Args)]
+struct ConvergeArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// What to refine: `time` (halve the step) or `space` (double every rod's elements).
+    #[arg(long, default_value = "time")]
+    refine: String,
+    /// Number of runs, each twice as fine as the one before (at least 2; 3 give an observed
+    /// order and error estimates).
+    #[arg(long, default_value_t = 3)]
+    runs: usize,
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Run(args)) => run(&args),
+        Some(Command::Converge(args)) => converge(&args),
         None => demo(),
     };
     match result {
@@ -221,8 +246,16 @@ impl Recorder {
     }
 }
 
-fn run(args: &RunArgs) -> Result<ExitCode, String> {
-    let backend = parse_backend(&args.backend)?;
+/// A scene loaded with the command line's overrides (and `extra` after them), its name and
+/// the steps to run.
+struct LoadedScene {
+    builder: cosserat::SimulationBuilder,
+    name: String,
+    steps: u64,
+}
+
+/// The command line's `--set` and `--elements` as overrides.
+fn overrides(args: &SceneArgs) -> Result<Vec<(String, String)>, String> {
     let mut overrides = Vec::new();
     for kv in &args.overrides {
         let (k, v) = kv
@@ -236,6 +269,12 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
             overrides.push((format!("rod.{i}.elements"), n.to_string()));
         }
     }
+    Ok(overrides)
+}
+
+fn load(args: &SceneArgs, extra: &[(String, String)]) -> Result<LoadedScene, String> {
+    let mut overrides = overrides(args)?;
+    overrides.extend_from_slice(extra);
     let (builder, length, name) = load_scene(&args.scene, &overrides).map_err(|e| e.to_string())?;
     let dt = builder.time_step();
     let steps = match (args.steps, args.duration) {
@@ -248,17 +287,37 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
         }
         (None, None) => length.steps,
     };
+    let builder = builder.backend(parse_backend(&args.backend)?);
+    Ok(LoadedScene {
+        builder,
+        name,
+        steps,
+    })
+}
+
+fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
+    let args = &run_args.scene;
+    let LoadedScene {
+        builder,
+        name,
+        steps,
+    } = load(args, &[])?;
     let mut sim = builder
-        .backend(backend)
         .build()
         .map_err(|e| format!("{}: {e}", args.scene.display()))?;
-    let mut recorder = args
+    let mut recorder = run_args
         .out
         .as_ref()
-        .map(|_| Recorder::new(&sim, steps, args.frames))
+        .map(|_| Recorder::new(&sim, steps, run_args.frames))
         .transpose()?;
-    let outcome = step_for(&mut sim, steps, &mut recorder, !args.json, args.step_times);
-    if let (Some(dir), Some(rec)) = (&args.out, &recorder) {
+    let outcome = step_for(
+        &mut sim,
+        steps,
+        &mut recorder,
+        !args.json,
+        run_args.step_times,
+    );
+    if let (Some(dir), Some(rec)) = (&run_args.out, &recorder) {
         write_output(dir, rec)?;
     }
     report(&sim, &name, &outcome, args.json);
@@ -267,6 +326,180 @@ fn run(args: &RunArgs) -> Result<ExitCode, String> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
+    let args = &c.scene;
+    let refinement = match c.refine.as_str() {
+        "time" => Refinement::Time,
+        "space" => Refinement::Space,
+        other => {
+            return Err(format!(
+                "--refine `{other}` is invalid: expected time or space"
+            ));
+        }
+    };
+    let base = load(args, &[])?;
+    let dt = base.builder.time_step();
+    // Every rod's elements as the first run has them, for the space refinement's overrides.
+    let elements: Vec<usize> = match refinement {
+        Refinement::Time => Vec::new(),
+        Refinement::Space => {
+            let sim = base
+                .builder
+                .build()
+                .map_err(|e| format!("{}: {e}", args.scene.display()))?;
+            sim.rods()
+                .map(|h| sim.positions(h).len().saturating_sub(1))
+                .collect()
+        }
+    };
+    let build = |factor: u32| {
+        let extra: Vec<(String, String)> = match refinement {
+            Refinement::Time => vec![("solver.dt".into(), format!("{:e}", dt / f64::from(factor)))],
+            Refinement::Space => elements
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    (
+                        format!("rod.{i}.elements"),
+                        (n * factor as usize).to_string(),
+                    )
+                })
+                .collect(),
+        };
+        let scene = load(args, &extra)?;
+        scene
+            .builder
+            .build()
+            .map_err(|e| format!("{}: {e}", args.scene.display()))
+    };
+    if !args.json {
+        eprintln!(
+            "running {} {} runs of {} ({} steps in the first)…",
+            c.runs,
+            refinement.name(),
+            base.name,
+            base.steps
+        );
+    }
+    match convergence::study(refinement, c.runs, base.steps, build) {
+        Ok(study) => {
+            report_study(&base.name, &study, args.json);
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e @ convergence::StudyError::Diverged { .. }) => {
+            if args.json {
+                let v = serde_json::json!({"scene": base.name, "diverged": true, "error": e.to_string()});
+                println!("{v}");
+            } else {
+                println!("DIVERGED   {e}");
+            }
+            Ok(ExitCode::from(1))
+        }
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn report_study(name: &str, study: &convergence::Study, json: bool) {
+    let formal = study.refinement.formal_order();
+    if json {
+        let levels: Vec<_> = study
+            .levels
+            .iter()
+            .map(|l| {
+                serde_json::json!({
+                    "factor": l.factor, "dt": l.dt, "elements": l.elements, "steps": l.steps,
+                    "simulated_s": l.time, "wall_s": l.wall_s, "max_strain": l.max_strain,
+                })
+            })
+            .collect();
+        let rods: Vec<_> = study
+            .rods
+            .iter()
+            .map(|r| {
+                serde_json::json!({
+                    "name": r.name,
+                    "points_compared": r.points,
+                    "differences": r.differences,
+                    "worst_points": r.worst_points,
+                    "observed_order": r.grid.observed_order,
+                    "formal_order": formal,
+                    "asymptotic": r.asymptotic(),
+                    "negligible": r.negligible(),
+                    "length": r.length,
+                    "estimated_errors": r.estimated_errors,
+                    "gci": r.grid.gci,
+                })
+            })
+            .collect();
+        let v = serde_json::json!({
+            "scene": name,
+            "refinement": study.refinement.name(),
+            "runs": levels,
+            "rods": rods,
+        });
+        println!("{v}");
+        return;
+    }
+    let last = study.levels.len() - 1;
+    println!(
+        "converge   {name}: {} refinement, {} runs to t = {} s",
+        study.refinement.name(),
+        study.levels.len(),
+        study.levels[0].time
+    );
+    println!("run  dt [s]      elements      steps       wall [s]   max strain");
+    for (k, l) in study.levels.iter().enumerate() {
+        let elements: Vec<String> = l.elements.iter().map(|n| n.to_string()).collect();
+        println!(
+            "{k:<4} {:<11.3e} {:<13} {:<11} {:<10.3} {:.2e}",
+            l.dt,
+            elements.join(","),
+            l.steps,
+            l.wall_s,
+            l.max_strain
+        );
+    }
+    for r in &study.rods {
+        println!("rod \"{}\" ({} points compared)", r.name, r.points);
+        let diffs: Vec<String> = r
+            .differences
+            .iter()
+            .zip(&r.worst_points)
+            .enumerate()
+            .map(|(k, (d, j))| format!("runs {k}–{}: {d:.3e} m (point {j})", k + 1))
+            .collect();
+        println!("  largest distance between  {}", diffs.join(", "));
+        match (r.grid.observed_order, &r.estimated_errors) {
+            (Some(p), Some(errors)) => {
+                let e: Vec<String> = errors
+                    .iter()
+                    .enumerate()
+                    .map(|(k, e)| format!("run {k} {e:.2e} m"))
+                    .collect();
+                println!("  observed order {p:.2} (formal {formal}): in the asymptotic range");
+                println!("  estimated error           {}", e.join(", "));
+            }
+            _ if r.negligible() => println!(
+                "  the runs agree to within {:e} of the rod's length ({:.3} m): no discretisation error is measurable",
+                convergence::NEGLIGIBLE,
+                r.length
+            ),
+            (p, _) => {
+                let p = p.map_or("none".to_string(), |p| format!("{p:.2}"));
+                println!(
+                    "  observed order {p} (formal {formal}): NOT in the asymptotic range ({}–{}); no error estimate",
+                    convergence::ASYMPTOTIC_ORDERS.0,
+                    convergence::ASYMPTOTIC_ORDERS.1
+                );
+            }
+        }
+        println!(
+            "  GCI of run {last} (error bound, Fs {}): {:.2e} m",
+            r.grid.safety_factor, r.grid.gci
+        );
+    }
 }
 
 fn count_rods(path: &Path) -> Result<usize, String> {

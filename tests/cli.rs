@@ -395,3 +395,52 @@ fn an_unconverged_run_is_flagged() {
         "{v}"
     );
 }
+
+/// `converge` runs the scene at three steps and reports, per rod, the distances between the
+/// runs, the observed order and the estimated error of every run; the runs all end at the
+/// same time and the errors shrink with the step.
+#[test]
+fn converge_reports_each_run_and_its_estimated_error() {
+    let v = run_json(&[
+        "converge",
+        "scenes/pendulum.toml",
+        "--elements",
+        "16",
+        "--set",
+        "solver.dt=1e-4",
+        "--set",
+        "solver.precision=\"f64\"",
+        "--steps",
+        "300",
+        "--json",
+    ]);
+    assert_eq!(v["refinement"], "time", "{v}");
+    let runs = v["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 3, "{v}");
+    for (k, run) in runs.iter().enumerate() {
+        assert_eq!(run["steps"], 300u64 << k, "{run}");
+        assert_eq!(run["elements"][0], 16, "{run}");
+        let t = run["simulated_s"].as_f64().unwrap();
+        assert!((t - 0.03).abs() < 1e-12, "{run}");
+    }
+    let rod = &v["rods"][0];
+    assert_eq!(rod["name"], "rope", "{rod}");
+    assert_eq!(rod["points_compared"], 17, "{rod}");
+    assert_eq!(rod["asymptotic"], true, "{rod}");
+    let errors: Vec<f64> = rod["estimated_errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect();
+    assert!(errors[0] > errors[1] && errors[1] > errors[2], "{rod}");
+
+    let out = cosserat()
+        .args(["converge", "scenes/pendulum.toml", "--refine", "sideways"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--refine `sideways`"), "{err}");
+}

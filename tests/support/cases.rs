@@ -16,6 +16,7 @@
 use super::direct_stepper::DirectRod;
 use super::reference as refs;
 use cosserat::constraints::BindingVariant;
+use cosserat::convergence::grid_convergence;
 use cosserat::cosserat_model::energy::bend_twist_node;
 use cosserat::cosserat_model::quat::frame_from_tangent;
 use cosserat::cosserat_model::rod::{RestShape, RodSpec, straight_polyline};
@@ -127,22 +128,14 @@ pub struct Convergence {
 /// as Roache recommends, so a pre-asymptotic "super-convergent" triple cannot shrink the bound).
 pub fn convergence(values: &[f64], formal: f64) -> Convergence {
     let k = values.len() - 1;
-    let d_fine = (values[k] - values[k - 1]).abs();
-    let order = (k >= 2)
-        .then(|| {
-            let d_coarse = (values[k - 1] - values[k - 2]).abs();
-            let same_sign = (values[k] - values[k - 1]) * (values[k - 1] - values[k - 2]) > 0.0;
-            (same_sign && d_fine > 0.0).then(|| (d_coarse / d_fine).log2())
-        })
-        .flatten();
-    let (fs, p) = match order {
-        Some(p) if p > 0.5 => (1.25, p.min(formal)),
-        _ => (3.0, formal),
-    };
+    let step = |i: usize| values[i] - values[i - 1];
+    // A scalar that does not converge monotonically has no observed order.
+    let coarser = (k >= 2 && step(k) * step(k - 1) > 0.0).then(|| step(k - 1).abs());
+    let g = grid_convergence(coarser, step(k).abs(), formal);
     Convergence {
         finest: values[k],
-        gci: fs * d_fine / (2f64.powf(p) - 1.0),
-        order,
+        gci: g.gci,
+        order: g.observed_order,
         values: values.to_vec(),
     }
 }

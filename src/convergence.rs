@@ -1,0 +1,410 @@
+//! How accurate was a run? A scene's discretisation error, estimated by running it again
+//! refined.
+//!
+//! The validation cases (`cargo xtask validate`) measure the schemes against analytic answers,
+//! but a user's own scene (a wire in a vessel, a catheter with its guidewire) has none. Running
+//! it again at half the step (or with twice the elements), and again, shows how far each run
+//! is from the answer the refinements converge to, as long as the runs are in their
+//! asymptotic range, which the observed order of convergence shows. The estimates are
+//! Richardson's; the bound on the finest run is Roache's grid convergence index (GCI), the
+//! judgement the validation cases use too.
+//!
+//! What is compared: every rod's centreline at the end of the run, point by point at the
+//! coarsest run's points. Rods are resampled uniformly by arc length, so point `f·j` of a rod
+//! with `f` times the elements sits at the arc length of point `j` of the coarse rod. A run
+//! whose outcome is a bifurcation (a column that buckles one way or the other) or chaotic has no
+//! asymptotic range: its observed order falls outside it, and the study gives the distances
+//! between the runs but no error estimate.
+
+use crate::Simulation;
+use std::time::Instant;
+
+/// What is refined from one run to the next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refinement {
+    /// The time step is halved (and the steps doubled, so that every run ends at the same time).
+    Time,
+    /// Every rod's element count is doubled, at the same time step.
+    Space,
+}
+
+impl Refinement {
+    /// `time` or `space`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Refinement::Time => "time",
+            Refinement::Space => "space",
+        }
+    }
+
+    /// The order of convergence both schemes have at least in this refinement, which the GCI
+    /// uses when the observed order is higher or unknown: the explicit scheme (symplectic
+    /// Euler) and the stiff scheme (implicit Euler) are first order in time; in space the
+    /// half-element offset of a clamped end makes clamped rods first order (free rods converge
+    /// at second order, `docs/validation.md`).
+    pub fn formal_order(self) -> f64 {
+        1.0
+    }
+}
+
+/// Roache's grid convergence judgement of a quantity computed at resolutions `r, 2r, 4r, …`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridConvergence {
+    /// `log2(d_coarser / d_finest)` from the differences of the three finest runs; `None` with
+    /// fewer runs, or when a difference vanishes.
+    pub observed_order: Option<f64>,
+    /// Bound on the finest run's error: `F_s d_finest / (2^p − 1)`, with `p` the smaller of the
+    /// observed and the formal order and `F_s = 1.25` when the observed order is above 0.5;
+    /// otherwise the formal order and `F_s = 3` (Roache's choices for two resolutions).
+    pub gci: f64,
+    /// The `F_s` used: 1.25 or 3.
+    pub safety_factor: f64,
+}
+
+/// [`GridConvergence`] from the difference between the two finest runs and, with three or
+/// more runs, the difference between the two before them (pass `None` where the differences
+/// change sign: a scalar that does not converge monotonically has no observed order).
+pub fn grid_convergence(
+    coarser_difference: Option<f64>,
+    finest_difference: f64,
+    formal_order: f64,
+) -> GridConvergence {
+    let observed_order = coarser_difference
+        .filter(|_| finest_difference > 0.0)
+        .map(|d| (d / finest_difference).log2())
+        .filter(|p| p.is_finite());
+    let (fs, p) = match observed_order {
+        Some(p) if p > 0.5 => (1.25, p.min(formal_order)),
+        _ => (3.0, formal_order),
+    };
+    GridConvergence {
+        observed_order,
+        gci: fs * finest_difference / (2f64.powf(p) - 1.0),
+        safety_factor: fs,
+    }
+}
+
+/// The range of observed orders in which the runs are taken to be asymptotic, so that
+/// Richardson's estimates hold: below 0.5 the differences barely shrink (a run not converging,
+/// or dominated by something the refinement does not reach); above 3 they collapse faster than
+/// either scheme converges (differences at the rounding level, or a lucky cancellation).
+pub const ASYMPTOTIC_ORDERS: (f64, f64) = (0.5, 3.0);
+
+/// One run of a study.
+#[derive(Clone, Debug)]
+pub struct Level {
+    /// How many times finer than the first run (1, 2, 4, …).
+    pub factor: u32,
+    /// Time step [s].
+    pub dt: f64,
+    /// Elements of every rod.
+    pub elements: Vec<usize>,
+    /// Steps run.
+    pub steps: u64,
+    /// Simulated time at the end [s].
+    pub time: f64,
+    /// Wall time of the steps [s].
+    pub wall_s: f64,
+    /// Largest `|l/l0 − 1|` of any segment over the run.
+    pub max_strain: f64,
+}
+
+/// What a study found for one rod.
+#[derive(Clone, Debug)]
+pub struct RodConvergence {
+    /// The rod's name.
+    pub name: String,
+    /// Points compared (those of the coarsest run).
+    pub points: usize,
+    /// Largest distance [m] between the end states of runs `k` and `k + 1`, at the coarsest
+    /// run's points, for `k = 0, 1, …`.
+    pub differences: Vec<f64>,
+    /// The point (of the coarsest run) where each of those distances is largest.
+    pub worst_points: Vec<usize>,
+    /// The rod's length [m] (of its centreline at the end of the first run), the scale the
+    /// distances are judged against.
+    pub length: f64,
+    /// The GCI judgement of the finest run.
+    pub grid: GridConvergence,
+    /// Estimated error [m] of every run's end state (largest over the points), when the observed
+    /// order is in [`ASYMPTOTIC_ORDERS`]: run `k`'s is the measured distances from it to the
+    /// finest run plus Richardson's extrapolation of the rest, `d_last / (2^p − 1)`.
+    pub estimated_errors: Option<Vec<f64>>,
+}
+
+impl RodConvergence {
+    /// Whether the observed order is in [`ASYMPTOTIC_ORDERS`].
+    pub fn asymptotic(&self) -> bool {
+        self.estimated_errors.is_some()
+    }
+
+    /// Whether the two finest runs agree to within [`NEGLIGIBLE`] of the rod's length: then
+    /// nothing is left for the refinement to measure (a motion the step reproduces exactly, such
+    /// as a straight wire pushed along its axis), and an observed order from such differences is
+    /// noise.
+    pub fn negligible(&self) -> bool {
+        self.differences
+            .last()
+            .is_some_and(|d| *d <= NEGLIGIBLE * self.length)
+    }
+}
+
+/// Distances between runs below this fraction of a rod's length are taken as agreement (see
+/// [`RodConvergence::negligible`]): well above the rounding an `f64` run accumulates over
+/// thousands of steps, and below any discretisation error worth reporting.
+pub const NEGLIGIBLE: f64 = 1e-9;
+
+/// The result of [`study`].
+#[derive(Clone, Debug)]
+pub struct Study {
+    /// What was refined.
+    pub refinement: Refinement,
+    /// The runs, coarsest first.
+    pub levels: Vec<Level>,
+    /// Per rod, in the simulation's order.
+    pub rods: Vec<RodConvergence>,
+}
+
+/// Why a study could not be completed.
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    /// Fewer than two runs were asked for.
+    #[error("a convergence study needs at least 2 runs, got {0}")]
+    TooFewLevels(usize),
+    /// A run could not be built.
+    #[error("run {level} ({factor}× finer): {message}")]
+    Build {
+        /// Index of the run.
+        level: usize,
+        /// How many times finer than the first.
+        factor: u32,
+        /// What the builder said.
+        message: String,
+    },
+    /// A run diverged.
+    #[error(
+        "run {level} ({factor}× finer, dt {dt:e} s, elements {elements:?}) diverged: {message}"
+    )]
+    Diverged {
+        /// Index of the run.
+        level: usize,
+        /// How many times finer than the first.
+        factor: u32,
+        /// Its time step.
+        dt: f64,
+        /// Its element counts.
+        elements: Vec<usize>,
+        /// The divergence.
+        message: String,
+    },
+    /// A refined run does not have the rods or points the refinement implies.
+    #[error("run {level} ({factor}× finer): {message}")]
+    Mismatch {
+        /// Index of the run.
+        level: usize,
+        /// How many times finer than the first.
+        factor: u32,
+        /// What does not match.
+        message: String,
+    },
+}
+
+/// Runs a scene `levels` times, each `2×` finer than the one before, and compares their end
+/// states.
+///
+/// `build(factor)` builds the simulation `factor` times finer than the first run (`factor` =
+/// 1, 2, 4, …): with [`Refinement::Time`] at `dt / factor`, with [`Refinement::Space`] with
+/// `factor` times the elements of every rod. The first run takes `steps` steps; with time
+/// refinement run `k` takes `steps · factor`, so that every run ends at the same time.
+pub fn study(
+    refinement: Refinement,
+    levels: usize,
+    steps: u64,
+    mut build: impl FnMut(u32) -> Result<Simulation, String>,
+) -> Result<Study, StudyError> {
+    if levels < 2 {
+        return Err(StudyError::TooFewLevels(levels));
+    }
+    let mut runs = Vec::with_capacity(levels);
+    let mut ends: Vec<Vec<Vec<[f64; 3]>>> = Vec::with_capacity(levels);
+    let mut names = Vec::new();
+    for level in 0..levels {
+        let factor = 1u32 << level;
+        let mut sim = build(factor).map_err(|message| StudyError::Build {
+            level,
+            factor,
+            message,
+        })?;
+        let elements: Vec<usize> = sim
+            .rods()
+            .map(|h| sim.positions(h).len().saturating_sub(1))
+            .collect();
+        let n = match refinement {
+            Refinement::Time => steps * u64::from(factor),
+            Refinement::Space => steps,
+        };
+        let start = Instant::now();
+        let result = sim.run(n);
+        let wall_s = start.elapsed().as_secs_f64();
+        if let Err(e) = result {
+            return Err(StudyError::Diverged {
+                level,
+                factor,
+                dt: sim.dt(),
+                elements,
+                message: e.to_string(),
+            });
+        }
+        if level == 0 {
+            names = sim.rods().map(|h| sim.rod_name(h).to_string()).collect();
+        }
+        ends.push(sim.rods().map(|h| sim.positions(h)).collect());
+        runs.push(Level {
+            factor,
+            dt: sim.dt(),
+            elements,
+            steps: n,
+            time: sim.time(),
+            wall_s,
+            max_strain: sim.max_strain(),
+        });
+    }
+    check_refinement(refinement, &runs)?;
+    let stride = |level: usize| match refinement {
+        Refinement::Time => 1,
+        Refinement::Space => 1usize << level,
+    };
+    let formal = refinement.formal_order();
+    let rods = names
+        .into_iter()
+        .enumerate()
+        .map(|(r, name)| {
+            let points = ends[0][r].len();
+            let (differences, worst_points): (Vec<f64>, Vec<usize>) = (0..levels - 1)
+                .map(|k| {
+                    let (a, b) = (&ends[k][r], &ends[k + 1][r]);
+                    (0..points)
+                        .map(|j| (distance(a[j * stride(k)], b[j * stride(k + 1)]), j))
+                        .fold((0.0, 0), |m, d| if d.0 > m.0 { d } else { m })
+                })
+                .unzip();
+            let last = differences[levels - 2];
+            let before = (levels >= 3).then(|| differences[levels - 3]);
+            let grid = grid_convergence(before, last, formal);
+            let estimated_errors = grid
+                .observed_order
+                .filter(|p| (ASYMPTOTIC_ORDERS.0..=ASYMPTOTIC_ORDERS.1).contains(p))
+                .map(|p| {
+                    let tail = last / (2f64.powf(p) - 1.0);
+                    (0..levels)
+                        .map(|k| differences[k..].iter().sum::<f64>() + tail)
+                        .collect()
+                });
+            let end = &ends[0][r];
+            let length = end.windows(2).map(|w| distance(w[0], w[1])).sum();
+            RodConvergence {
+                name,
+                points,
+                differences,
+                worst_points,
+                length,
+                grid,
+                estimated_errors,
+            }
+        })
+        .collect();
+    Ok(Study {
+        refinement,
+        levels: runs,
+        rods,
+    })
+}
+
+/// Every run has the first run's rods, with the element counts and time step the refinement
+/// implies, and ends at the first run's time.
+fn check_refinement(refinement: Refinement, runs: &[Level]) -> Result<(), StudyError> {
+    let first = &runs[0];
+    for (level, run) in runs.iter().enumerate().skip(1) {
+        let mismatch = |message: String| StudyError::Mismatch {
+            level,
+            factor: run.factor,
+            message,
+        };
+        let f = run.factor as usize;
+        let expected: Vec<usize> = match refinement {
+            Refinement::Time => first.elements.clone(),
+            Refinement::Space => first.elements.iter().map(|n| n * f).collect(),
+        };
+        if run.elements != expected {
+            return Err(mismatch(format!(
+                "its rods have {:?} elements, expected {expected:?}",
+                run.elements
+            )));
+        }
+        let dt = match refinement {
+            Refinement::Time => first.dt / f64::from(run.factor),
+            Refinement::Space => first.dt,
+        };
+        if (run.dt - dt).abs() > 1e-12 * dt {
+            return Err(mismatch(format!(
+                "its time step is {:e} s, expected {dt:e} s",
+                run.dt
+            )));
+        }
+        if (run.time - first.time).abs() > 1e-9 * first.time.max(run.dt) {
+            return Err(mismatch(format!(
+                "it ended at t = {} s, the first run at {} s",
+                run.time, first.time
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values converging as `v* + C h^p` give back `p`; for `p ≤ 1` the GCI is 1.25 times the
+    /// finest value's exact error, above it the formal order 1 makes it larger.
+    #[test]
+    fn observed_order_and_gci_of_an_exact_power_law() {
+        for p in [0.8, 1.0, 1.7] {
+            let v: Vec<f64> = (0..3)
+                .map(|k| 2.0 + 0.3 * 0.5f64.powf(p * k as f64))
+                .collect();
+            let g = grid_convergence(Some(v[0] - v[1]), v[1] - v[2], 1.0);
+            let observed = g.observed_order.unwrap();
+            assert!((observed - p).abs() < 1e-12, "{observed} vs {p}");
+            let exact_error = v[2] - 2.0;
+            let expected = 1.25 * (v[1] - v[2]) / (2f64.powf(p.min(1.0)) - 1.0);
+            assert!((g.gci - expected).abs() < 1e-12 * expected);
+            if p <= 1.0 {
+                assert!(
+                    (g.gci / exact_error - 1.25).abs() < 1e-9,
+                    "{}",
+                    g.gci / exact_error
+                );
+            } else {
+                assert!(g.gci > 1.25 * exact_error, "the formal order caps p");
+            }
+        }
+    }
+
+    #[test]
+    fn two_runs_or_no_shrinking_use_the_formal_order_and_safety_three() {
+        let two = grid_convergence(None, 1e-3, 1.0);
+        assert_eq!(two.observed_order, None);
+        assert!((two.gci - 3e-3).abs() < 1e-15);
+        let growing = grid_convergence(Some(1e-3), 2e-3, 1.0);
+        assert!(growing.observed_order.unwrap() < 0.0);
+        assert!((growing.gci - 6e-3).abs() < 1e-15);
+        let exact = grid_convergence(Some(1e-3), 0.0, 1.0);
+        assert_eq!(exact.observed_order, None);
+        assert_eq!(exact.gci, 0.0);
+    }
+}

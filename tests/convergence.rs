@@ -1,0 +1,162 @@
+//! `cosserat::convergence`: the error a study estimates for each run, against the error measured
+//! against a much finer run of the same scene.
+
+use cosserat::Simulation;
+use cosserat::convergence::{Refinement, StudyError, study};
+use cosserat::scene::load_scene;
+use std::path::PathBuf;
+
+fn pendulum_scene() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/pendulum.toml")
+}
+
+/// The shipped pendulum with `sets` (scene keys and TOML values) applied, in `f64`.
+fn pendulum(sets: &[(&str, String)]) -> Result<Simulation, String> {
+    let mut overrides: Vec<(String, String)> = vec![("solver.precision".into(), "\"f64\"".into())];
+    overrides.extend(sets.iter().map(|(k, v)| (k.to_string(), v.clone())));
+    let (builder, _, _) = load_scene(&pendulum_scene(), &overrides).map_err(|e| e.to_string())?;
+    builder.build().map_err(|e| e.to_string())
+}
+
+fn run_to_end(mut sim: Simulation, steps: u64) -> Vec<[f64; 3]> {
+    sim.run(steps).expect("the reference run does not diverge");
+    sim.positions(cosserat::RodHandle(0))
+}
+
+/// Largest distance between `coarse` and the points `stride·j` of `fine`.
+fn largest_distance(coarse: &[[f64; 3]], fine: &[[f64; 3]], stride: usize) -> f64 {
+    coarse
+        .iter()
+        .enumerate()
+        .map(|(j, a)| {
+            let b = fine[j * stride];
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Halving the explicit scheme's step: the estimated error of every run is within 15 % of its
+/// distance from a run at a 64th of the first step (whose own error is about 1/64 of the
+/// first run's).
+#[test]
+fn time_refinement_estimates_the_error_of_every_run() {
+    let (dt, steps, elements) = (5e-5, 1000u64, 20usize);
+    let base = [
+        ("rod.0.elements", elements.to_string()),
+        ("solver.scheme", "\"explicit\"".to_string()),
+    ];
+    let at = |factor: u32| {
+        let mut sets = base.to_vec();
+        sets.push(("solver.dt", format!("{:e}", dt / f64::from(factor))));
+        pendulum(&sets)
+    };
+    let s = study(Refinement::Time, 3, steps, at).unwrap();
+    let reference = run_to_end(at(64).unwrap(), steps * 64);
+    let rod = &s.rods[0];
+    let p = rod.grid.observed_order.unwrap();
+    assert!((0.8..1.2).contains(&p), "observed order {p}");
+    let estimates = rod.estimated_errors.as_ref().expect("asymptotic");
+    for (k, estimate) in estimates.iter().enumerate() {
+        let run = run_to_end(at(1 << k).unwrap(), steps << k);
+        let actual = largest_distance(&run, &reference, 1);
+        let ratio = estimate / actual;
+        assert!(
+            (0.85..1.15).contains(&ratio),
+            "run {k}: estimated {estimate:e} m, measured {actual:e} m"
+        );
+    }
+    assert!(
+        rod.grid.gci >= 0.98 * estimates[2],
+        "the GCI bounds the finest run"
+    );
+    assert!(s.levels.iter().all(|l| (l.time - 0.05).abs() < 1e-12));
+}
+
+/// Doubling the elements of a stiff-scheme pendulum at dt 1 ms: the same check against a run
+/// with 16 times the elements.
+#[test]
+fn space_refinement_estimates_the_error_of_every_run() {
+    let (coarse, steps) = (16usize, 100u64);
+    let at = |elements: usize| {
+        pendulum(&[
+            ("rod.0.elements", elements.to_string()),
+            ("solver.scheme", "\"stiff\"".to_string()),
+            ("solver.dt", "1e-3".to_string()),
+        ])
+    };
+    let s = study(Refinement::Space, 3, steps, |factor| {
+        at(coarse * factor as usize)
+    })
+    .unwrap();
+    let reference = run_to_end(at(coarse * 16).unwrap(), steps);
+    let rod = &s.rods[0];
+    assert_eq!(rod.points, coarse + 1);
+    let estimates = rod.estimated_errors.as_ref().expect("asymptotic");
+    for (k, estimate) in estimates.iter().enumerate() {
+        let run = run_to_end(at(coarse << k).unwrap(), steps);
+        let actual = largest_distance(&run, &reference, 16 >> k);
+        let ratio = estimate / actual;
+        assert!(
+            (0.85..1.15).contains(&ratio),
+            "run {k}: estimated {estimate:e} m, measured {actual:e} m (order {:?})",
+            rod.grid.observed_order
+        );
+    }
+}
+
+/// A refined run the scheme cannot take is reported with its index: the explicit scheme's
+/// stable step shrinks with the element length, and the builder refuses a step above it.
+#[test]
+fn a_refined_run_the_scheme_cannot_take_says_which() {
+    let err = study(Refinement::Space, 3, 100, |factor| {
+        pendulum(&[
+            ("rod.0.elements", (40 * factor).to_string()),
+            ("solver.scheme", "\"explicit\"".to_string()),
+            ("solver.dt", "2e-4".to_string()),
+        ])
+    })
+    .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            StudyError::Build {
+                level: 2,
+                factor: 4,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("stability limit"), "{err}");
+}
+
+#[test]
+fn a_build_that_ignores_the_refinement_is_refused() {
+    let err = study(Refinement::Space, 2, 10, |_| {
+        pendulum(&[("rod.0.elements", "10".to_string())])
+    })
+    .unwrap_err();
+    assert!(
+        matches!(err, StudyError::Mismatch { level: 1, .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("expected [20]"), "{err}");
+}
+
+/// A rod that does not move (no gravity) gives identical runs: nothing to measure, and the
+/// study says so rather than reporting an order.
+#[test]
+fn runs_that_agree_exactly_are_negligible() {
+    let s = study(Refinement::Time, 3, 50, |factor| {
+        pendulum(&[
+            ("rod.0.elements", "10".to_string()),
+            ("solver.gravity", "[0.0, 0.0, 0.0]".to_string()),
+            ("solver.dt", format!("{:e}", 1e-4 / f64::from(factor))),
+        ])
+    })
+    .unwrap();
+    let rod = &s.rods[0];
+    assert!(rod.negligible(), "{rod:?}");
+    assert!(!rod.asymptotic(), "{rod:?}");
+    assert!((rod.length - 1.0).abs() < 1e-9, "{rod:?}");
+}
