@@ -9,8 +9,8 @@
 //! Richardson's; the bound on the finest run is Roache's grid convergence index (GCI), the
 //! judgement the validation cases use too.
 //!
-//! What is compared: every rod's centreline at the end of the run, point by point at the
-//! coarsest run's points. Rods are resampled uniformly by arc length, so point `f·j` of a rod
+//! What is compared: every rod's centreline at evenly spaced checkpoints and at the end of the
+//! run, point by point at the coarsest run's points. Rods are resampled uniformly by arc length, so point `f·j` of a rod
 //! with `f` times the elements sits at the arc length of point `j` of the coarse rod. A run
 //! whose outcome is a bifurcation (a column that buckles one way or the other) or chaotic has no
 //! asymptotic range: its observed order falls outside it, and the study gives the distances
@@ -116,17 +116,18 @@ pub struct RodConvergence {
     pub name: String,
     /// Points compared (those of the coarsest run).
     pub points: usize,
-    /// Largest distance [m] between the end states of runs `k` and `k + 1`, at the coarsest
-    /// run's points, for `k = 0, 1, …`.
+    /// Largest distance [m] between the states of runs `k` and `k + 1`, over the checkpoints
+    /// and the coarsest run's points, for `k = 0, 1, …`.
     pub differences: Vec<f64>,
-    /// The point (of the coarsest run) where each of those distances is largest.
-    pub worst_points: Vec<usize>,
+    /// Where each of those distances is largest: the point (of the coarsest run) and the time
+    /// [s].
+    pub worst: Vec<(usize, f64)>,
     /// The rod's length [m] (of its centreline at the end of the first run), the scale the
     /// distances are judged against.
     pub length: f64,
     /// The GCI judgement of the finest run.
     pub grid: GridConvergence,
-    /// Estimated error [m] of every run's end state (largest over the points), when the observed
+    /// Estimated error [m] of every run (largest over the checkpoints and points), when the observed
     /// order is in [`ASYMPTOTIC_ORDERS`]: run `k`'s is the measured distances from it to the
     /// finest run plus Richardson's extrapolation of the rest, `d_last / (2^p − 1)`.
     pub estimated_errors: Option<Vec<f64>>,
@@ -161,6 +162,8 @@ pub struct Study {
     pub refinement: Refinement,
     /// The runs, coarsest first.
     pub levels: Vec<Level>,
+    /// The times [s] at which the runs were compared; the last is the end.
+    pub checkpoint_times: Vec<f64>,
     /// Per rod, in the simulation's order.
     pub rods: Vec<RodConvergence>,
 }
@@ -209,24 +212,35 @@ pub enum StudyError {
     },
 }
 
-/// Runs a scene `levels` times, each `2×` finer than the one before, and compares their end
-/// states.
+/// Runs a scene `levels` times, each `2×` finer than the one before, and compares their
+/// states at `checkpoints` evenly spaced times (the last at the end of the run).
 ///
 /// `build(factor)` builds the simulation `factor` times finer than the first run (`factor` =
 /// 1, 2, 4, …): with [`Refinement::Time`] at `dt / factor`, with [`Refinement::Space`] with
 /// `factor` times the elements of every rod. The first run takes `steps` steps; with time
-/// refinement run `k` takes `steps · factor`, so that every run ends at the same time.
+/// refinement run `k` takes `steps · factor`, so that every run ends at the same time and passes
+/// the same checkpoints. Comparing along the way, not only at the end, catches runs that part
+/// and meet again (a wire that bows one way and straightens, a pendulum whose phase error
+/// crosses zero at the end).
 pub fn study(
     refinement: Refinement,
     levels: usize,
     steps: u64,
+    checkpoints: usize,
     mut build: impl FnMut(u32) -> Result<Simulation, String>,
 ) -> Result<Study, StudyError> {
     if levels < 2 {
         return Err(StudyError::TooFewLevels(levels));
     }
+    // Steps of the first run at which the states are compared (distinct, the last = steps).
+    let count = (checkpoints.max(1) as u64).min(steps.max(1));
+    let marks: Vec<u64> = (1..=count)
+        .map(|c| (c * steps + count / 2) / count)
+        .collect();
     let mut runs = Vec::with_capacity(levels);
-    let mut ends: Vec<Vec<Vec<[f64; 3]>>> = Vec::with_capacity(levels);
+    // states[level][checkpoint][rod]: the points.
+    let mut states: Vec<Vec<Vec<Vec<[f64; 3]>>>> = Vec::with_capacity(levels);
+    let mut times = Vec::new();
     let mut names = Vec::new();
     for level in 0..levels {
         let factor = 1u32 << level;
@@ -239,31 +253,41 @@ pub fn study(
             .rods()
             .map(|h| sim.positions(h).len().saturating_sub(1))
             .collect();
-        let n = match refinement {
-            Refinement::Time => steps * u64::from(factor),
-            Refinement::Space => steps,
+        let per_step = match refinement {
+            Refinement::Time => u64::from(factor),
+            Refinement::Space => 1,
         };
-        let start = Instant::now();
-        let result = sim.run(n);
-        let wall_s = start.elapsed().as_secs_f64();
-        if let Err(e) = result {
-            return Err(StudyError::Diverged {
-                level,
-                factor,
-                dt: sim.dt(),
-                elements,
-                message: e.to_string(),
-            });
+        let mut wall_s = 0.0;
+        let mut at = Vec::with_capacity(marks.len());
+        let mut done = 0;
+        for &mark in &marks {
+            let start = Instant::now();
+            let result = sim.run((mark - done) * per_step);
+            wall_s += start.elapsed().as_secs_f64();
+            done = mark;
+            if let Err(e) = result {
+                return Err(StudyError::Diverged {
+                    level,
+                    factor,
+                    dt: sim.dt(),
+                    elements,
+                    message: e.to_string(),
+                });
+            }
+            at.push(sim.rods().map(|h| sim.positions(h)).collect());
+            if level == 0 {
+                times.push(sim.time());
+            }
         }
         if level == 0 {
             names = sim.rods().map(|h| sim.rod_name(h).to_string()).collect();
         }
-        ends.push(sim.rods().map(|h| sim.positions(h)).collect());
+        states.push(at);
         runs.push(Level {
             factor,
             dt: sim.dt(),
             elements,
-            steps: n,
+            steps: steps * per_step,
             time: sim.time(),
             wall_s,
             max_strain: sim.max_strain(),
@@ -279,15 +303,24 @@ pub fn study(
         .into_iter()
         .enumerate()
         .map(|(r, name)| {
-            let points = ends[0][r].len();
-            let (differences, worst_points): (Vec<f64>, Vec<usize>) = (0..levels - 1)
-                .map(|k| {
-                    let (a, b) = (&ends[k][r], &ends[k + 1][r]);
-                    (0..points)
-                        .map(|j| (distance(a[j * stride(k)], b[j * stride(k + 1)]), j))
-                        .fold((0.0, 0), |m, d| if d.0 > m.0 { d } else { m })
-                })
-                .unzip();
+            let end = &states[0][marks.len() - 1][r];
+            let points = end.len();
+            let mut differences = Vec::with_capacity(levels - 1);
+            let mut worst = Vec::with_capacity(levels - 1);
+            for k in 0..levels - 1 {
+                let mut largest = (0.0, 0, 0);
+                for c in 0..marks.len() {
+                    let (a, b) = (&states[k][c][r], &states[k + 1][c][r]);
+                    for j in 0..points {
+                        let d = distance(a[j * stride(k)], b[j * stride(k + 1)]);
+                        if d > largest.0 {
+                            largest = (d, j, c);
+                        }
+                    }
+                }
+                differences.push(largest.0);
+                worst.push((largest.1, times[largest.2]));
+            }
             let last = differences[levels - 2];
             let before = (levels >= 3).then(|| differences[levels - 3]);
             let grid = grid_convergence(before, last, formal);
@@ -300,13 +333,12 @@ pub fn study(
                         .map(|k| differences[k..].iter().sum::<f64>() + tail)
                         .collect()
                 });
-            let end = &ends[0][r];
             let length = end.windows(2).map(|w| distance(w[0], w[1])).sum();
             RodConvergence {
                 name,
                 points,
                 differences,
-                worst_points,
+                worst,
                 length,
                 grid,
                 estimated_errors,
@@ -316,6 +348,7 @@ pub fn study(
     Ok(Study {
         refinement,
         levels: runs,
+        checkpoint_times: times,
         rods,
     })
 }

@@ -87,6 +87,9 @@ struct ConvergeArgs {
     /// order and error estimates).
     #[arg(long, default_value_t = 3)]
     runs: usize,
+    /// Times at which the runs are compared, evenly spaced, the last at the end.
+    #[arg(long, default_value_t = 10)]
+    checkpoints: usize,
 }
 
 fn main() -> ExitCode {
@@ -383,7 +386,7 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
             base.steps
         );
     }
-    match convergence::study(refinement, c.runs, base.steps, build) {
+    match convergence::study(refinement, c.runs, base.steps, c.checkpoints, build) {
         Ok(study) => {
             report_study(&base.name, &study, args.json);
             Ok(ExitCode::SUCCESS)
@@ -422,7 +425,8 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
                     "name": r.name,
                     "points_compared": r.points,
                     "differences": r.differences,
-                    "worst_points": r.worst_points,
+                    "worst_points": r.worst.iter().map(|w| w.0).collect::<Vec<_>>(),
+                    "worst_times": r.worst.iter().map(|w| w.1).collect::<Vec<_>>(),
                     "observed_order": r.grid.observed_order,
                     "formal_order": formal,
                     "asymptotic": r.asymptotic(),
@@ -437,6 +441,7 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
             "scene": name,
             "refinement": study.refinement.name(),
             "runs": levels,
+            "checkpoint_times": study.checkpoint_times,
             "rods": rods,
         });
         println!("{v}");
@@ -444,10 +449,11 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
     }
     let last = study.levels.len() - 1;
     println!(
-        "converge   {name}: {} refinement, {} runs to t = {} s",
+        "converge   {name}: {} refinement, {} runs to t = {} s, compared at {} times",
         study.refinement.name(),
         study.levels.len(),
-        study.levels[0].time
+        study.levels[0].time,
+        study.checkpoint_times.len()
     );
     println!("run  dt [s]      elements      steps       wall [s]   max strain");
     for (k, l) in study.levels.iter().enumerate() {
@@ -466,9 +472,11 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
         let diffs: Vec<String> = r
             .differences
             .iter()
-            .zip(&r.worst_points)
+            .zip(&r.worst)
             .enumerate()
-            .map(|(k, (d, j))| format!("runs {k}–{}: {d:.3e} m (point {j})", k + 1))
+            .map(|(k, (d, (j, t)))| {
+                format!("runs {k}–{}: {d:.3e} m (point {j}, t {t:.4} s)", k + 1)
+            })
             .collect();
         println!("  largest distance between  {}", diffs.join(", "));
         match (r.grid.observed_order, &r.estimated_errors) {

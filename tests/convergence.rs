@@ -18,9 +18,19 @@ fn pendulum(sets: &[(&str, String)]) -> Result<Simulation, String> {
     builder.build().map_err(|e| e.to_string())
 }
 
-fn run_to_end(mut sim: Simulation, steps: u64) -> Vec<[f64; 3]> {
-    sim.run(steps).expect("the reference run does not diverge");
-    sim.positions(cosserat::RodHandle(0))
+fn run_to_end(sim: Simulation, steps: u64) -> Vec<[f64; 3]> {
+    run_through(sim, steps, 1).pop().unwrap()
+}
+
+/// The rod's points after each of `checkpoints` equal parts of `steps`.
+fn run_through(mut sim: Simulation, steps: u64, checkpoints: u64) -> Vec<Vec<[f64; 3]>> {
+    (0..checkpoints)
+        .map(|_| {
+            sim.run(steps / checkpoints)
+                .expect("the reference run does not diverge");
+            sim.positions(cosserat::RodHandle(0))
+        })
+        .collect()
 }
 
 /// Largest distance between `coarse` and the points `stride·j` of `fine`.
@@ -36,11 +46,11 @@ fn largest_distance(coarse: &[[f64; 3]], fine: &[[f64; 3]], stride: usize) -> f6
 }
 
 /// Halving the explicit scheme's step: the estimated error of every run is within 15 % of its
-/// distance from a run at a 64th of the first step (whose own error is about 1/64 of the
-/// first run's).
+/// largest distance, over five checkpoints, from a run at a 64th of the first step (whose own
+/// error is about 1/64 of the first run's).
 #[test]
 fn time_refinement_estimates_the_error_of_every_run() {
-    let (dt, steps, elements) = (5e-5, 1000u64, 20usize);
+    let (dt, steps, elements, checkpoints) = (5e-5, 1000u64, 20usize, 5u64);
     let base = [
         ("rod.0.elements", elements.to_string()),
         ("solver.scheme", "\"explicit\"".to_string()),
@@ -50,15 +60,24 @@ fn time_refinement_estimates_the_error_of_every_run() {
         sets.push(("solver.dt", format!("{:e}", dt / f64::from(factor))));
         pendulum(&sets)
     };
-    let s = study(Refinement::Time, 3, steps, at).unwrap();
-    let reference = run_to_end(at(64).unwrap(), steps * 64);
+    let s = study(Refinement::Time, 3, steps, checkpoints as usize, at).unwrap();
+    let times: Vec<f64> = (1..=5).map(|c| c as f64 * 0.01).collect();
+    assert_eq!(s.checkpoint_times.len(), 5);
+    for (t, expected) in s.checkpoint_times.iter().zip(&times) {
+        assert!((t - expected).abs() < 1e-12, "{:?}", s.checkpoint_times);
+    }
+    let reference = run_through(at(64).unwrap(), steps * 64, checkpoints);
     let rod = &s.rods[0];
     let p = rod.grid.observed_order.unwrap();
     assert!((0.8..1.2).contains(&p), "observed order {p}");
     let estimates = rod.estimated_errors.as_ref().expect("asymptotic");
     for (k, estimate) in estimates.iter().enumerate() {
-        let run = run_to_end(at(1 << k).unwrap(), steps << k);
-        let actual = largest_distance(&run, &reference, 1);
+        let run = run_through(at(1 << k).unwrap(), steps << k, checkpoints);
+        let actual = run
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| largest_distance(a, b, 1))
+            .fold(0.0, f64::max);
         let ratio = estimate / actual;
         assert!(
             (0.85..1.15).contains(&ratio),
@@ -84,7 +103,7 @@ fn space_refinement_estimates_the_error_of_every_run() {
             ("solver.dt", "1e-3".to_string()),
         ])
     };
-    let s = study(Refinement::Space, 3, steps, |factor| {
+    let s = study(Refinement::Space, 3, steps, 1, |factor| {
         at(coarse * factor as usize)
     })
     .unwrap();
@@ -108,7 +127,7 @@ fn space_refinement_estimates_the_error_of_every_run() {
 /// stable step shrinks with the element length, and the builder refuses a step above it.
 #[test]
 fn a_refined_run_the_scheme_cannot_take_says_which() {
-    let err = study(Refinement::Space, 3, 100, |factor| {
+    let err = study(Refinement::Space, 3, 100, 1, |factor| {
         pendulum(&[
             ("rod.0.elements", (40 * factor).to_string()),
             ("solver.scheme", "\"explicit\"".to_string()),
@@ -132,7 +151,7 @@ fn a_refined_run_the_scheme_cannot_take_says_which() {
 
 #[test]
 fn a_build_that_ignores_the_refinement_is_refused() {
-    let err = study(Refinement::Space, 2, 10, |_| {
+    let err = study(Refinement::Space, 2, 10, 1, |_| {
         pendulum(&[("rod.0.elements", "10".to_string())])
     })
     .unwrap_err();
@@ -147,7 +166,7 @@ fn a_build_that_ignores_the_refinement_is_refused() {
 /// study says so rather than reporting an order.
 #[test]
 fn runs_that_agree_exactly_are_negligible() {
-    let s = study(Refinement::Time, 3, 50, |factor| {
+    let s = study(Refinement::Time, 3, 50, 4, |factor| {
         pendulum(&[
             ("rod.0.elements", "10".to_string()),
             ("solver.gravity", "[0.0, 0.0, 0.0]".to_string()),
