@@ -109,6 +109,67 @@ pub struct Level {
     pub max_strain: f64,
 }
 
+/// How one quantity of a rod converged: its centreline, or the force at a held end.
+#[derive(Clone, Debug)]
+pub struct Convergence {
+    /// Largest difference between runs `k` and `k + 1` (a distance [m], or the size of a
+    /// force's difference [N]) over the checkpoints (and, for the centreline, the coarsest
+    /// run's points), for `k = 0, 1, …`.
+    pub differences: Vec<f64>,
+    /// Where each of those differences is largest: the point of the coarsest run (for a force,
+    /// the end: 0 first, 1 last) and the time [s].
+    pub worst: Vec<(usize, f64)>,
+    /// The size the differences are judged against: the rod's length [m] (of its centreline at
+    /// the end of the first run), or the largest force of the first run at the checkpoints [N].
+    pub scale: f64,
+    /// The GCI judgement of the finest run.
+    pub grid: GridConvergence,
+    /// Estimated error of every run (largest over the checkpoints and points), when the
+    /// observed order is in [`ASYMPTOTIC_ORDERS`]: run `k`'s is the measured differences from
+    /// it to the finest run plus Richardson's extrapolation of the rest, `d_last / (2^p − 1)`.
+    pub estimated_errors: Option<Vec<f64>>,
+}
+
+impl Convergence {
+    fn new(differences: Vec<f64>, worst: Vec<(usize, f64)>, scale: f64, formal: f64) -> Self {
+        let runs = differences.len() + 1;
+        let last = differences[runs - 2];
+        let before = (runs >= 3).then(|| differences[runs - 3]);
+        let grid = grid_convergence(before, last, formal);
+        let estimated_errors = grid
+            .observed_order
+            .filter(|p| (ASYMPTOTIC_ORDERS.0..=ASYMPTOTIC_ORDERS.1).contains(p))
+            .map(|p| {
+                let tail = last / (2f64.powf(p) - 1.0);
+                (0..runs)
+                    .map(|k| differences[k..].iter().sum::<f64>() + tail)
+                    .collect()
+            });
+        Self {
+            differences,
+            worst,
+            scale,
+            grid,
+            estimated_errors,
+        }
+    }
+
+    /// Whether the observed order is in [`ASYMPTOTIC_ORDERS`].
+    pub fn asymptotic(&self) -> bool {
+        self.estimated_errors.is_some()
+    }
+
+    /// Whether the two finest runs agree to within [`NEGLIGIBLE`] of the scale: then nothing
+    /// is left for the refinement to measure (a motion the step reproduces exactly, such as a
+    /// straight wire pushed along its axis), and an observed order from such differences is
+    /// noise.
+    pub fn negligible(&self) -> bool {
+        self.differences
+            .last()
+            .is_some_and(|d| *d <= NEGLIGIBLE * self.scale)
+    }
+}
+
 /// What a study found for one rod.
 #[derive(Clone, Debug)]
 pub struct RodConvergence {
@@ -116,42 +177,15 @@ pub struct RodConvergence {
     pub name: String,
     /// Points compared (those of the coarsest run).
     pub points: usize,
-    /// Largest distance [m] between the states of runs `k` and `k + 1`, over the checkpoints
-    /// and the coarsest run's points, for `k = 0, 1, …`.
-    pub differences: Vec<f64>,
-    /// Where each of those distances is largest: the point (of the coarsest run) and the time
-    /// [s].
-    pub worst: Vec<(usize, f64)>,
-    /// The rod's length [m] (of its centreline at the end of the first run), the scale the
-    /// distances are judged against.
-    pub length: f64,
-    /// The GCI judgement of the finest run.
-    pub grid: GridConvergence,
-    /// Estimated error [m] of every run (largest over the checkpoints and points), when the observed
-    /// order is in [`ASYMPTOTIC_ORDERS`]: run `k`'s is the measured distances from it to the
-    /// finest run plus Richardson's extrapolation of the rest, `d_last / (2^p − 1)`.
-    pub estimated_errors: Option<Vec<f64>>,
+    /// Its centreline.
+    pub positions: Convergence,
+    /// The filtered force at each held end (`Simulation::end_reaction`, what a haptic device
+    /// renders), with the end's index (0 first, 1 last).
+    pub end_forces: Vec<(usize, Convergence)>,
 }
 
-impl RodConvergence {
-    /// Whether the observed order is in [`ASYMPTOTIC_ORDERS`].
-    pub fn asymptotic(&self) -> bool {
-        self.estimated_errors.is_some()
-    }
-
-    /// Whether the two finest runs agree to within [`NEGLIGIBLE`] of the rod's length: then
-    /// nothing is left for the refinement to measure (a motion the step reproduces exactly, such
-    /// as a straight wire pushed along its axis), and an observed order from such differences is
-    /// noise.
-    pub fn negligible(&self) -> bool {
-        self.differences
-            .last()
-            .is_some_and(|d| *d <= NEGLIGIBLE * self.length)
-    }
-}
-
-/// Distances between runs below this fraction of a rod's length are taken as agreement (see
-/// [`RodConvergence::negligible`]): well above the rounding an `f64` run accumulates over
+/// Differences between runs below this fraction of a quantity's scale are taken as agreement
+/// (see [`Convergence::negligible`]): well above the rounding an `f64` run accumulates over
 /// thousands of steps, and below any discretisation error worth reporting.
 pub const NEGLIGIBLE: f64 = 1e-9;
 
@@ -238,8 +272,8 @@ pub fn study(
         .map(|c| (c * steps + count / 2) / count)
         .collect();
     let mut runs = Vec::with_capacity(levels);
-    // states[level][checkpoint][rod]: the points.
-    let mut states: Vec<Vec<Vec<Vec<[f64; 3]>>>> = Vec::with_capacity(levels);
+    // states[level][checkpoint][rod]: the points, and the force at each end when it is held.
+    let mut states: Vec<Vec<Vec<RodState>>> = Vec::with_capacity(levels);
     let mut times = Vec::new();
     let mut names = Vec::new();
     for level in 0..levels {
@@ -274,7 +308,14 @@ pub fn study(
                     message: e.to_string(),
                 });
             }
-            at.push(sim.rods().map(|h| sim.positions(h)).collect());
+            at.push(
+                sim.rods()
+                    .map(|h| RodState {
+                        points: sim.positions(h),
+                        forces: [0, 1].map(|end| sim.end_reaction(h, end).map(|r| r.force)),
+                    })
+                    .collect(),
+            );
             if level == 0 {
                 times.push(sim.time());
             }
@@ -303,45 +344,48 @@ pub fn study(
         .into_iter()
         .enumerate()
         .map(|(r, name)| {
-            let end = &states[0][marks.len() - 1][r];
+            let end = &states[0][marks.len() - 1][r].points;
             let points = end.len();
-            let mut differences = Vec::with_capacity(levels - 1);
-            let mut worst = Vec::with_capacity(levels - 1);
-            for k in 0..levels - 1 {
-                let mut largest = (0.0, 0, 0);
-                for c in 0..marks.len() {
-                    let (a, b) = (&states[k][c][r], &states[k + 1][c][r]);
-                    for j in 0..points {
-                        let d = distance(a[j * stride(k)], b[j * stride(k + 1)]);
-                        if d > largest.0 {
-                            largest = (d, j, c);
-                        }
-                    }
-                }
-                differences.push(largest.0);
-                worst.push((largest.1, times[largest.2]));
-            }
-            let last = differences[levels - 2];
-            let before = (levels >= 3).then(|| differences[levels - 3]);
-            let grid = grid_convergence(before, last, formal);
-            let estimated_errors = grid
-                .observed_order
-                .filter(|p| (ASYMPTOTIC_ORDERS.0..=ASYMPTOTIC_ORDERS.1).contains(p))
-                .map(|p| {
-                    let tail = last / (2f64.powf(p) - 1.0);
-                    (0..levels)
-                        .map(|k| differences[k..].iter().sum::<f64>() + tail)
-                        .collect()
-                });
             let length = end.windows(2).map(|w| distance(w[0], w[1])).sum();
+            // The largest difference between runs k and k + 1 of `value(run, checkpoint, i)`
+            // over the checkpoints and `i < count`, with its `i` and time.
+            let compare = |count: usize, value: &dyn Fn(usize, usize, usize) -> [f64; 3]| {
+                (0..levels - 1)
+                    .map(|k| {
+                        let mut largest = (0.0, 0, 0);
+                        for c in 0..marks.len() {
+                            for i in 0..count {
+                                let d = distance(value(k, c, i), value(k + 1, c, i));
+                                if d > largest.0 {
+                                    largest = (d, i, c);
+                                }
+                            }
+                        }
+                        (largest.0, (largest.1, times[largest.2]))
+                    })
+                    .unzip()
+            };
+            let (differences, worst) =
+                compare(points, &|k, c, j| states[k][c][r].points[j * stride(k)]);
+            let positions = Convergence::new(differences, worst, length, formal);
+            let end_forces = (0..2)
+                .filter(|&e| states.iter().flatten().all(|at| at[r].forces[e].is_some()))
+                .map(|e| {
+                    let force = |k: usize, c: usize| states[k][c][r].forces[e].unwrap_or_default();
+                    let (differences, worst): (Vec<f64>, Vec<(usize, f64)>) =
+                        compare(1, &|k, c, _| force(k, c));
+                    let worst = worst.into_iter().map(|(_, t)| (e, t)).collect();
+                    let scale = (0..marks.len())
+                        .map(|c| distance(force(0, c), [0.0; 3]))
+                        .fold(0.0, f64::max);
+                    (e, Convergence::new(differences, worst, scale, formal))
+                })
+                .collect();
             RodConvergence {
                 name,
                 points,
-                differences,
-                worst,
-                length,
-                grid,
-                estimated_errors,
+                positions,
+                end_forces,
             }
         })
         .collect();
@@ -392,6 +436,13 @@ fn check_refinement(refinement: Refinement, runs: &[Level]) -> Result<(), StudyE
         }
     }
     Ok(())
+}
+
+/// One rod at one checkpoint of one run.
+struct RodState {
+    points: Vec<[f64; 3]>,
+    /// The filtered force at the first and the last end, where held.
+    forces: [Option<[f64; 3]>; 2],
 }
 
 fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -407,6 +407,20 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
 fn report_study(name: &str, study: &convergence::Study, json: bool) {
     let formal = study.refinement.formal_order();
     if json {
+        let quantity = |q: &convergence::Convergence| {
+            serde_json::json!({
+                "differences": q.differences,
+                "worst": q.worst.iter().map(|w| w.0).collect::<Vec<_>>(),
+                "worst_times": q.worst.iter().map(|w| w.1).collect::<Vec<_>>(),
+                "scale": q.scale,
+                "observed_order": q.grid.observed_order,
+                "formal_order": formal,
+                "asymptotic": q.asymptotic(),
+                "negligible": q.negligible(),
+                "estimated_errors": q.estimated_errors,
+                "gci": q.grid.gci,
+            })
+        };
         let levels: Vec<_> = study
             .levels
             .iter()
@@ -421,19 +435,20 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
             .rods
             .iter()
             .map(|r| {
+                let forces: Vec<_> = r
+                    .end_forces
+                    .iter()
+                    .map(|(end, q)| {
+                        let mut v = quantity(q);
+                        v["end"] = serde_json::json!(end);
+                        v
+                    })
+                    .collect();
                 serde_json::json!({
                     "name": r.name,
                     "points_compared": r.points,
-                    "differences": r.differences,
-                    "worst_points": r.worst.iter().map(|w| w.0).collect::<Vec<_>>(),
-                    "worst_times": r.worst.iter().map(|w| w.1).collect::<Vec<_>>(),
-                    "observed_order": r.grid.observed_order,
-                    "formal_order": formal,
-                    "asymptotic": r.asymptotic(),
-                    "negligible": r.negligible(),
-                    "length": r.length,
-                    "estimated_errors": r.estimated_errors,
-                    "gci": r.grid.gci,
+                    "positions": quantity(&r.positions),
+                    "end_forces": forces,
                 })
             })
             .collect();
@@ -447,7 +462,6 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
         println!("{v}");
         return;
     }
-    let last = study.levels.len() - 1;
     println!(
         "converge   {name}: {} refinement, {} runs to t = {} s, compared at {} times",
         study.refinement.name(),
@@ -468,46 +482,72 @@ fn report_study(name: &str, study: &convergence::Study, json: bool) {
         );
     }
     for r in &study.rods {
-        println!("rod \"{}\" ({} points compared)", r.name, r.points);
-        let diffs: Vec<String> = r
-            .differences
-            .iter()
-            .zip(&r.worst)
-            .enumerate()
-            .map(|(k, (d, (j, t)))| {
-                format!("runs {k}–{}: {d:.3e} m (point {j}, t {t:.4} s)", k + 1)
-            })
-            .collect();
-        println!("  largest distance between  {}", diffs.join(", "));
-        match (r.grid.observed_order, &r.estimated_errors) {
-            (Some(p), Some(errors)) => {
-                let e: Vec<String> = errors
-                    .iter()
-                    .enumerate()
-                    .map(|(k, e)| format!("run {k} {e:.2e} m"))
-                    .collect();
-                println!("  observed order {p:.2} (formal {formal}): in the asymptotic range");
-                println!("  estimated error           {}", e.join(", "));
-            }
-            _ if r.negligible() => println!(
-                "  the runs agree to within {:e} of the rod's length ({:.3} m): no discretisation error is measurable",
-                convergence::NEGLIGIBLE,
-                r.length
-            ),
-            (p, _) => {
-                let p = p.map_or("none".to_string(), |p| format!("{p:.2}"));
-                println!(
-                    "  observed order {p} (formal {formal}): NOT in the asymptotic range ({}–{}); no error estimate",
-                    convergence::ASYMPTOTIC_ORDERS.0,
-                    convergence::ASYMPTOTIC_ORDERS.1
-                );
-            }
+        println!("rod \"{}\"", r.name);
+        let what = format!("centreline ({} points compared)", r.points);
+        report_quantity(&what, "m", "point", &r.positions, study);
+        for (end, q) in &r.end_forces {
+            let what = format!(
+                "force at its {} end (filtered, as a haptic device renders it)",
+                if *end == 0 { "first" } else { "last" }
+            );
+            report_quantity(&what, "N", "end", q, study);
         }
-        println!(
-            "  GCI of run {last} (error bound, Fs {}): {:.2e} m",
-            r.grid.safety_factor, r.grid.gci
-        );
     }
+}
+
+/// The text lines of one quantity of a study: what it is, its differences, order, estimates
+/// and GCI. `unit` is its unit, `place` what `worst.0` counts (a point, an end).
+fn report_quantity(
+    what: &str,
+    unit: &str,
+    place: &str,
+    q: &convergence::Convergence,
+    study: &convergence::Study,
+) {
+    let formal = study.refinement.formal_order();
+    let last = study.levels.len() - 1;
+    println!("  {what}");
+    let diffs: Vec<String> = q
+        .differences
+        .iter()
+        .zip(&q.worst)
+        .enumerate()
+        .map(|(k, (d, (j, t)))| {
+            format!(
+                "runs {k}–{}: {d:.3e} {unit} ({place} {j}, t {t:.4} s)",
+                k + 1
+            )
+        })
+        .collect();
+    println!("    largest difference between  {}", diffs.join(", "));
+    match (q.grid.observed_order, &q.estimated_errors) {
+        (Some(p), Some(errors)) => {
+            let e: Vec<String> = errors
+                .iter()
+                .enumerate()
+                .map(|(k, e)| format!("run {k} {e:.2e} {unit}"))
+                .collect();
+            println!("    observed order {p:.2} (formal {formal}): in the asymptotic range");
+            println!("    estimated error             {}", e.join(", "));
+        }
+        _ if q.negligible() => println!(
+            "    the runs agree to within {:e} of its size ({:.3e} {unit}): no discretisation error is measurable",
+            convergence::NEGLIGIBLE,
+            q.scale
+        ),
+        (p, _) => {
+            let p = p.map_or("none".to_string(), |p| format!("{p:.2}"));
+            println!(
+                "    observed order {p} (formal {formal}): NOT in the asymptotic range ({}–{}); no error estimate",
+                convergence::ASYMPTOTIC_ORDERS.0,
+                convergence::ASYMPTOTIC_ORDERS.1
+            );
+        }
+    }
+    println!(
+        "    GCI of run {last} (error bound, Fs {}): {:.2e} {unit}",
+        q.grid.safety_factor, q.grid.gci
+    );
 }
 
 fn count_rods(path: &Path) -> Result<usize, String> {

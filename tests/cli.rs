@@ -426,8 +426,9 @@ fn converge_reports_each_run_and_its_estimated_error() {
     let rod = &v["rods"][0];
     assert_eq!(rod["name"], "rope", "{rod}");
     assert_eq!(rod["points_compared"], 17, "{rod}");
-    assert_eq!(rod["asymptotic"], true, "{rod}");
-    let errors: Vec<f64> = rod["estimated_errors"]
+    let positions = &rod["positions"];
+    assert_eq!(positions["asymptotic"], true, "{rod}");
+    let errors: Vec<f64> = positions["estimated_errors"]
         .as_array()
         .unwrap()
         .iter()
