@@ -90,6 +90,9 @@ pub fn grid_convergence(
 /// either scheme converges (differences at the rounding level, or a lucky cancellation).
 pub const ASYMPTOTIC_ORDERS: (f64, f64) = (0.5, 3.0);
 
+/// The most runs a study takes: the last is `2^11 = 2048` times finer than the first.
+pub const MAX_LEVELS: usize = 12;
+
 /// One run of a study.
 #[derive(Clone, Debug)]
 pub struct Level {
@@ -205,9 +208,17 @@ pub struct Study {
 /// Why a study could not be completed.
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
-    /// Fewer than two runs were asked for.
-    #[error("a convergence study needs at least 2 runs, got {0}")]
-    TooFewLevels(usize),
+    /// Fewer than two or more than [`MAX_LEVELS`] runs were asked for.
+    #[error("a convergence study takes 2 to {MAX_LEVELS} runs, got {0}")]
+    Levels(usize),
+    /// The finest run would take more steps than can be counted.
+    #[error("{steps} steps refined {factor} times is more steps than can be counted")]
+    TooManySteps {
+        /// Steps of the first run.
+        steps: u64,
+        /// The finest run's refinement.
+        factor: u32,
+    },
     /// A run could not be built.
     #[error("run {level} ({factor}× finer): {message}")]
     Build {
@@ -263,8 +274,15 @@ pub fn study(
     checkpoints: usize,
     mut build: impl FnMut(u32) -> Result<Simulation, String>,
 ) -> Result<Study, StudyError> {
-    if levels < 2 {
-        return Err(StudyError::TooFewLevels(levels));
+    if !(2..=MAX_LEVELS).contains(&levels) {
+        return Err(StudyError::Levels(levels));
+    }
+    let finest = 1u32 << (levels - 1);
+    if refinement == Refinement::Time && steps.checked_mul(u64::from(finest)).is_none() {
+        return Err(StudyError::TooManySteps {
+            steps,
+            factor: finest,
+        });
     }
     // Steps of the first run at which the states are compared (distinct, the last = steps).
     let count = (checkpoints.max(1) as u64).min(steps.max(1));

@@ -2,6 +2,7 @@
 //!
 //! `cosserat run SCENE` steps a scene and prints a summary (or one JSON object with `--json`,
 //! for scripts and benchmarks); `--out DIR` also writes the trajectory for NumPy and ParaView.
+//! `cosserat converge SCENE` estimates how accurate such a run is (`docs/convergence.md`).
 //! With no arguments it runs the built-in demo, the paper's free-space pendulum.
 
 use clap::{Parser, Subcommand};
@@ -31,7 +32,7 @@ enum Command {
     /// Run a scene file.
     Run(RunArgs),
     /// Estimate a scene's discretisation error: run it again with half the step (or twice the
-    /// elements), and again, and compare the end states (Richardson, Roache's GCI).
+    /// elements), and again, and compare the runs along the way (Richardson, Roache's GCI).
     Converge(ConvergeArgs),
 }
 

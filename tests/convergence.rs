@@ -223,3 +223,26 @@ fn the_force_at_a_held_end_is_estimated_too() {
         );
     }
 }
+
+#[test]
+fn the_number_of_runs_and_steps_is_checked_before_anything_runs() {
+    let mut built = 0;
+    for levels in [0, 1, 13] {
+        let err = study(Refinement::Time, levels, 10, 1, |_| {
+            built += 1;
+            pendulum(&[])
+        })
+        .unwrap_err();
+        assert!(matches!(err, StudyError::Levels(n) if n == levels), "{err}");
+    }
+    let err = study(Refinement::Time, 3, u64::MAX / 2, 1, |_| {
+        built += 1;
+        pendulum(&[])
+    })
+    .unwrap_err();
+    assert!(
+        matches!(err, StudyError::TooManySteps { factor: 4, .. }),
+        "{err}"
+    );
+    assert_eq!(built, 0);
+}
