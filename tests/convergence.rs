@@ -149,17 +149,23 @@ fn a_refined_run_the_scheme_cannot_take_says_which() {
     assert!(err.to_string().contains("stability limit"), "{err}");
 }
 
+/// A build that ignores the refinement is refused before it runs.
 #[test]
 fn a_build_that_ignores_the_refinement_is_refused() {
-    let err = study(Refinement::Space, 2, 10, 1, |_| {
+    let mut built = 0;
+    let err = study(Refinement::Space, 3, 10, 1, |_| {
+        built += 1;
         pendulum(&[("rod.0.elements", "10".to_string())])
     })
     .unwrap_err();
+    assert_eq!(built, 2, "the third run is not built");
     assert!(
         matches!(err, StudyError::Mismatch { level: 1, .. }),
         "{err}"
     );
     assert!(err.to_string().contains("expected [20]"), "{err}");
+    let err = study(Refinement::Time, 2, 10, 1, |_| pendulum(&[])).unwrap_err();
+    assert!(err.to_string().contains("time step"), "{err}");
 }
 
 /// A rod that does not move (no gravity) gives identical runs: nothing to measure, and the
