@@ -89,8 +89,8 @@ struct ConvergeArgs {
     #[arg(long, default_value_t = 3)]
     runs: usize,
     /// Times at which the runs are compared, evenly spaced, the last at the end.
-    #[arg(long, default_value_t = 10)]
-    checkpoints: usize,
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    checkpoints: u64,
 }
 
 fn main() -> ExitCode {
@@ -387,7 +387,7 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
             base.steps
         );
     }
-    match convergence::study(refinement, c.runs, base.steps, c.checkpoints, build) {
+    match convergence::study(refinement, c.runs, base.steps, c.checkpoints as usize, build) {
         Ok(study) => {
             report_study(&base.name, &study, args.json);
             Ok(ExitCode::SUCCESS)
