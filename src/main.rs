@@ -387,7 +387,13 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
             base.steps
         );
     }
-    match convergence::study(refinement, c.runs, base.steps, c.checkpoints as usize, build) {
+    match convergence::study(
+        refinement,
+        c.runs,
+        base.steps,
+        c.checkpoints as usize,
+        build,
+    ) {
         Ok(study) => {
             report_study(&base.name, &study, args.json);
             Ok(ExitCode::SUCCESS)

@@ -243,6 +243,9 @@ pub struct StiffSection {
     /// by the step's later iterations), `"every-iteration"` (Newton) or `"lagged"` (kept
     /// across steps); `backend_cpu::Refactor`.
     pub refactor: Option<String>,
+    /// Time integration: `"implicit-euler"` (default, first order) or `"bdf2"` (second
+    /// order); `backend_cpu::Integrator`.
+    pub integrator: Option<String>,
 }
 
 impl Default for SolverSection {
@@ -780,6 +783,19 @@ impl Checker<'_> {
                                     "solver.stiff.refactor",
                                     other,
                                     "expected \"every-step\", \"every-iteration\" or \"lagged\"",
+                                ));
+                            }
+                        };
+                    }
+                    if let Some(i) = &x.integrator {
+                        st.integrator = match i.as_str() {
+                            "implicit-euler" => backend_cpu::Integrator::ImplicitEuler,
+                            "bdf2" => backend_cpu::Integrator::Bdf2,
+                            other => {
+                                return Err(self.invalid(
+                                    "solver.stiff.integrator",
+                                    other,
+                                    "expected \"implicit-euler\" or \"bdf2\"",
                                 ));
                             }
                         };

@@ -104,6 +104,14 @@ fn bad_values_name_file_field_and_value() {
         (
             GOOD.replace(
                 "steps = 10",
+                "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\nintegrator = \"rk4\"",
+            ),
+            "solver.stiff.integrator",
+            "rk4",
+        ),
+        (
+            GOOD.replace(
+                "steps = 10",
                 "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\nhalve_above = -0.5",
             ),
             "solver.stiff.halve_above",

@@ -18,8 +18,8 @@
 //! and `bisect` in metres, default 1).
 
 use backend_cpu::{
-    CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, Refactor, SolverSettings,
-    StiffScheme, StiffScratch, StiffSettings, step_rod_batch, step_rod_stiff,
+    CpuRod, EndCondition, Integrator, Ordering, PointLoad, PrescribedMotion, Refactor,
+    SolverSettings, StiffScheme, StiffScratch, StiffSettings, step_rod_batch, step_rod_stiff,
 };
 use cosserat_model::presets::{PRESETS, Preset};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
@@ -138,6 +138,9 @@ fn stiff_default() -> StiffSettings {
     }
     if let Ok(v) = std::env::var("HALVE_ABOVE") {
         s.halve_above = v.parse().unwrap();
+    }
+    if std::env::var("INTEGRATOR").as_deref() == Ok("bdf2") {
+        s.integrator = Integrator::Bdf2;
     }
     s
 }

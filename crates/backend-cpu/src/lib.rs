@@ -37,6 +37,6 @@ pub use stepper::{
     step_rod_batch, step_rods, step_rods_batch,
 };
 pub use stiff::{
-    Refactor, StiffBindings, StiffReport, StiffScheme, StiffScratch, StiffSettings,
+    Integrator, Refactor, StiffBindings, StiffReport, StiffScheme, StiffScratch, StiffSettings,
     step_bound_stiff, step_rod_stiff, step_rods_stiff,
 };

@@ -107,6 +107,27 @@ pub enum Refactor {
     Lagged,
 }
 
+/// Time integration of the stiff scheme.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integrator {
+    /// Implicit (backward) Euler, as XPBD: first order and L-stable. It damps a vibration of
+    /// frequency `ω` by about `(ω h)² / 2` of its amplitude per step, which at haptic steps
+    /// is most of the error of a swinging rod (`docs/stiff-solver.md`).
+    #[default]
+    ImplicitEuler,
+    /// BDF2, the two-step backward differentiation formula: second order and still L-stable,
+    /// with a numerical damping of order `(ω h)⁴` per step. A BDF2 step of `h` is an implicit
+    /// Euler step of `2h/3` taken from the state extrapolated from the last two,
+    /// `x* = (4 x_n − x_{n−1})/3`, `v* = (4 v_n − v_{n−1})/3` (frames: a third of the last
+    /// step's rotation past `q_n`, `ω* = (4 ω_n − ω_{n−1})/3`); its velocities are then
+    /// `(x_{n+1} − x*)/(2h/3)`, which is BDF2's `(3 x_{n+1} − 4 x_n + x_{n−1})/(2h)`. So
+    /// contacts, guides, bindings, damping and the reactions at held ends work unchanged. The
+    /// first step of a run, a step after one retaken in halves and a step after the rod's state
+    /// was changed from outside have no history and are implicit Euler steps. Direct solver
+    /// only.
+    Bdf2,
+}
+
 /// Settings of the stiff scheme (the rest — `dt`, gravity, extensibility, divergence limit —
 /// comes from the shared [`SolverSettings`]; its `iterations` and `ordering` belong to the
 /// explicit scheme's distance constraints and are not used here).
@@ -186,6 +207,8 @@ pub struct StiffSettings {
     /// (`docs/benchmarks/stiff-insertion.md`). `false` queries every point every time, for
     /// checking.
     pub reuse_contact_queries: bool,
+    /// Time integration: implicit Euler (the default) or BDF2 ([`Integrator`]).
+    pub integrator: Integrator,
 }
 
 impl Default for StiffSettings {
@@ -209,6 +232,7 @@ impl Default for StiffSettings {
             halve_above: f64::INFINITY,
             axial_fallback: true,
             reuse_contact_queries: true,
+            integrator: Integrator::ImplicitEuler,
         }
     }
 }
@@ -777,9 +801,6 @@ fn step_fixed<T: Real>(
     } = window;
     let h = settings.dt.to_f64();
     let n = rod.elements();
-    scratch
-        .k
-        .rebuild(rod, h, settings.extensible, stiff.inertia_floor);
     if scratch.contacts.is_none()
         && let Some(mesh) = rod.mesh.as_ref()
     {
@@ -806,6 +827,7 @@ fn step_fixed<T: Real>(
     // one changed the state in between): rounding an f32 state at every step would leave a
     // residual of the order of f32's resolution that the tolerance sees as unconverged.
     if !(w.shadow && shadow_matches(rod, w)) {
+        w.history = None;
         for i in 0..=n {
             w.x.set(i, &v64(&rod.state.positions[i]));
             w.v.set(i, &v64(&rod.state.velocities[i]));
@@ -819,18 +841,42 @@ fn step_fixed<T: Real>(
     }
     let gravity = v64(&settings.gravity);
     let precision = T::default_epsilon().to_f64();
-    let drag = 1.0 / (1.0 + h * rod.params.drag.to_f64());
+    let drag_rate = rod.params.drag.to_f64();
     let limit = settings.divergence_strain.to_f64();
+    let bdf2 = stiff.integrator == Integrator::Bdf2 && stiff.scheme == StiffScheme::Direct;
+    // The step the implicit solve takes (`h`, or `2h/3` for a BDF2 step with history), for
+    // which the constants were last built.
+    let mut solved_with = None;
     let mut stats = StepStats::none();
     let mut result = Ok(());
     // What the batch's steps report, added to `report` only if the batch is kept.
     let mut kept = StiffReport::default();
     for step in 0..steps {
         let t = time + step as f64 * h;
+        let hs = if !bdf2 {
+            h
+        } else if w.history == Some(h) {
+            w.extrapolate_bdf2();
+            2.0 * h / 3.0
+        } else {
+            w.keep_history();
+            w.history = Some(h);
+            h
+        };
+        if solved_with != Some(hs) {
+            // A no-op when the constants already are for this step; a changed step also
+            // changes the matrix a lagged factorisation was kept for.
+            if solved_with.is_some() {
+                *factor_valid = false;
+            }
+            k.rebuild(rod, hs, settings.extensible, stiff.inertia_floor);
+            solved_with = Some(hs);
+        }
+        let drag = 1.0 / (1.0 + hs * drag_rate);
         let ctx = StepContext {
             rod,
             stiff,
-            h,
+            h: hs,
             t,
             gravity: &gravity,
             precision,
@@ -859,7 +905,7 @@ fn step_fixed<T: Real>(
             // material's axial compliance (see `StiffSettings::axial_fallback`).
             w.restore_step_start();
             let ka = axial.get_or_insert_with(Consts::default);
-            ka.rebuild(rod, h, true, stiff.inertia_floor);
+            ka.rebuild(rod, hs, true, stiff.inertia_floor);
             *factor_valid = false;
             (residual, tolerance) = solve_step(
                 &ctx,
@@ -881,6 +927,7 @@ fn step_fixed<T: Real>(
             // Far from converged: not an answer. Retaken in halves by the caller, or
             // reported at the finest split.
             *factor_valid = false;
+            w.history = None;
             result = Err(Divergence {
                 rod: rod_index,
                 element: worst_element(w, k),
@@ -905,12 +952,12 @@ fn step_fixed<T: Real>(
         // 3. Velocities from the positions and frames. Drag of the medium, implicit
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
         // energy without changing static equilibria.
-        w.velocities(h, drag);
+        w.velocities(hs, drag);
         if rod.reaction.is_some() {
-            record_reactions(rod, w, k, h, &gravity, &coupled.loads);
+            record_reactions(rod, w, k, hs, &gravity, &coupled.loads);
         }
         if !coupled.lines.is_empty() {
-            binding::line_forces(w, k, h, coupled);
+            binding::line_forces(w, k, hs, coupled);
         }
         // Divergence check, as the explicit stepper's, on squared stretches (`|r − 1| > limit`
         // is `r² > (1 + limit)²` or `r² < (1 − limit)²`).
@@ -927,6 +974,7 @@ fn step_fixed<T: Real>(
                     Some(r2) => DivergedQuantity::Strain((r2.sqrt() - 1.0).abs()),
                 };
                 *factor_valid = false;
+                w.history = None;
                 result = Err(Divergence {
                     rod: rod_index,
                     element,

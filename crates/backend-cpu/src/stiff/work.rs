@@ -56,6 +56,13 @@ pub(crate) struct Work {
     bound_before: Vec<f64>,
     /// Whether `x`, `v`, `q`, `omega` hold the state the last step left (see `step_fixed`).
     pub(crate) shadow: bool,
+    /// BDF2's history (`Integrator::Bdf2`): the state one step before `x`, `v`, `q`, `omega`,
+    /// and the step between them; `None` when there is none (the next step is implicit Euler).
+    pub(crate) x_prev: V3s,
+    pub(crate) v_prev: V3s,
+    pub(crate) q_prev: Q4s,
+    pub(crate) omega_prev: V3s,
+    pub(crate) history: Option<f64>,
     /// Points held on a mesh's surface in this step (`contact.rs`): their displacements are
     /// projected onto the tangent plane (sliding) or removed (sticking) in every update, and
     /// the Newton matrix is assembled with the same projected inverse masses
@@ -118,6 +125,48 @@ impl Work {
         self.lambda_prev = [frames(), frames()];
         self.rhs = [frames(), frames()];
         self.c_old = [frames(), frames()];
+        self.x_prev = points();
+        self.v_prev = points();
+        self.q_prev = Q4s::identities(n);
+        self.omega_prev = frames();
+        self.history = None;
+    }
+
+    /// Keeps the current state as BDF2's history of the next step.
+    pub(crate) fn keep_history(&mut self) {
+        self.x_prev.copy_from(&self.x);
+        self.v_prev.copy_from(&self.v);
+        self.q_prev.copy_from(&self.q);
+        self.omega_prev.copy_from(&self.omega);
+    }
+
+    /// A BDF2 step's start (`Integrator::Bdf2`): replaces the state `(x_n, v_n, q_n, ω_n)` by
+    /// `x* = (4 x_n − x_{n−1})/3`, `v* = (4 v_n − v_{n−1})/3`, `q* = q_n ⊗ exp(φ/3)` with `φ`
+    /// the body rotation from `q_{n−1}` to `q_n`, `ω* = (4 ω_n − ω_{n−1})/3`, and keeps
+    /// `(x_n, v_n, q_n, ω_n)` as the history of the next step.
+    pub(crate) fn extrapolate_bdf2(&mut self) {
+        let third = 1.0 / 3.0;
+        let blend = |now: Vec3<f64>, before: Vec3<f64>| (now * 4.0 - before) * third;
+        for i in 0..=self.n {
+            let (x, v) = (self.x.get(i), self.v.get(i));
+            self.x.set(i, &blend(x, self.x_prev.get(i)));
+            self.v.set(i, &blend(v, self.v_prev.get(i)));
+            self.x_prev.set(i, &x);
+            self.v_prev.set(i, &v);
+        }
+        for j in 0..self.n {
+            let (q, omega) = (self.q.get(j), self.omega.get(j));
+            let mut s = self.q_prev.get(j).conjugate() * q;
+            if s.w < 0.0 {
+                s = -s;
+            }
+            let phi = s.imag() * angle_over_sin_half(&s);
+            let r = q * exp_small(&(phi * third));
+            self.q.set(j, &(r / r.norm()));
+            self.omega.set(j, &blend(omega, self.omega_prev.get(j)));
+            self.q_prev.set(j, &q);
+            self.omega_prev.set(j, &omega);
+        }
     }
 
     /// Evaluates every constraint and its Jacobian at the current iterate.
