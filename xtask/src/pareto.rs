@@ -53,6 +53,8 @@ enum Solver {
     Extensible,
     /// The stiff scheme (XPBD, direct banded solve), default settings.
     Stiff,
+    /// The same with BDF2 time integration (`solver.stiff.integrator = "bdf2"`).
+    StiffBdf2,
 }
 
 impl Solver {
@@ -62,7 +64,12 @@ impl Solver {
             Solver::Direct => "direct".into(),
             Solver::Extensible => "extensible".into(),
             Solver::Stiff => "stiff (XPBD direct)".into(),
+            Solver::StiffBdf2 => "stiff BDF2 (XPBD direct)".into(),
         }
+    }
+
+    fn stiff(self) -> bool {
+        matches!(self, Solver::Stiff | Solver::StiffBdf2)
     }
 }
 
@@ -105,10 +112,10 @@ fn pendulum_run(
                 go::<f32>(&spec.points, &spec.spec, ends, g, dt, steps)
             }
         }
-        Solver::Iterative(_) | Solver::Extensible | Solver::Stiff => {
+        Solver::Iterative(_) | Solver::Extensible | Solver::Stiff | Solver::StiffBdf2 => {
             let (mode, sweeps) = match solver {
                 Solver::Iterative(k) => ("inextensible", k),
-                Solver::Stiff => ("inextensible", 10),
+                Solver::Stiff | Solver::StiffBdf2 => ("inextensible", 10),
                 _ => ("extensible", 0),
             };
             let mut overrides = vec![
@@ -122,8 +129,11 @@ fn pendulum_run(
                 ("solver.mode", mode.into()),
                 ("solver.ordering", "gauss-seidel".into()),
             ];
-            if solver == Solver::Stiff {
+            if solver.stiff() {
                 overrides.push(("solver.scheme", "stiff".into()));
+            }
+            if solver == Solver::StiffBdf2 {
+                overrides.push(("solver.stiff.integrator", "bdf2".into()));
             }
             let b = pendulum(&overrides)?;
             let mut sim = b.build().map_err(|e| e.to_string())?;
@@ -154,12 +164,12 @@ fn pendulum_sweep() -> Result<Vec<Point>, String> {
                 solver == Solver::Extensible,
             ))
             .max_dt;
-            if dt > limit && solver != Solver::Stiff {
+            if dt > limit && !solver.stiff() {
                 return Ok(());
             }
             let (tip, wall) = match pendulum_run(solver, double, n, dt) {
                 Ok(r) => r,
-                Err(e) if solver == Solver::Stiff => {
+                Err(e) if solver.stiff() => {
                     eprintln!("  {family}, N {n}, dt {dt:e}: {e} (left out)");
                     return Ok(());
                 }
@@ -199,6 +209,13 @@ fn pendulum_sweep() -> Result<Vec<Point>, String> {
         for n in [25, 50, 100, 200] {
             for dt in [1e-3, 2e-4, 4e-5, 1e-5] {
                 push(&format!("stiff, {p}"), Solver::Stiff, double, n, dt)?;
+                push(
+                    &format!("stiff BDF2, {p}"),
+                    Solver::StiffBdf2,
+                    double,
+                    n,
+                    dt,
+                )?;
             }
         }
         for k in [1, 3, 30, 100] {
@@ -535,7 +552,7 @@ pub(crate) fn run() -> Result<bool, String> {
     )
     .map_err(|e| e.to_string())?;
     let mut md = String::from(
-        "Work-precision measurements (`cargo xtask bench --pareto`, release build, serial, one core of this machine). Errors: pendulum — tip distance after 0.2 s from a direct-solver f64 run with N = 400, dt = 2.5e-6, divided by the length; cantilever — relative error of the static tip deflection at α = FL²/EI = 2 against the shearable elastica. Settings of the explicit scheme outside its estimated stable region are skipped. The stiff scheme (`solver.scheme = \"stiff\"`, default settings, `docs/stiff-solver.md`) has no such limit: its pendulum points sweep dt = 1e-3 … 1e-5 s, its cantilever points run at dt = 0.1/ω₁ and 0.01/ω₁ (ω₁ the first bending frequency). Data: `docs/benchmarks/pareto.json`; diagrams: `pareto-pendulum.{png,svg}`, `pareto-cantilever.{png,svg}`.\n",
+        "Work-precision measurements (`cargo xtask bench --pareto`, release build, serial, one core of this machine). Errors: pendulum — tip distance after 0.2 s from a direct-solver f64 run with N = 400, dt = 2.5e-6, divided by the length; cantilever — relative error of the static tip deflection at α = FL²/EI = 2 against the shearable elastica. Settings of the explicit scheme outside its estimated stable region are skipped. The stiff scheme (`solver.scheme = \"stiff\"`, default settings, `docs/stiff-solver.md`) has no such limit: its pendulum points sweep dt = 1e-3 … 1e-5 s, with implicit Euler (`stiff`, the default) and with BDF2 (`stiff BDF2`, `solver.stiff.integrator = \"bdf2\"`), its cantilever points run at dt = 0.1/ω₁ and 0.01/ω₁ (ω₁ the first bending frequency). Data: `docs/benchmarks/pareto.json`; diagrams: `pareto-pendulum.{png,svg}`, `pareto-cantilever.{png,svg}`.\n",
     );
     let _ = writeln!(
         md,
