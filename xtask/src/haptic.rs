@@ -2,7 +2,7 @@
 //!
 //! A haptic loop calls the simulation once per tick and must get it back within the tick,
 //! every time: a median says little, the slow ticks (steps that re-solve after the contacts
-//! changed) are what a user feels. This steps three loops call by call, timing every tick,
+//! changed) are what a user feels. This steps its loops call by call, timing every tick,
 //! three times each:
 //! - the soft wire of `scenes/stiff-guidewire-insertion.toml` at 1 kHz (one step of 1 ms per
 //!   tick) and at 500 Hz (one step of 2 ms), the two ends of the range haptic devices run at;
@@ -11,7 +11,9 @@
 //!   elements (2 mm, the resolution a haptic scene would use);
 //! - that guidewire bound inside a `catheter-polymer` catheter
 //!   (`scenes/stiff-catheter-guidewire.toml`), 256 elements each, at 1 kHz as five steps of
-//!   0.2 ms per tick.
+//!   0.2 ms per tick;
+//! - the soft wire at 1 kHz and the nitinol wire at 1 kHz again with the second-order
+//!   integrator (`solver.stiff.integrator = "bdf2"`), which costs more per step.
 //!
 //! Each loop's tips (every rod's) are compared with a reference run to the same end: the
 //! explicit insertion (`scenes/guidewire-insertion.toml`, 700 000 steps) for the soft wire, the
@@ -59,7 +61,7 @@ const PAIR_REFERENCE: (SceneWith, &str) = (
     "`scenes/stiff-catheter-guidewire.toml` at dt 5e-5 s (512 elements each)",
 );
 
-const LOOPS: [Loop; 4] = [
+const LOOPS: [Loop; 6] = [
     Loop {
         label: "soft wire, 1 kHz (1 × 1 ms)",
         scene: ("scenes/stiff-guidewire-insertion.toml", &[]),
@@ -82,6 +84,29 @@ const LOOPS: [Loop; 4] = [
         scene: (
             "scenes/nitinol-guidewire-insertion.toml",
             &[("rod.0.elements", "256")],
+        ),
+        steps_per_tick: 10,
+        period: 1e-3,
+        reference: NITINOL_REFERENCE,
+    },
+    Loop {
+        label: "soft wire, BDF2, 1 kHz (1 × 1 ms)",
+        scene: (
+            "scenes/stiff-guidewire-insertion.toml",
+            &[("solver.stiff.integrator", "bdf2")],
+        ),
+        steps_per_tick: 1,
+        period: 1e-3,
+        reference: SOFT_REFERENCE,
+    },
+    Loop {
+        label: "nitinol wire, 256 elements, BDF2, 1 kHz (10 × 0.1 ms)",
+        scene: (
+            "scenes/nitinol-guidewire-insertion.toml",
+            &[
+                ("rod.0.elements", "256"),
+                ("solver.stiff.integrator", "bdf2"),
+            ],
         ),
         steps_per_tick: 10,
         period: 1e-3,

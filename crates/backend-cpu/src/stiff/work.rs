@@ -145,27 +145,43 @@ impl Work {
     /// the body rotation from `q_{n−1}` to `q_n`, `ω* = (4 ω_n − ω_{n−1})/3`, and keeps
     /// `(x_n, v_n, q_n, ω_n)` as the history of the next step.
     pub(crate) fn extrapolate_bdf2(&mut self) {
-        let third = 1.0 / 3.0;
-        let blend = |now: Vec3<f64>, before: Vec3<f64>| (now * 4.0 - before) * third;
-        for i in 0..=self.n {
-            let (x, v) = (self.x.get(i), self.v.get(i));
-            self.x.set(i, &blend(x, self.x_prev.get(i)));
-            self.v.set(i, &blend(v, self.v_prev.get(i)));
-            self.x_prev.set(i, &x);
-            self.v_prev.set(i, &v);
+        let n = self.n;
+        let (four_thirds, minus_third) = (F::splat(4.0 / 3.0), F::splat(-1.0 / 3.0));
+        let blend = |now: V, before: V| now.scale(four_thirds).add_scaled(before, minus_third);
+        for i in chunks(n + 1) {
+            let (x, v) = (self.x.load(i), self.v.load(i));
+            self.x.store(i, blend(x, self.x_prev.load(i)));
+            self.v.store(i, blend(v, self.v_prev.load(i)));
+            self.x_prev.store(i, x);
+            self.v_prev.store(i, v);
         }
-        for j in 0..self.n {
-            let (q, omega) = (self.q.get(j), self.omega.get(j));
-            let mut s = self.q_prev.get(j).conjugate() * q;
-            if s.w < 0.0 {
-                s = -s;
+        for j in chunks(n) {
+            let (q, omega) = (self.q.load(j), self.omega.load(j));
+            let s = self.q_prev.load(j).conj_mul(q).positive();
+            // Lanes past 1e-2 rad are redone below.
+            let (series, ok) = small_log(s);
+            let turned = q.mul(small_exp(s.v.scale(series * F::splat(1.0 / 3.0))));
+            // Other lanes: the closed forms, from the states before they are overwritten.
+            let mut redone = [None; 4];
+            for_lanes(!ok.to_bitmask(), j, n, |e| {
+                let q = self.q.get(e);
+                let mut s = self.q_prev.get(e).conjugate() * q;
+                if s.w < 0.0 {
+                    s = -s;
+                }
+                let phi = s.imag() * angle_over_sin_half(&s);
+                let r = q * exp_small(&(phi * (1.0 / 3.0)));
+                redone[e - j] = Some(r / r.norm());
+            });
+            self.q.store(j, turned.normalised());
+            self.omega.store(j, blend(omega, self.omega_prev.load(j)));
+            self.q_prev.store(j, q);
+            self.omega_prev.store(j, omega);
+            for (k, r) in redone.iter().enumerate() {
+                if let Some(r) = r {
+                    self.q.set(j + k, r);
+                }
             }
-            let phi = s.imag() * angle_over_sin_half(&s);
-            let r = q * exp_small(&(phi * third));
-            self.q.set(j, &(r / r.norm()));
-            self.omega.set(j, &blend(omega, self.omega_prev.get(j)));
-            self.q_prev.set(j, &q);
-            self.omega_prev.set(j, &omega);
         }
     }
 
@@ -656,21 +672,10 @@ impl Work {
                 .mul(c.inv_inertia_own.load(j));
             let o = o.add_scaled(gyro, -hf);
             self.omega.store(j, o);
-            // exp(h ω / 2) by its series (as `exp_small`); lanes past 1e-2 rad are redone.
+            // Lanes past 1e-2 rad are redone.
             let v = o.scale(hf);
             let a2 = v.norm2();
-            let h2 = F::splat(0.25) * a2;
-            let cos = F::ONE
-                - h2 * (F::splat(0.5) - h2 * (F::splat(1.0 / 24.0) - h2 * F::splat(1.0 / 720.0)));
-            let sin = F::splat(0.5)
-                * (F::ONE
-                    - h2 * (F::splat(1.0 / 6.0)
-                        - h2 * (F::splat(1.0 / 120.0) - h2 * F::splat(1.0 / 5040.0))));
-            let e = Q {
-                w: cos,
-                v: v.scale(sin),
-            };
-            self.q.store(j, q.mul(e).normalised());
+            self.q.store(j, q.mul(small_exp(v)).normalised());
             // Lanes past 1e-2 rad: the closed form, as `exp_small`.
             for_lanes(mask_ge(a2, F::splat(1e-4)), j, n, |e| {
                 let r = self.q_old.get(e) * exp_small(&(self.omega.get(e) * h));
@@ -709,17 +714,8 @@ impl Work {
         let inv_h = F::splat(1.0 / h);
         for j in chunks(n) {
             let s = self.q_old.load(j).conj_mul(self.q.load(j)).positive();
-            // angle / |s_v| by the series of 2 asin(x)/x (as `angle_over_sin_half`); other
-            // lanes are redone.
-            let sn2 = s.v.norm2();
-            let series = F::splat(2.0)
-                + sn2
-                    * (F::splat(1.0 / 3.0)
-                        + sn2
-                            * (F::splat(0.15)
-                                + sn2 * (F::splat(5.0 / 56.0) + sn2 * F::splat(35.0 / 576.0))));
-            let norm_err = (s.w.mul_add(s.w, sn2) - F::ONE).abs();
-            let ok = sn2.simd_lt(F::splat(1e-4)) & norm_err.simd_lt(F::splat(1e-12));
+            // Lanes past 1e-2 rad are redone.
+            let (series, ok) = small_log(s);
             self.omega.store(j, s.v.scale(series * inv_h));
             // Other lanes: the closed form, as `angle_over_sin_half`.
             for_lanes(!ok.to_bitmask(), j, n, |e| {
@@ -794,6 +790,39 @@ type M = [[F; 3]; 3];
 
 /// `[v]×`.
 #[inline(always)]
+/// `angle / |s_v|` of unit quaternions `s` with `s_w ≥ 0` by the series of `2 asin(x)/x` (as
+/// `angle_over_sin_half`; `s_v` times it is the rotation vector), and the mask of the lanes
+/// where that series applies (`|s_v|² < 1e-4` and `s` of unit norm to 1e-12); other lanes must
+/// be redone with the closed form.
+fn small_log(s: Q) -> (F, F) {
+    let sn2 = s.v.norm2();
+    let series = F::splat(2.0)
+        + sn2
+            * (F::splat(1.0 / 3.0)
+                + sn2
+                    * (F::splat(0.15)
+                        + sn2 * (F::splat(5.0 / 56.0) + sn2 * F::splat(35.0 / 576.0))));
+    let norm_err = (s.w.mul_add(s.w, sn2) - F::ONE).abs();
+    let ok = sn2.simd_lt(F::splat(1e-4)) & norm_err.simd_lt(F::splat(1e-12));
+    (series, ok)
+}
+
+/// `exp(v / 2)`, the quaternion of a rotation by `v`, by the series of `cos` and `sin` (as
+/// `exp_small`); for `|v|² < 1e-4` (error below 1e-20), other lanes must be redone.
+fn small_exp(v: V) -> Q {
+    let h2 = F::splat(0.25) * v.norm2();
+    let cos =
+        F::ONE - h2 * (F::splat(0.5) - h2 * (F::splat(1.0 / 24.0) - h2 * F::splat(1.0 / 720.0)));
+    let sin = F::splat(0.5)
+        * (F::ONE
+            - h2 * (F::splat(1.0 / 6.0)
+                - h2 * (F::splat(1.0 / 120.0) - h2 * F::splat(1.0 / 5040.0))));
+    Q {
+        w: cos,
+        v: v.scale(sin),
+    }
+}
+
 fn cross(v: V) -> M {
     let z = F::ZERO;
     [[z, -v.z, v.y], [v.z, z, -v.x], [-v.y, v.x, z]]
@@ -910,6 +939,71 @@ mod tests {
 
     /// Constraint values, the assembled blocks of `J K⁻¹ Jᵀ + α̃`, `Jᵀ μ` and the right-hand
     /// side of the lanes against the scalar formulas of `constraints.rs` and `direct::blocks`.
+    /// BDF2's extrapolation against its formulas, element by element: `(4 a_n − a_{n−1})/3` for
+    /// positions, velocities and angular velocities, and each frame turned past `q_n` by a third
+    /// of the body rotation from `q_{n−1}` to `q_n` (the rotation vector's exponential, checked
+    /// by turning three times: `q_n ⊗ r³ = q_n ⊗ (q̄_{n−1} q_n)`), for small turns (the series)
+    /// and large ones (the closed forms), on every lane.
+    #[test]
+    fn bdf2_extrapolation_matches_its_formulas() {
+        let n = 9;
+        let (_, mut w) = setup(n);
+        let before = w.clone();
+        for i in 0..=n {
+            let f = i as f64;
+            w.x_prev
+                .set(i, &(w.x.get(i) - Vec3::new(1e-3, -2e-3 * f, 5e-4)));
+            w.v.set(i, &Vec3::new(f.sin(), 0.3, -f.cos()));
+            w.v_prev.set(i, &Vec3::new(0.1, f.cos(), 0.2 * f));
+        }
+        for j in 0..n {
+            let f = j as f64;
+            // Turns of 1e-4 to 0.5 rad between the two states.
+            let angle = 1e-4 * 5f64.powi(j as i32 % 6);
+            let axis = Vec3::new(f.cos(), 0.4, f.sin()).normalize();
+            w.q_prev
+                .set(j, &(before.q.get(j) * exp_rotation(&(-axis * angle))));
+            w.omega.set(j, &Vec3::new(0.5, -f, 2.0));
+            w.omega_prev.set(j, &Vec3::new(f, 0.1, -0.3));
+        }
+        let old = w.clone();
+        w.extrapolate_bdf2();
+        let blend = |a: Vec3<f64>, b: Vec3<f64>| (a * 4.0 - b) / 3.0;
+        for i in 0..=n {
+            close(
+                &w.x.get(i),
+                &blend(old.x.get(i), old.x_prev.get(i)),
+                1.0,
+                "x*",
+            );
+            close(
+                &w.v.get(i),
+                &blend(old.v.get(i), old.v_prev.get(i)),
+                1.0,
+                "v*",
+            );
+            assert_eq!(w.x_prev.get(i), old.x.get(i));
+            assert_eq!(w.v_prev.get(i), old.v.get(i));
+        }
+        for j in 0..n {
+            let (q, qp) = (old.q.get(j), old.q_prev.get(j));
+            let r = q.conjugate() * w.q.get(j);
+            let thrice = q * r * r * r;
+            let step = q * (qp.conjugate() * q);
+            let diff = (thrice.coords - step.coords)
+                .norm()
+                .min((thrice.coords + step.coords).norm());
+            assert!(diff < 1e-12, "frame {j}: {thrice:?} vs {step:?}");
+            close(
+                &w.omega.get(j),
+                &blend(old.omega.get(j), old.omega_prev.get(j)),
+                1.0,
+                "ω*",
+            );
+            assert_eq!(w.q_prev.get(j), q);
+        }
+    }
+
     #[test]
     fn lane_passes_match_the_scalar_formulas() {
         let n = 11;
