@@ -687,11 +687,14 @@ fn stiff_rods_step_alike_serially_and_in_parallel() {
 /// further in the next step than its unchanged twin.
 #[test]
 fn the_step_continues_from_its_own_state_and_reads_a_changed_one() {
-    fn check<T: Real>() {
+    fn check<T: Real>(integrator: Integrator) {
         let p = &PRESETS[0];
         let ends = [EndCondition::pinned(), EndCondition::free()];
         let s = settings::<T>(1e-3, Vec3::new(0.0, 0.0, -9.81), false);
-        let st = StiffSettings::default();
+        let st = StiffSettings {
+            integrator,
+            ..StiffSettings::default()
+        };
         let mut single = straight::<T>(p, 0.5, 30, 0.0, ends, vec![]);
         let mut batch = single.clone();
         let (mut a, mut b) = (StiffScratch::new(), StiffScratch::new());
@@ -708,10 +711,14 @@ fn the_step_continues_from_its_own_state_and_reads_a_changed_one() {
         step_rod_stiff(&mut single, &s, &st, &mut a, 0.02, 0, 20, 1).unwrap();
         step_rod_stiff(&mut pushed, &s, &st, &mut c, 0.02, 0, 20, 1).unwrap();
         let dz = (pushed.state.positions[n].z - single.state.positions[n].z).to_f64();
-        assert!(dz > 0.5e-3 && dz < 1.5e-3, "{dz}");
+        assert!(dz > 0.5e-3 && dz < 1.5e-3, "{integrator:?}: {dz}");
     }
-    check::<f32>();
-    check::<f64>();
+    // BDF2 also keeps its history from one call to the next: one step per call (a haptic
+    // loop) is the batch bit for bit.
+    for integrator in [Integrator::ImplicitEuler, Integrator::Bdf2] {
+        check::<f32>(integrator);
+        check::<f64>(integrator);
+    }
 }
 
 /// A prepared scratch (`StiffScratch::prepare`, which steps a copy of the rod once) steps the
@@ -720,7 +727,7 @@ fn the_step_continues_from_its_own_state_and_reads_a_changed_one() {
 /// state, a factorisation a lagged policy would reuse, the counters).
 #[test]
 fn a_prepared_scratch_steps_as_a_fresh_one() {
-    fn check<T: Real>(refactor: Refactor) {
+    fn check<T: Real>(refactor: Refactor, integrator: Integrator) {
         let p = &PRESETS[0];
         let motion = PrescribedMotion {
             velocity: Vec3::new(T::lit(0.02), T::zero(), T::zero()),
@@ -732,6 +739,7 @@ fn a_prepared_scratch_steps_as_a_fresh_one() {
         let s = settings::<T>(1e-3, Vec3::new(0.0, 0.0, -9.81), false);
         let st = StiffSettings {
             refactor,
+            integrator,
             ..StiffSettings::default()
         };
         let mut fresh = straight::<T>(p, 0.5, 30, 0.0, ends, vec![]);
@@ -743,16 +751,18 @@ fn a_prepared_scratch_steps_as_a_fresh_one() {
             step_rod_stiff(&mut fresh, &s, &st, &mut a, k as f64 * 1e-3, 0, k, 1).unwrap();
             step_rod_stiff(&mut prepared, &s, &st, &mut b, k as f64 * 1e-3, 0, k, 1).unwrap();
         }
-        assert_eq!(fresh.state, prepared.state, "{refactor:?}");
-        assert_eq!(a.report(), b.report(), "{refactor:?}");
+        assert_eq!(fresh.state, prepared.state, "{refactor:?} {integrator:?}");
+        assert_eq!(a.report(), b.report(), "{refactor:?} {integrator:?}");
     }
     for refactor in [
         Refactor::EveryStep,
         Refactor::EveryIteration,
         Refactor::Lagged,
     ] {
-        check::<f32>(refactor);
-        check::<f64>(refactor);
+        for integrator in [Integrator::ImplicitEuler, Integrator::Bdf2] {
+            check::<f32>(refactor, integrator);
+            check::<f64>(refactor, integrator);
+        }
     }
 }
 
@@ -767,10 +777,11 @@ fn a_step_far_from_converged_is_retaken_in_halves() {
     let p = &PRESETS[0];
     let ends = [EndCondition::pinned(), EndCondition::free()];
     let s = settings::<f64>(0.2, Vec3::new(0.0, 0.0, -9.81), false);
-    let run = |halve_above: f64| {
+    let run = |halve_above: f64, integrator: Integrator| {
         let st = StiffSettings {
             iterations: 2,
             halve_above,
+            integrator,
             ..StiffSettings::default()
         };
         let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
@@ -778,18 +789,21 @@ fn a_step_far_from_converged_is_retaken_in_halves() {
         step_rod_stiff(&mut rod, &s, &st, &mut scratch, 0.0, 0, 0, 10).unwrap();
         (rod, scratch.report())
     };
-    let (_, kept) = run(f64::INFINITY);
+    let (_, kept) = run(f64::INFINITY, Integrator::ImplicitEuler);
     assert!(kept.max_residual > 1e-2, "{kept:?}");
-    let (rod, halved) = run(1e-3);
-    assert!(halved.max_residual <= 1e-3, "{halved:?}");
-    assert!(halved.steps > kept.steps, "{kept:?}\n{halved:?}");
-    let strain = rod
-        .state
-        .positions
-        .windows(2)
-        .map(|w| ((w[1] - w[0]).norm() / 0.0125 - 1.0).abs())
-        .fold(0.0, f64::max);
-    assert!(strain < 1e-3, "{strain:e}");
+    // BDF2 starts again from implicit Euler after each change of step.
+    for integrator in [Integrator::ImplicitEuler, Integrator::Bdf2] {
+        let (rod, halved) = run(1e-3, integrator);
+        assert!(halved.max_residual <= 1e-3, "{integrator:?} {halved:?}");
+        assert!(halved.steps > kept.steps, "{kept:?}\n{halved:?}");
+        let strain = rod
+            .state
+            .positions
+            .windows(2)
+            .map(|w| ((w[1] - w[0]).norm() / 0.0125 - 1.0).abs())
+            .fold(0.0, f64::max);
+        assert!(strain < 1e-3, "{integrator:?}: {strain:e}");
+    }
 }
 
 /// A step that cannot be brought within `halve_above` stops the run with an error naming the

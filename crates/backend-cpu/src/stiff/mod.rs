@@ -122,9 +122,9 @@ pub enum Integrator {
     /// step's rotation past `q_n`, `ω* = (4 ω_n − ω_{n−1})/3`); its velocities are then
     /// `(x_{n+1} − x*)/(2h/3)`, which is BDF2's `(3 x_{n+1} − 4 x_n + x_{n−1})/(2h)`. So
     /// contacts, guides, bindings, damping and the reactions at held ends work unchanged. The
-    /// first step of a run, a step after one retaken in halves and a step after the rod's state
-    /// was changed from outside have no history and are implicit Euler steps. Direct solver
-    /// only.
+    /// first step of a run, the first step after a change of step (a step retaken in halves,
+    /// and the first full step after it) and a step after the rod's state was changed from
+    /// outside have no history and are implicit Euler steps. Direct solver only.
     Bdf2,
 }
 
