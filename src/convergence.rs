@@ -37,11 +37,12 @@ impl Refinement {
         }
     }
 
-    /// The order of convergence both schemes have at least in this refinement, which the GCI
+    /// The lowest order of convergence the schemes have in this refinement, which the GCI
     /// uses when the observed order is higher or unknown: the explicit scheme (symplectic
-    /// Euler) and the stiff scheme (implicit Euler) are first order in time; in space the
-    /// half-element offset of a clamped end makes clamped rods first order (free rods converge
-    /// at second order, `docs/validation.md`).
+    /// Euler) and the stiff scheme's default (implicit Euler) are first order in time (its BDF2
+    /// is second order, for which this bound is then conservative); in space the half-element
+    /// offset of a clamped end makes clamped rods first order (free rods converge at second
+    /// order, `docs/validation.md`).
     pub fn formal_order(self) -> f64 {
         1.0
     }
@@ -287,7 +288,9 @@ pub fn study(
     // Steps of the first run at which the states are compared (distinct, the last = steps).
     let count = (checkpoints.max(1) as u64).min(steps.max(1));
     let marks: Vec<u64> = (1..=count)
-        .map(|c| (c * steps + count / 2) / count)
+        .map(|c| {
+            ((u128::from(c) * u128::from(steps) + u128::from(count / 2)) / u128::from(count)) as u64
+        })
         .collect();
     let mut runs = Vec::with_capacity(levels);
     // states[level][checkpoint][rod]: the points, and the force at each end when it is held.

@@ -662,6 +662,13 @@ impl<T: Real> Rods<T> {
                 );
             }
             if st.scheme == backend_cpu::StiffScheme::GaussSeidel
+                && st.integrator == backend_cpu::Integrator::Bdf2
+            {
+                return Err(BuildError::Setting(
+                    "BDF2 runs with the stiff solver's direct variant only".into(),
+                ));
+            }
+            if st.scheme == backend_cpu::StiffScheme::GaussSeidel
                 && (b.environment.is_some() || b.rods.iter().any(|r| r.guide.is_some()))
             {
                 return Err(BuildError::Setting(

@@ -398,7 +398,7 @@ fn an_unconverged_run_is_flagged() {
 
 /// `converge` runs the scene at three steps and reports, per rod, the distances between the
 /// runs, the observed order and the estimated error of every run; the runs all end at the
-/// same time and the errors shrink with the step.
+/// same time, and the explicit pendulum converges at first order.
 #[test]
 fn converge_reports_each_run_and_its_estimated_error() {
     let v = run_json(&[
@@ -428,13 +428,10 @@ fn converge_reports_each_run_and_its_estimated_error() {
     assert_eq!(rod["points_compared"], 17, "{rod}");
     let positions = &rod["positions"];
     assert_eq!(positions["asymptotic"], true, "{rod}");
-    let errors: Vec<f64> = positions["estimated_errors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e.as_f64().unwrap())
-        .collect();
-    assert!(errors[0] > errors[1] && errors[1] > errors[2], "{rod}");
+    // The explicit scheme is first order in time.
+    let order = positions["observed_order"].as_f64().unwrap();
+    assert!((0.8..1.2).contains(&order), "{rod}");
+    assert_eq!(positions["estimated_errors"].as_array().unwrap().len(), 3);
 
     let out = cosserat()
         .args(["converge", "scenes/pendulum.toml", "--refine", "sideways"])

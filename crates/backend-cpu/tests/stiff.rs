@@ -313,6 +313,45 @@ fn presets_are_stable_at_a_millisecond() {
     }
 }
 
+/// A held end follows its prescribed motion with BDF2 as with implicit Euler: a clamped end
+/// pushed at 2 cm/s and turned at 6 rad/s for 50 ms stops where that motion ends (1 mm along,
+/// 0.3 rad about the axis), and stays there. Extrapolating it like the free points would carry
+/// it on by a third of its last step, and again, half a step's travel in all.
+#[test]
+fn bdf2_held_ends_stop_where_their_motion_does() {
+    let p = &PRESETS[0];
+    let motion = PrescribedMotion {
+        velocity: Vec3::new(0.02, 0.0, 0.0),
+        angular_velocity: Vec3::new(6.0, 0.0, 0.0),
+        start_time: 0.0,
+        end_time: 0.05,
+    };
+    let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
+    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
+    let (x0, q0) = (rod.state.positions[0], rod.state.frames[0]);
+    let s = settings::<f64>(1e-3, Vec3::new(0.0, 0.0, -9.81), false);
+    let st = StiffSettings {
+        integrator: Integrator::Bdf2,
+        ..StiffSettings::default()
+    };
+    let mut scratch = StiffScratch::new();
+    for k in 0..100u64 {
+        step_rod_stiff(&mut rod, &s, &st, &mut scratch, k as f64 * 1e-3, 0, k, 1).unwrap();
+        let t = (k + 1) as f64 * 1e-3;
+        let along = 0.02 * t.min(0.05);
+        let x = rod.state.positions[0];
+        assert!(
+            (x - x0 - Vec3::new(along, 0.0, 0.0)).norm() < 1e-12,
+            "t {t}: held point {x} from {x0}"
+        );
+        let turned = twist(&rod.state.frames[0], &q0);
+        assert!(
+            (turned - 6.0 * t.min(0.05)).abs() < 1e-9,
+            "t {t}: turned {turned}"
+        );
+    }
+}
+
 /// BDF2 has the statics of implicit Euler (at rest its extrapolated state is the state): a
 /// nitinol cantilever with a tip load, settled at dt 1 ms, bends as far with either, and the
 /// clamp's reaction balances the loads with either.
@@ -702,19 +741,28 @@ fn the_step_continues_from_its_own_state_and_reads_a_changed_one() {
             step_rod_stiff(&mut single, &s, &st, &mut a, k as f64 * 1e-3, 0, k, 1).unwrap();
         }
         step_rod_stiff(&mut batch, &s, &st, &mut b, 0.0, 0, 0, 20).unwrap();
-        assert_eq!(single.state, batch.state);
+        assert_eq!(single.state, batch.state, "{integrator:?}");
 
         let mut pushed = single.clone();
         let mut c = a.clone();
         let n = pushed.state.positions.len() - 1;
         pushed.state.velocities[n].z += T::lit(1.0);
+        // The same changed state stepped by implicit Euler, from the same scratch.
+        let (mut pushed_euler, mut c_euler) = (pushed.clone(), c.clone());
         step_rod_stiff(&mut single, &s, &st, &mut a, 0.02, 0, 20, 1).unwrap();
         step_rod_stiff(&mut pushed, &s, &st, &mut c, 0.02, 0, 20, 1).unwrap();
         let dz = (pushed.state.positions[n].z - single.state.positions[n].z).to_f64();
         assert!(dz > 0.5e-3 && dz < 1.5e-3, "{integrator:?}: {dz}");
+        let euler = StiffSettings {
+            integrator: Integrator::ImplicitEuler,
+            ..st
+        };
+        step_rod_stiff(&mut pushed_euler, &s, &euler, &mut c_euler, 0.02, 0, 20, 1).unwrap();
+        assert_eq!(pushed.state, pushed_euler.state, "{integrator:?}");
     }
     // BDF2 also keeps its history from one call to the next: one step per call (a haptic
-    // loop) is the batch bit for bit.
+    // loop) is the batch bit for bit. A state changed from outside leaves it no history: its
+    // next step is implicit Euler's, bit for bit.
     for integrator in [Integrator::ImplicitEuler, Integrator::Bdf2] {
         check::<f32>(integrator);
         check::<f64>(integrator);
@@ -791,7 +839,7 @@ fn a_step_far_from_converged_is_retaken_in_halves() {
     };
     let (_, kept) = run(f64::INFINITY, Integrator::ImplicitEuler);
     assert!(kept.max_residual > 1e-2, "{kept:?}");
-    // BDF2 starts again from implicit Euler after each change of step.
+    // With BDF2 too, whose history restarts at each change of step.
     for integrator in [Integrator::ImplicitEuler, Integrator::Bdf2] {
         let (rod, halved) = run(1e-3, integrator);
         assert!(halved.max_residual <= 1e-3, "{integrator:?} {halved:?}");

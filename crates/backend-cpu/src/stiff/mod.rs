@@ -121,10 +121,13 @@ pub enum Integrator {
     /// `x* = (4 x_n − x_{n−1})/3`, `v* = (4 v_n − v_{n−1})/3` (frames: a third of the last
     /// step's rotation past `q_n`, `ω* = (4 ω_n − ω_{n−1})/3`); its velocities are then
     /// `(x_{n+1} − x*)/(2h/3)`, which is BDF2's `(3 x_{n+1} − 4 x_n + x_{n−1})/(2h)`. So
-    /// contacts, guides, bindings, damping and the reactions at held ends work unchanged. The
-    /// first step of a run, the first step after a change of step (a step retaken in halves,
-    /// and the first full step after it) and a step after the rod's state was changed from
-    /// outside have no history and are implicit Euler steps. Direct solver only.
+    /// contacts, guides, bindings, damping and the reactions at held ends work unchanged; held
+    /// ends are placed so that the step moves them by their prescribed motion over `h`. The
+    /// medium's drag, applied to the velocities after the solve, stays first order. The first
+    /// step of a run, the first step after a change of step (a step retaken in halves, and the
+    /// first full step after it), the steps of a batch retaken after a divergence and a step
+    /// after the rod's state was changed from outside have no history and are implicit Euler
+    /// steps. Direct solver only.
     Bdf2,
 }
 
@@ -442,7 +445,7 @@ fn exp_small(v: &Vec3<f64>) -> Quat<f64> {
 /// For a unit quaternion `s` with `s_w ≥ 0`: `angle / |s_v|` with `angle = 2 atan2(|s_v|, s_w)`,
 /// so that `s_v · angle / |s_v|` is its rotation vector; a series below 1e-2 rad.
 #[inline(always)]
-fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
+pub(crate) fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
     let sn2 = s.imag().norm_squared();
     if sn2 < 1e-4 && (s.w * s.w + sn2 - 1.0).abs() < 1e-12 {
         // For a unit quaternion angle = 2 asin|s_v|, and 2 asin(x)/x = 2 (1 + x²/6 + 3x⁴/40
@@ -456,6 +459,14 @@ fn angle_over_sin_half(s: &Quat<f64>) -> f64 {
     }
     let sn = sn2.sqrt();
     2.0 * sn.atan2(s.w) / sn
+}
+
+/// The rotation from unit quaternion `from` to `to` in `from`'s body axes, `s = from̄ ⊗ to`,
+/// with `s_w ≥ 0` (the shorter way round); its rotation vector is
+/// `s_v · angle_over_sin_half(s)`.
+pub(crate) fn relative_rotation(from: &Quat<f64>, to: &Quat<f64>) -> Quat<f64> {
+    let s = from.conjugate() * to;
+    if s.w < 0.0 { -s } else { s }
 }
 
 /// `1 / s_w` for a unit quaternion by the series of `(1 − |s_v|²)^(−1/2)` when `|s_v|² < 1e-4`
@@ -844,34 +855,33 @@ fn step_fixed<T: Real>(
     let drag_rate = rod.params.drag.to_f64();
     let limit = settings.divergence_strain.to_f64();
     let bdf2 = stiff.integrator == Integrator::Bdf2 && stiff.scheme == StiffScheme::Direct;
-    // The step the implicit solve takes (`h`, or `2h/3` for a BDF2 step with history), for
-    // which the constants were last built.
-    let mut solved_with = None;
     let mut stats = StepStats::none();
     let mut result = Ok(());
     // What the batch's steps report, added to `report` only if the batch is kept.
     let mut kept = StiffReport::default();
     for step in 0..steps {
         let t = time + step as f64 * h;
+        // The step the implicit solve takes: `h`, or `2h/3` for a BDF2 step with history.
         let hs = if !bdf2 {
             h
         } else if w.history == Some(h) {
             w.extrapolate_bdf2();
+            place_held_ends(w, rod, t, h - 2.0 * h / 3.0);
             2.0 * h / 3.0
         } else {
             w.keep_history();
             w.history = Some(h);
             h
         };
-        if solved_with != Some(hs) {
-            // A no-op when the constants already are for this step; a changed step also
-            // changes the matrix a lagged factorisation was kept for.
-            if solved_with.is_some() {
+        if w.solved_with != Some(hs) {
+            // A changed step changes the matrix a lagged factorisation was kept for.
+            if w.solved_with.is_some() {
                 *factor_valid = false;
             }
-            k.rebuild(rod, hs, settings.extensible, stiff.inertia_floor);
-            solved_with = Some(hs);
+            w.solved_with = Some(hs);
         }
+        // A no-op when the constants already are for this step and rod.
+        k.rebuild(rod, hs, settings.extensible, stiff.inertia_floor);
         let drag = 1.0 / (1.0 + hs * drag_rate);
         let ctx = StepContext {
             rod,
@@ -954,7 +964,7 @@ fn step_fixed<T: Real>(
         // energy without changing static equilibria.
         w.velocities(hs, drag);
         if rod.reaction.is_some() {
-            record_reactions(rod, w, k, hs, &gravity, &coupled.loads);
+            record_reactions(rod, w, k, hs, h, &gravity, &coupled.loads);
         }
         if !coupled.lines.is_empty() {
             binding::line_forces(w, k, hs, coupled);
@@ -1011,12 +1021,14 @@ fn step_fixed<T: Real>(
 /// `Jᵀ λ / h²` the constraint forces of the implicit step (XPBD's multipliers are impulses
 /// times the step), and for a clamped end the frame's, `τ = I (ω − ω_start)/h − (J_θᵀ λ)/h²`
 /// in body axes. Uses this step's multipliers (`lambda_prev` once the step is accepted) and the
-/// Jacobians of the last constraint evaluation.
+/// Jacobians of the last constraint evaluation. `h` is the implicit step, `advance` the time the
+/// step advances the clock by (they differ for BDF2), over which the reaction is filtered.
 fn record_reactions<T: Real>(
     rod: &mut CpuRod<T>,
     w: &Work,
     k: &Consts,
     h: f64,
+    advance: f64,
     gravity: &Vec3<f64>,
     coupling_loads: &[(usize, Vec3<f64>)],
 ) {
@@ -1090,7 +1102,29 @@ fn record_reactions<T: Real>(
             );
         }
     }
-    rx.finish([Vec3::zeros(); 2], [Vec3::zeros(); 2], ht);
+    rx.finish([Vec3::zeros(); 2], [Vec3::zeros(); 2], T::lit(advance));
+}
+
+/// After BDF2's extrapolation (`Work::extrapolate_bdf2`, which leaves the state before it in
+/// `x_prev`, `q_prev`): puts each held point at `x_n + lead V(t)` and each held frame at
+/// `exp(lead Ω(t)) q_n`, `lead = h − 2h/3`, so that the implicit step of `2h/3`, which moves
+/// them by their prescribed velocities (`solve_step`), ends where a step of `h` does. An
+/// extrapolated held end would keep moving by a third of its last step after its motion stops.
+fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, lead: f64) {
+    let n = w.n;
+    for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
+        if end.holds_point() {
+            let v = v64(&end.velocities_at(t).0);
+            w.x.set(i, &(w.x_prev.get(i) + v * lead));
+        }
+    }
+    for (j, end) in [(0, &rod.ends[0]), (n - 1, &rod.ends[1])] {
+        if end.holds_frame() {
+            let omega = v64(&end.velocities_at(t).1);
+            let r = exp_rotation(&(omega * lead)) * w.q_prev.get(j);
+            w.q.set(j, &(r / r.norm()));
+        }
+    }
 }
 
 /// The element with the largest entry of the last right-hand side (bend–twist rows as angles,

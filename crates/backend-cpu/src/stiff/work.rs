@@ -6,7 +6,7 @@ use super::Consts;
 use super::contact::Pinned;
 use super::direct::Assembled;
 use super::lanes::{F, Q, Q4s, V, V3s, below, load, mask_ge, padded, store};
-use super::{angle_over_sin_half, exp_small, inv_w};
+use super::{angle_over_sin_half, exp_small, inv_w, relative_rotation};
 use cosserat_model::Vec3;
 
 /// The working state of a step, in `f64`, as padded columns.
@@ -63,6 +63,8 @@ pub(crate) struct Work {
     pub(crate) q_prev: Q4s,
     pub(crate) omega_prev: V3s,
     pub(crate) history: Option<f64>,
+    /// The step the constants and the factorisation were last built for (`step_fixed`).
+    pub(crate) solved_with: Option<f64>,
     /// Points held on a mesh's surface in this step (`contact.rs`): their displacements are
     /// projected onto the tangent plane (sliding) or removed (sticking) in every update, and
     /// the Newton matrix is assembled with the same projected inverse masses
@@ -130,6 +132,7 @@ impl Work {
         self.q_prev = Q4s::identities(n);
         self.omega_prev = frames();
         self.history = None;
+        self.solved_with = None;
     }
 
     /// Keeps the current state as BDF2's history of the next step.
@@ -165,10 +168,7 @@ impl Work {
             let mut redone = [None; 4];
             for_lanes(!ok.to_bitmask(), j, n, |e| {
                 let q = self.q.get(e);
-                let mut s = self.q_prev.get(e).conjugate() * q;
-                if s.w < 0.0 {
-                    s = -s;
-                }
+                let s = relative_rotation(&self.q_prev.get(e), &q);
                 let phi = s.imag() * angle_over_sin_half(&s);
                 let r = q * exp_small(&(phi * (1.0 / 3.0)));
                 redone[e - j] = Some(r / r.norm());
@@ -719,10 +719,7 @@ impl Work {
             self.omega.store(j, s.v.scale(series * inv_h));
             // Other lanes: the closed form, as `angle_over_sin_half`.
             for_lanes(!ok.to_bitmask(), j, n, |e| {
-                let mut s = self.q_old.get(e).conjugate() * self.q.get(e);
-                if s.w < 0.0 {
-                    s = -s;
-                }
+                let s = relative_rotation(&self.q_old.get(e), &self.q.get(e));
                 self.omega
                     .set(e, &(s.imag() * (angle_over_sin_half(&s) / h)));
             });
@@ -788,12 +785,11 @@ fn perpendiculars(a: &Vec3<f64>) -> [Vec3<f64>; 2] {
 /// A 3×3 matrix per lane, row-major.
 type M = [[F; 3]; 3];
 
-/// `[v]×`.
-#[inline(always)]
 /// `angle / |s_v|` of unit quaternions `s` with `s_w ≥ 0` by the series of `2 asin(x)/x` (as
 /// `angle_over_sin_half`; `s_v` times it is the rotation vector), and the mask of the lanes
 /// where that series applies (`|s_v|² < 1e-4` and `s` of unit norm to 1e-12); other lanes must
 /// be redone with the closed form.
+#[inline(always)]
 fn small_log(s: Q) -> (F, F) {
     let sn2 = s.v.norm2();
     let series = F::splat(2.0)
@@ -809,6 +805,7 @@ fn small_log(s: Q) -> (F, F) {
 
 /// `exp(v / 2)`, the quaternion of a rotation by `v`, by the series of `cos` and `sin` (as
 /// `exp_small`); for `|v|² < 1e-4` (error below 1e-20), other lanes must be redone.
+#[inline(always)]
 fn small_exp(v: V) -> Q {
     let h2 = F::splat(0.25) * v.norm2();
     let cos =
@@ -823,6 +820,8 @@ fn small_exp(v: V) -> Q {
     }
 }
 
+/// `[v]×`.
+#[inline(always)]
 fn cross(v: V) -> M {
     let z = F::ZERO;
     [[z, -v.z, v.y], [v.z, z, -v.x], [-v.y, v.x, z]]
