@@ -342,6 +342,9 @@ fn column(v: &[f64], len: usize, pad: f64) -> Vec<f64> {
 #[derive(Clone, Debug, Default)]
 pub struct StiffScratch {
     k: Consts,
+    /// The constants for BDF2's implicit step of `2h/3` (`Integrator::Bdf2`), kept beside those
+    /// for `h` so that neither is rebuilt as a run alternates between them.
+    k_bdf2: Consts,
     w: Work,
     /// The constants of the extensible model, for steps retaken with the axial compliance.
     axial: Option<Consts>,
@@ -395,7 +398,8 @@ impl StiffScratch {
     /// Sizes the scratch for `rod` and builds its constants, so that the first step costs what
     /// the later ones do (a haptic loop's first tick; sizing and building on the first step
     /// took 1–2 ms at 1000 elements against 0.13–0.2 ms for a step). It takes one step of a
-    /// copy of the rod, which touches every buffer the step uses, and then forgets that step:
+    /// copy of the rod (two with BDF2, whose second step is the first of `2h/3` and has
+    /// constants of its own), which touches every buffer the step uses, and then forgets them:
     /// the steps that follow are bit for bit those of a fresh scratch. A step of the copy that
     /// diverges is ignored here (the real step reports it).
     pub fn prepare<T: Real>(
@@ -405,7 +409,13 @@ impl StiffScratch {
         stiff: &StiffSettings,
     ) {
         let mut copy = rod.clone();
-        let _ = step_rod_stiff(&mut copy, settings, stiff, self, 0.0, 0, 0, 1);
+        // BDF2's second step is its first of `2h/3`: built now too.
+        let steps = if stiff.integrator == Integrator::Bdf2 {
+            2
+        } else {
+            1
+        };
+        let _ = step_rod_stiff(&mut copy, settings, stiff, self, 0.0, 0, 0, steps);
         // What a step hands to the next: the shadow state, the multipliers that start the
         // geometric bound, a factorisation a lagged policy would reuse, and the counters.
         self.w.shadow = false;
@@ -819,7 +829,8 @@ fn step_fixed<T: Real>(
         scratch.contacts = Some(StiffContacts::new(mesh.settings.clone(), radius));
     }
     let StiffScratch {
-        k,
+        k: k_full,
+        k_bdf2,
         w,
         axial,
         assembled,
@@ -880,6 +891,7 @@ fn step_fixed<T: Real>(
             }
             w.solved_with = Some(hs);
         }
+        let k: &mut Consts = if hs == h { k_full } else { k_bdf2 };
         // A no-op when the constants already are for this step and rod.
         k.rebuild(rod, hs, settings.extensible, stiff.inertia_floor);
         let drag = 1.0 / (1.0 + hs * drag_rate);
