@@ -992,14 +992,22 @@ impl Simulation {
 
     /// The filtered reaction at end `end` (0: first point, 1: last point) of a rod after the
     /// last step: the force and torque the holder applies to the rod (a haptic device renders
-    /// its negative); `None` for a free end. See `backend_cpu::reaction`.
+    /// its negative); `None` for a free end, and on the GPU backend, whose kernels do not
+    /// compute reactions (its CPU-side mirror of the rods would report zeros). See
+    /// `backend_cpu::reaction`.
     pub fn end_reaction(&self, h: RodHandle, end: usize) -> Option<EndReaction> {
+        if self.backend == Backend::Gpu {
+            return None;
+        }
         with_rods!(&self.world, w => w.rods[h.0].end_reaction(end))
     }
 
     /// Largest filtered reaction force at any held end of any rod so far [N]; `None` when no
-    /// end is held.
+    /// end is held, and on the GPU backend ([`end_reaction`](Self::end_reaction)).
     pub fn max_reaction_force(&self) -> Option<f64> {
+        if self.backend == Backend::Gpu {
+            return None;
+        }
         with_rods!(&self.world, w => w.rods.iter().filter_map(|r| r.max_reaction_force()).reduce(f64::max))
     }
 

@@ -267,6 +267,10 @@ fn the_gpu_backend_agrees_with_the_cpu() {
         serde_json::from_slice(&cpu.stdout).unwrap(),
     );
     assert_eq!(g["backend"], "gpu");
+    // The pinned end's force: computed by the CPU backend, not by the GPU kernels, which
+    // report none rather than a zero.
+    assert!(c["max_reaction_force"].as_f64().unwrap() > 0.0, "{c}");
+    assert!(g.get("max_reaction_force").is_none(), "{g}");
     let tip = |v: &serde_json::Value| -> Vec<f64> {
         v["tip"]
             .as_array()
