@@ -2,7 +2,7 @@
 //! against a much finer run of the same scene.
 
 use cosserat::Simulation;
-use cosserat::convergence::{Refinement, StudyError, study};
+use cosserat::convergence::{Convergence, Refinement, StudyError, study};
 use cosserat::scene::load_scene;
 use std::path::PathBuf;
 
@@ -45,6 +45,21 @@ fn largest_distance(coarse: &[[f64; 3]], fine: &[[f64; 3]], stride: usize) -> f6
         .fold(0.0, f64::max)
 }
 
+/// A study's estimated error of run `k` is within 15 % of `measured(k)`, its largest distance
+/// from a much finer run.
+fn assert_estimates(what: &str, q: &Convergence, mut measured: impl FnMut(usize) -> f64) {
+    let estimates = q.estimated_errors.as_ref().expect("asymptotic");
+    for (k, estimate) in estimates.iter().enumerate() {
+        let actual = measured(k);
+        let ratio = estimate / actual;
+        assert!(
+            (0.85..1.15).contains(&ratio),
+            "{what}, run {k}: estimated {estimate:e}, measured {actual:e} (order {:?})",
+            q.grid.observed_order
+        );
+    }
+}
+
 /// Halving the explicit scheme's step: the estimated error of every run is within 15 % of its
 /// largest distance, over five checkpoints, from a run at a 64th of the first step (whose own
 /// error is about 1/64 of the first run's).
@@ -70,20 +85,13 @@ fn time_refinement_estimates_the_error_of_every_run() {
     let rod = &s.rods[0].positions;
     let p = rod.grid.observed_order.unwrap();
     assert!((0.8..1.2).contains(&p), "observed order {p}");
-    let estimates = rod.estimated_errors.as_ref().expect("asymptotic");
-    for (k, estimate) in estimates.iter().enumerate() {
+    assert_estimates("positions", rod, |k| {
         let run = run_through(at(1 << k).unwrap(), steps << k, checkpoints);
-        let actual = run
-            .iter()
+        run.iter()
             .zip(&reference)
             .map(|(a, b)| largest_distance(a, b, 1))
-            .fold(0.0, f64::max);
-        let ratio = estimate / actual;
-        assert!(
-            (0.85..1.15).contains(&ratio),
-            "run {k}: estimated {estimate:e} m, measured {actual:e} m"
-        );
-    }
+            .fold(0.0, f64::max)
+    });
     assert!(s.levels.iter().all(|l| (l.time - 0.05).abs() < 1e-12));
 }
 
@@ -106,17 +114,10 @@ fn space_refinement_estimates_the_error_of_every_run() {
     let reference = run_to_end(at(coarse * 16).unwrap(), steps);
     let rod = &s.rods[0].positions;
     assert_eq!(s.rods[0].points, coarse + 1);
-    let estimates = rod.estimated_errors.as_ref().expect("asymptotic");
-    for (k, estimate) in estimates.iter().enumerate() {
+    assert_estimates("positions", rod, |k| {
         let run = run_to_end(at(coarse << k).unwrap(), steps);
-        let actual = largest_distance(&run, &reference, 16 >> k);
-        let ratio = estimate / actual;
-        assert!(
-            (0.85..1.15).contains(&ratio),
-            "run {k}: estimated {estimate:e} m, measured {actual:e} m (order {:?})",
-            rod.grid.observed_order
-        );
-    }
+        largest_distance(&run, &reference, 16 >> k)
+    });
 }
 
 /// A refined run the scheme cannot take is reported with its index: the explicit scheme's
@@ -208,22 +209,14 @@ fn the_force_at_a_held_end_is_estimated_too() {
     assert_eq!(forces.len(), 1, "only the pinned first end is held");
     let (end, force) = &forces[0];
     assert_eq!(*end, 0);
-    let estimates = force.estimated_errors.as_ref().expect("asymptotic");
     let reference = force_through(at(256).unwrap(), steps * 256);
-    for (k, estimate) in estimates.iter().enumerate() {
+    assert_estimates("force", force, |k| {
         let run = force_through(at(1 << k).unwrap(), steps << k);
-        let actual = run
-            .iter()
+        run.iter()
             .zip(&reference)
             .map(|(a, b)| largest_distance(&[*a], &[*b], 1))
-            .fold(0.0, f64::max);
-        let ratio = estimate / actual;
-        assert!(
-            (0.85..1.15).contains(&ratio),
-            "run {k}: estimated {estimate:e} N, measured {actual:e} N (order {:?})",
-            force.grid.observed_order
-        );
-    }
+            .fold(0.0, f64::max)
+    });
 }
 
 #[test]
@@ -294,8 +287,8 @@ fn bdf2_is_second_order_in_positions_and_in_the_pin_force() {
             })
             .collect::<Vec<_>>()
     };
-    let estimates = rod.positions.estimated_errors.as_ref().unwrap();
-    let force_estimates = rod.end_forces[0].1.estimated_errors.as_ref().unwrap();
+    // The largest distances of each run from the reference, positions and force.
+    let (mut measured, mut measured_force) = (Vec::new(), Vec::new());
     for k in 0..3 {
         let mut sim = build(1 << k).unwrap();
         let (mut actual, mut actual_force) = (0.0_f64, 0.0_f64);
@@ -306,15 +299,9 @@ fn bdf2_is_second_order_in_positions_and_in_the_pin_force() {
             let f = sim.end_reaction(cosserat::RodHandle(0), 0).unwrap().force;
             actual_force = actual_force.max(largest_distance(&[f], &[reference_force[c]], 1));
         }
-        for (what, estimate, measured) in [
-            ("positions", estimates[k], actual),
-            ("force", force_estimates[k], actual_force),
-        ] {
-            let ratio = estimate / measured;
-            assert!(
-                (0.85..1.15).contains(&ratio),
-                "run {k} {what}: estimated {estimate:e}, measured {measured:e}"
-            );
-        }
+        measured.push(actual);
+        measured_force.push(actual_force);
     }
+    assert_estimates("BDF2 positions", &rod.positions, |k| measured[k]);
+    assert_estimates("BDF2 force", &rod.end_forces[0].1, |k| measured_force[k]);
 }
