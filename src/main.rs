@@ -345,19 +345,9 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
     };
     let base = load(args, &[])?;
     let dt = base.builder.time_step();
-    // Every rod's elements as the first run has them, for the space refinement's overrides.
-    let elements: Vec<usize> = match refinement {
-        Refinement::Time => Vec::new(),
-        Refinement::Space => {
-            let sim = base
-                .builder
-                .build()
-                .map_err(|e| format!("{}: {e}", args.scene.display()))?;
-            sim.rods()
-                .map(|h| sim.positions(h).len().saturating_sub(1))
-                .collect()
-        }
-    };
+    // Every rod's elements as the first run (built first) has them, for the space
+    // refinement's overrides of the later runs.
+    let mut elements: Vec<usize> = Vec::new();
     let build = |factor: u32| {
         let extra: Vec<(String, String)> = match refinement {
             Refinement::Time => vec![("solver.dt".into(), format!("{:e}", dt / f64::from(factor)))],
@@ -373,10 +363,17 @@ fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
                 .collect(),
         };
         let scene = load(args, &extra)?;
-        scene
+        let sim = scene
             .builder
             .build()
-            .map_err(|e| format!("{}: {e}", args.scene.display()))
+            .map_err(|e| format!("{}: {e}", args.scene.display()))?;
+        if factor == 1 {
+            elements = sim
+                .rods()
+                .map(|h| sim.positions(h).len().saturating_sub(1))
+                .collect();
+        }
+        Ok(sim)
     };
     if !args.json {
         eprintln!(
