@@ -7,8 +7,8 @@
 //!
 //! Run with `cargo run --release --example guidewire_in_catheter`.
 
-use cosserat::backend_cpu::StiffSettings;
-use cosserat::constraints::BindingVariant;
+use cosserat::cosserat_backend_cpu::StiffSettings;
+use cosserat::cosserat_constraints::BindingVariant;
 use cosserat::cosserat_model::presets::preset;
 use cosserat::{EndCondition, PrescribedMotion, RodBuilder, SimulationBuilder};
 

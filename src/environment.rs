@@ -4,10 +4,10 @@
 //! A simulation has at most one environment, shared by all its rods. A scene without one builds
 //! no tree and runs no collision code.
 
-use backend_cpu::MeshContactSettings;
-use collide::vessel::Centreline;
-use collide::{MeshCollider, MeshError, TriMesh, Vessel, VesselParams};
-use constraints::Friction;
+use cosserat_backend_cpu::MeshContactSettings;
+use cosserat_collide::vessel::Centreline;
+use cosserat_collide::{MeshCollider, MeshError, TriMesh, Vessel, VesselParams};
+use cosserat_constraints::Friction;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -48,10 +48,10 @@ impl Environment {
         }
     }
 
-    /// The procedural vessel tree of `collide::vessel` with about `triangles` triangles (the
+    /// The procedural vessel tree of `cosserat_collide::vessel` with about `triangles` triangles (the
     /// default, 26 000, matches the paper's phantom).
     pub fn vessel(triangles: usize) -> Result<Self, MeshError> {
-        let v: Vessel = collide::vessel::generate(&VesselParams {
+        let v: Vessel = cosserat_collide::vessel::generate(&VesselParams {
             target_triangles: triangles,
             ..VesselParams::default()
         })?;
@@ -73,7 +73,7 @@ impl Environment {
         scale: f64,
         entry: Option<([f64; 3], [f64; 3])>,
     ) -> Result<Self, MeshError> {
-        let (mut mesh, _report) = collide::load_mesh(path, scale)?;
+        let (mut mesh, _report) = cosserat_collide::load_mesh(path, scale)?;
         mesh.orient_into_lumen();
         let vessel = entry.map(|(point, dir)| VesselGeometry {
             entry_point: point,

@@ -3,7 +3,7 @@
 //! This facade ties the workspace together: [`Simulation`] owns rods built with
 //! [`RodBuilder`]s through typed [`RodHandle`]s, [`scene`] loads TOML scene files, and
 //! [`output`] writes trajectories for NumPy and ParaView. The physics lives in
-//! [`cosserat_model`] (energies), [`constraints`] (impulse solver) and [`backend_cpu`]
+//! [`cosserat_model`] (energies), [`cosserat_constraints`] (impulse solver) and [`cosserat_backend_cpu`]
 //! (stepping); they are re-exported for users who want the explicit pipeline.
 //!
 //! ```
@@ -25,11 +25,14 @@ pub mod output;
 pub mod scene;
 pub mod sim;
 
-pub use backend_cpu::{self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion};
-pub use constraints;
+pub use cosserat_backend_cpu::{
+    self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion,
+};
+pub use cosserat_constraints;
 pub use cosserat_model::{self, Material};
 pub use environment::Environment;
 pub use sim::{
-    Backend, BuildError, ContactReport, RodBuilder, RodHandle, Simulation, SimulationBuilder,
-    StepError, StiffSummary,
+    Backend, BuildError, Capabilities, Capability, ContactReport, ContactSample, ControlError,
+    RodBuilder, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot, StateField,
+    StepError, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };

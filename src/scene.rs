@@ -10,7 +10,7 @@
 
 use crate::environment::Environment;
 use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
-use backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
+use cosserat_backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
 use cosserat_model::Material;
 use cosserat_model::rod::RestShape;
 use serde::Deserialize;
@@ -230,21 +230,21 @@ pub struct StiffSection {
     /// Floor on frame inertia as a multiple of `m l² / 12` (default 0: the model's inertia).
     pub inertia_floor: Option<f64>,
     /// Retake a step of an inextensible rod that does not converge with the material's axial
-    /// compliance (default true; `backend_cpu::StiffSettings::axial_fallback`).
+    /// compliance (default true; `cosserat_backend_cpu::StiffSettings::axial_fallback`).
     pub axial_fallback: Option<bool>,
     /// Answer the mesh query of a touching point that has barely moved between two iterations
     /// of a step from its last query (default true; `false` queries every point every time;
-    /// `backend_cpu::StiffSettings::reuse_contact_queries`).
+    /// `cosserat_backend_cpu::StiffSettings::reuse_contact_queries`).
     pub reuse_contact_queries: Option<bool>,
     /// Residual above which a step still unconverged after `iterations` is retaken in halves
-    /// (default: never; `backend_cpu::StiffSettings::halve_above`).
+    /// (default: never; `cosserat_backend_cpu::StiffSettings::halve_above`).
     pub halve_above: Option<f64>,
     /// When the banded matrix is refactorised: `"every-step"` (default: once per step, reused
     /// by the step's later iterations), `"every-iteration"` (Newton) or `"lagged"` (kept
-    /// across steps); `backend_cpu::Refactor`.
+    /// across steps); `cosserat_backend_cpu::Refactor`.
     pub refactor: Option<String>,
     /// Time integration: `"implicit-euler"` (default, first order) or `"bdf2"` (second
-    /// order); `backend_cpu::Integrator`.
+    /// order); `cosserat_backend_cpu::Integrator`.
     pub integrator: Option<String>,
 }
 
@@ -707,7 +707,7 @@ impl Checker<'_> {
                         "expected kinetic <= static",
                     ));
                 }
-                spec.friction = constraints::Friction {
+                spec.friction = cosserat_constraints::Friction {
                     static_coefficient: mu_s,
                     kinetic_coefficient: mu_k,
                 };
@@ -733,7 +733,10 @@ impl Checker<'_> {
         Ok(b)
     }
 
-    fn stiff(&self, s: &SolverSection) -> Result<Option<backend_cpu::StiffSettings>, SceneError> {
+    fn stiff(
+        &self,
+        s: &SolverSection,
+    ) -> Result<Option<cosserat_backend_cpu::StiffSettings>, SceneError> {
         match s.scheme.as_str() {
             "explicit" => {
                 if s.stiff.is_some() {
@@ -746,7 +749,7 @@ impl Checker<'_> {
                 Ok(None)
             }
             "stiff" => {
-                let mut st = backend_cpu::StiffSettings::default();
+                let mut st = cosserat_backend_cpu::StiffSettings::default();
                 if let Some(x) = &s.stiff {
                     if let Some(n) = x.iterations {
                         if !(1..=100).contains(&n) {
@@ -775,9 +778,9 @@ impl Checker<'_> {
                     }
                     if let Some(r) = &x.refactor {
                         st.refactor = match r.as_str() {
-                            "every-step" => backend_cpu::Refactor::EveryStep,
-                            "every-iteration" => backend_cpu::Refactor::EveryIteration,
-                            "lagged" => backend_cpu::Refactor::Lagged,
+                            "every-step" => cosserat_backend_cpu::Refactor::EveryStep,
+                            "every-iteration" => cosserat_backend_cpu::Refactor::EveryIteration,
+                            "lagged" => cosserat_backend_cpu::Refactor::Lagged,
                             other => {
                                 return Err(self.invalid(
                                     "solver.stiff.refactor",
@@ -789,8 +792,8 @@ impl Checker<'_> {
                     }
                     if let Some(i) = &x.integrator {
                         st.integrator = match i.as_str() {
-                            "implicit-euler" => backend_cpu::Integrator::ImplicitEuler,
-                            "bdf2" => backend_cpu::Integrator::Bdf2,
+                            "implicit-euler" => cosserat_backend_cpu::Integrator::ImplicitEuler,
+                            "bdf2" => cosserat_backend_cpu::Integrator::Bdf2,
                             other => {
                                 return Err(self.invalid(
                                     "solver.stiff.integrator",
@@ -810,7 +813,7 @@ impl Checker<'_> {
     }
 
     fn environment(&self, e: &EnvironmentSection) -> Result<Environment, SceneError> {
-        let mesh_err = |field: &str, err: collide::MeshError| {
+        let mesh_err = |field: &str, err: cosserat_collide::MeshError| {
             self.invalid(field, err.to_string(), "a readable, valid triangle mesh")
         };
         let mut env = match &e.mesh {
@@ -878,7 +881,7 @@ impl Checker<'_> {
                     "expected kinetic <= static",
                 ));
             }
-            env.friction = constraints::Friction {
+            env.friction = cosserat_constraints::Friction {
                 static_coefficient: mu_s,
                 kinetic_coefficient: mu_k,
             };

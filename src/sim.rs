@@ -6,16 +6,18 @@
 //! scene file or a command-line flag can choose them.
 
 use crate::environment::Environment;
-pub use backend_cpu::{BindingSpec, CouplingStats, EndReaction, RodContactSpec};
-use backend_cpu::{
-    CpuRod, Divergence, EndCondition, Guide, Ordering, Par, PointLoad, PrescribedMotion,
-    SolverSettings, StepStats,
-};
-pub use constraints::BindingVariant;
-use cosserat_model::energy::{Energies, ForceModel, energies};
-use cosserat_model::quat::directors;
+pub use cosserat_backend_cpu::{BindingSpec, RodContactSpec};
+use cosserat_backend_cpu::{CpuRod, CpuStepper, Guide};
+pub use cosserat_constraints::BindingVariant;
+use cosserat_model::energy::Energies;
 use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
-use cosserat_model::{Material, Real, RodBuildError, Vec3};
+use cosserat_model::{Material, Quat, Real, RodBuildError, Vec3};
+use cosserat_problem::Snapshot;
+pub use cosserat_problem::{
+    Capabilities, Capability, ContactSample, ControlError, CouplingStats, EndCondition, EndKind,
+    EndReaction, Integrator, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
+    StateField, StepError, Stepper, StepperInfo, StiffScheme, StiffSettings, StiffSummary,
+};
 
 /// Which backend steps the rods.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -192,7 +194,7 @@ impl RodBuilder {
 
     /// Feeds the rod through a straight, frictionless introducer of `length` [m] that starts at
     /// the first point and runs along the first element: the points inside it move only along
-    /// its axis (see [`backend_cpu::guide`]). Use it with a pushed start to insert a wire
+    /// its axis (see [`cosserat_backend_cpu::guide`]). Use it with a pushed start to insert a wire
     /// through an entry point without the outside part buckling.
     pub fn guide(mut self, length: f64) -> Self {
         self.guide = Some(length);
@@ -210,7 +212,7 @@ impl RodBuilder {
         environment: Option<&Environment>,
     ) -> Result<CpuRod<T>, RodBuildError> {
         let (state, params) = build_rod::<T>(&self.points, &self.spec)?;
-        let ends = self.ends.map(cast_end);
+        let ends = self.ends.map(|e| e.cast());
         let loads = self
             .loads
             .iter()
@@ -235,18 +237,6 @@ impl RodBuilder {
 
 fn v3<T: Real>(a: [f64; 3]) -> Vec3<T> {
     Vec3::new(T::lit(a[0]), T::lit(a[1]), T::lit(a[2]))
-}
-
-fn cast_end<T: Real>(e: EndCondition<f64>) -> EndCondition<T> {
-    EndCondition {
-        kind: e.kind,
-        motion: e.motion.map(|m| PrescribedMotion {
-            velocity: v3(m.velocity.into()),
-            angular_velocity: v3(m.angular_velocity.into()),
-            start_time: m.start_time,
-            end_time: m.end_time,
-        }),
-    }
 }
 
 /// A simulation that could not be built.
@@ -290,7 +280,7 @@ pub struct SimulationBuilder {
     rod_contact: Option<RodContactSpec>,
     /// The stiff solver (implicit bending, twisting and coupling), instead of the paper's
     /// explicit scheme.
-    stiff: Option<backend_cpu::StiffSettings>,
+    stiff: Option<StiffSettings>,
     /// Speed at which a run is declared diverged [m/s].
     divergence_speed: f64,
     /// Whether `build` refuses an explicit time step beyond the estimated stable one.
@@ -312,14 +302,7 @@ impl SimulationBuilder {
     pub fn new() -> Self {
         Self {
             rods: Vec::new(),
-            settings: SolverSettings {
-                dt: 1e-4,
-                iterations: 10,
-                ordering: Ordering::RedBlack,
-                extensible: false,
-                gravity: Vec3::new(0.0, 0.0, -9.81),
-                divergence_strain: 0.5,
-            },
+            settings: SolverSettings::default(),
             double_precision: false,
             backend: Backend::Cpu,
             environment: None,
@@ -334,7 +317,7 @@ impl SimulationBuilder {
     }
 
     /// Solves the inextensibility constraints exactly with the direct solver
-    /// (`constraints::direct`, Newton iterations on the tridiagonal system) instead of the
+    /// (`cosserat_constraints::direct`, Newton iterations on the tridiagonal system) instead of the
     /// paper's iterative impulses; segment lengths then hold to ~1e-12 (f64) after every step.
     pub fn direct_constraints(mut self, yes: bool) -> Self {
         self.direct_constraints = yes;
@@ -352,14 +335,14 @@ impl SimulationBuilder {
     /// Uses the stiff solver (`docs/stiff-solver.md`) with these settings, or the paper's
     /// explicit scheme with `None` (the default). The stiff solver's stable time step does not
     /// depend on the material, so real guidewires run at haptic rates (1e-3 s).
-    pub fn stiff_solver(mut self, settings: Option<backend_cpu::StiffSettings>) -> Self {
+    pub fn stiff_solver(mut self, settings: Option<StiffSettings>) -> Self {
         self.stiff = settings;
         self
     }
 
     /// Binds rod `inner` inside rod `outer` (a guidewire in a catheter) with the given variant:
     /// the inner rod's points inside the outer rod are held on its centreline while they slide
-    /// along it (see `constraints::binding`).
+    /// along it (see `cosserat_constraints::binding`).
     pub fn bind(mut self, inner: RodHandle, outer: RodHandle, variant: BindingVariant) -> Self {
         self.bindings.push(BindingSpec {
             inner: inner.0,
@@ -487,11 +470,6 @@ impl SimulationBuilder {
                         "rod {i}: guide length {length} m is invalid: expected a number > 0 and at most the rod's length ({rod_length} m)"
                     )));
                 }
-                if self.backend == Backend::Gpu {
-                    return Err(BuildError::Setting(format!(
-                        "rod {i}: a guide (introducer) runs on the CPU backends only"
-                    )));
-                }
             }
             for &(point, _) in &r.loads {
                 if point > r.element_count() {
@@ -533,43 +511,30 @@ impl SimulationBuilder {
                 "reaction cut-off {hz} Hz is invalid: expected a number > 0"
             )));
         }
-        let coupled = self.rod_contact.is_some() || !self.bindings.is_empty();
-        if coupled && self.backend == Backend::Gpu {
-            return Err(BuildError::Setting(
-                "bindings and rod contacts run on the CPU backends only".into(),
-            ));
+        if let Some(st) = self.stiff {
+            if st.scheme == StiffScheme::GaussSeidel && st.integrator == Integrator::Bdf2 {
+                return Err(BuildError::Setting(
+                    "BDF2 runs with the stiff solver's direct variant only".into(),
+                ));
+            }
+            if st.scheme == StiffScheme::GaussSeidel
+                && (env.is_some() || self.rods.iter().any(|r| r.guide.is_some()))
+            {
+                return Err(BuildError::Setting(
+                    "the stiff solver's Gauss–Seidel variant handles neither mesh contact nor guides: use the direct solver".into(),
+                ));
+            }
         }
-        if self.backend == Backend::Gpu && self.direct_constraints {
-            return Err(BuildError::Setting(
-                "the GPU backend solves constraints iteratively only: use --backend cpu for solver.constraint_solver = \"direct\"".into(),
-            ));
-        }
-        if self.backend == Backend::Gpu && self.stiff.is_some() {
-            return Err(BuildError::Setting(
-                "the GPU backend runs the explicit scheme only: use --backend cpu for solver.scheme = \"stiff\"".into(),
-            ));
-        }
-        let world = if self.backend == Backend::Gpu {
-            gpu_world(
-                Rods::build(&self.rods, &cast_settings(s), env)?,
-                self.double_precision,
-                env.is_some(),
-            )?
-        } else if self.double_precision {
-            World::F64(
-                Rods::build(&self.rods, s, env)?
-                    .couple(&self)?
-                    .stiffen(&self)?,
-            )
-        } else {
-            World::F32(
-                Rods::build(&self.rods, &cast_settings(s), env)?
-                    .couple(&self)?
-                    .stiffen(&self)?,
-            )
+        let needs = self.needs();
+        let stepper = match self.backend {
+            Backend::Gpu => gpu_stepper(&self, needs)?,
+            Backend::Cpu | Backend::CpuRayon if self.double_precision => {
+                cpu_stepper::<f64>(&self, needs)?
+            }
+            Backend::Cpu | Backend::CpuRayon => cpu_stepper::<f32>(&self, needs)?,
         };
         Ok(Simulation {
-            world,
+            stepper,
             names: self
                 .rods
                 .iter()
@@ -578,316 +543,207 @@ impl SimulationBuilder {
                 .collect(),
             radii: self.rods.iter().map(|r| r.spec.material.radius).collect(),
             backend: self.backend,
-            dt: s.dt,
-            time: 0.0,
-            steps: 0,
             max_strain: 0.0,
             extensible: s.extensible,
             environment: self.environment,
             divergence_speed: self.divergence_speed,
             warnings,
-        })
-    }
-}
-
-fn cast_settings<T: Real>(s: &SolverSettings<f64>) -> SolverSettings<T> {
-    SolverSettings {
-        dt: T::lit(s.dt),
-        iterations: s.iterations,
-        ordering: s.ordering,
-        extensible: s.extensible,
-        gravity: v3(s.gravity.into()),
-        divergence_strain: T::lit(s.divergence_strain),
-    }
-}
-
-struct Rods<T: Real> {
-    rods: Vec<CpuRod<T>>,
-    settings: SolverSettings<T>,
-    stats: Vec<StepStats>,
-    /// Bindings and rod contacts; `None` steps the rods independently.
-    coupling: Option<backend_cpu::Coupling<T>>,
-    /// The stiff solver's settings and one scratch per rod, when it is used.
-    stiff: Option<(backend_cpu::StiffSettings, Vec<backend_cpu::StiffScratch>)>,
-    /// Bindings stepped with the stiff solver (which replaces `coupling` then).
-    stiff_bindings: Option<backend_cpu::StiffBindings<T>>,
-}
-
-impl<T: Real> Rods<T> {
-    fn build(
-        rods: &[RodBuilder],
-        settings: &SolverSettings<T>,
-        env: Option<&Environment>,
-    ) -> Result<Self, BuildError> {
-        let rods = rods
-            .iter()
-            .enumerate()
-            .map(|(i, r)| {
-                r.build::<T>(env)
-                    .map_err(|source| BuildError::Rod { rod: i, source })
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(Self {
-            rods,
-            settings: *settings,
-            stats: Vec::new(),
-            coupling: None,
-            stiff: None,
-            stiff_bindings: None,
+            scratch: Vec::new(),
         })
     }
 
-    /// Switches to the stiff solver, or to direct distance constraints, if the builder asks.
-    fn stiffen(mut self, b: &SimulationBuilder) -> Result<Self, BuildError> {
-        if b.direct_constraints {
-            if self.coupling.is_some() {
-                return Err(BuildError::Setting("the direct constraint solver does not handle bindings or rod contact yet: use solver.constraint_solver = \"iterative\"".into()));
-            }
-            self.rods = std::mem::take(&mut self.rods)
-                .into_iter()
-                .map(|r| r.with_direct_solver(constraints::direct::DirectSettings::default()))
-                .collect();
-        }
-        if let Some(st) = b.stiff {
-            if self.coupling.is_some() {
-                if b.rod_contact.is_some() {
-                    return Err(BuildError::Setting(
-                        "the stiff solver does not handle rod–rod contact yet: use solver.scheme = \"explicit\"".into(),
-                    ));
-                }
-                self.coupling = None;
-                self.stiff_bindings = Some(
-                    backend_cpu::StiffBindings::new(&self.rods, &b.bindings)
-                        .map_err(BuildError::Setting)?,
-                );
-            }
-            if st.scheme == backend_cpu::StiffScheme::GaussSeidel
-                && st.integrator == backend_cpu::Integrator::Bdf2
-            {
-                return Err(BuildError::Setting(
-                    "BDF2 runs with the stiff solver's direct variant only".into(),
-                ));
-            }
-            if st.scheme == backend_cpu::StiffScheme::GaussSeidel
-                && (b.environment.is_some() || b.rods.iter().any(|r| r.guide.is_some()))
-            {
-                return Err(BuildError::Setting(
-                    "the stiff solver's Gauss–Seidel variant handles neither mesh contact nor guides: use the direct solver".into(),
-                ));
-            }
-            // Sized and built now, so that the first step of a haptic loop costs what the
-            // later ones do.
-            let scratch = self
-                .rods
-                .iter()
-                .map(|rod| {
-                    let mut s = backend_cpu::StiffScratch::new();
-                    s.prepare(rod, &self.settings, &st);
-                    s
-                })
-                .collect();
-            self.stiff = Some((st, scratch));
-        }
-        Ok(self)
-    }
-
-    /// Applies the builder's bindings, rod contacts and reaction filter.
-    fn couple(mut self, b: &SimulationBuilder) -> Result<Self, BuildError> {
-        if let Some(hz) = b.reaction_cutoff_hz {
-            self.rods = std::mem::take(&mut self.rods)
-                .into_iter()
-                .map(|r| r.with_reaction_cutoff(hz))
-                .collect();
-        }
-        if b.rod_contact.is_some() || !b.bindings.is_empty() {
-            let c = backend_cpu::Coupling::new(&self.rods, &b.bindings, b.rod_contact)
-                .map_err(BuildError::Setting)?;
-            self.coupling = c.is_active().then_some(c);
-        }
-        Ok(self)
-    }
-
-    /// The stiff solver's reports of all rods together after `steps` steps.
-    fn stiff_summary(&self, steps: u64) -> Option<StiffSummary> {
-        let (settings, scratch) = self.stiff.as_ref()?;
-        let mut s = StiffSummary {
-            rod_steps: steps * scratch.len() as u64,
-            max_tolerance: settings.tolerance,
-            ..StiffSummary::default()
-        };
-        for r in scratch.iter().map(backend_cpu::StiffScratch::report) {
-            s.iterations += r.total_iterations;
-            s.factorisations += r.factorisations;
-            s.steps_kept += r.steps;
-            s.unconverged_steps += r.unconverged_steps;
-            s.halved_steps += r.halved_steps;
-            s.axial_steps += r.axial_steps;
-            s.max_residual = s.max_residual.max(r.max_residual);
-            s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
-        }
-        Some(s)
-    }
-
-    /// Steps every rod `n` times on the CPU; returns the largest strain seen.
-    fn run(&mut self, time: f64, step: u64, n: u64, par: Par) -> Result<f64, StepError> {
-        let (rods, stats, settings) = (&mut self.rods, &mut self.stats, &self.settings);
-        match (
-            self.stiff.as_mut(),
-            self.stiff_bindings.as_mut(),
-            self.coupling.as_mut(),
-        ) {
-            (Some((st, scratch)), Some(bindings), _) => backend_cpu::step_bound_stiff(
-                rods, scratch, bindings, settings, st, time, step, n, stats,
-            )?,
-            (Some((st, scratch)), None, _) => backend_cpu::step_rods_stiff(
-                rods, scratch, settings, st, time, step, n, par, stats,
-            )?,
-            // Coupled rods are stepped together, serially.
-            (None, _, Some(c)) => {
-                backend_cpu::step_coupled_batch(rods, c, settings, time, step, n, stats)?
-            }
-            (None, _, None) => {
-                backend_cpu::step_rods_batch(rods, settings, time, step, n, par, stats)?
-            }
-        }
-        Ok(self
-            .stats
+    /// What the scene asks of its stepper.
+    fn needs(&self) -> Capabilities {
+        let held = self
+            .rods
             .iter()
-            .map(StepStats::max_strain)
-            .fold(0.0, f64::max))
+            .any(|r| r.ends.iter().any(|e| e.holds_point()));
+        Capabilities::NONE
+            .with_if(
+                Capability::MeshContact,
+                self.environment.is_some() && self.rods.iter().any(|r| r.collides),
+            )
+            .with_if(
+                Capability::Guide,
+                self.rods.iter().any(|r| r.guide.is_some()),
+            )
+            .with_if(Capability::Bindings, !self.bindings.is_empty())
+            .with_if(Capability::RodContact, self.rod_contact.is_some())
+            .with_if(Capability::StiffScheme, self.stiff.is_some())
+            .with_if(Capability::DirectConstraints, self.direct_constraints)
+            .with_if(Capability::DoublePrecision, self.double_precision)
+            .with_if(Capability::Reactions, held && self.backend != Backend::Gpu)
     }
 }
 
-enum World {
-    F32(Rods<f32>),
-    F64(Rods<f64>),
-    /// Rods on the GPU, with a CPU-side mirror of their state refreshed after every batch.
-    #[cfg(feature = "gpu")]
-    Gpu(Box<GpuWorld>),
-}
-
-/// Dispatches a generic expression over the precision of the world (reading the GPU world's
-/// mirror).
-macro_rules! with_rods {
-    ($world:expr, $r:ident => $body:expr) => {
-        match $world {
-            World::F32($r) => $body,
-            World::F64($r) => $body,
-            #[cfg(feature = "gpu")]
-            World::Gpu(g) => {
-                let $r = &g.mirror;
-                $body
-            }
-        }
-    };
-}
-
-/// Why a step failed.
-#[derive(Debug, thiserror::Error)]
-pub enum StepError {
-    /// A rod diverged.
-    #[error("{0}")]
-    Diverged(#[from] Divergence),
-    /// The backend failed for a reason of its own (a GPU device error, a timeout).
-    #[error("{0}")]
-    Backend(String),
-}
-
-impl StepError {
-    /// The divergence, if that is what happened.
-    pub fn divergence(&self) -> Option<&Divergence> {
-        match self {
-            StepError::Diverged(d) => Some(d),
-            StepError::Backend(_) => None,
-        }
+/// The one place where a scene's needs meet a stepper's capabilities: everything missing, in
+/// one error, with what to change.
+fn require(
+    stepper: &str,
+    has: Capabilities,
+    needs: Capabilities,
+    instead: &str,
+) -> Result<(), BuildError> {
+    let missing = has.missing(needs);
+    if missing.is_empty() {
+        return Ok(());
     }
+    let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
+    Err(BuildError::Setting(format!(
+        "the {stepper} stepper cannot run this scene: it lacks {}; {instead}",
+        list.join(", ")
+    )))
 }
 
-#[cfg(feature = "gpu")]
-struct GpuWorld {
-    sim: backend_gpu::GpuSimulation,
-    mirror: Rods<f32>,
-}
-
-#[cfg(feature = "gpu")]
-impl GpuWorld {
-    /// Runs `n` steps on the GPU, then refreshes the mirror. Returns the largest strain of the
-    /// final state (the GPU checks every step for divergence itself).
-    fn run(&mut self, n: u64) -> Result<f64, StepError> {
-        let to_step = |e: backend_gpu::GpuError| match e {
-            backend_gpu::GpuError::Diverged(d) => StepError::Diverged(d),
-            other => StepError::Backend(other.to_string()),
-        };
-        let mut left = n;
-        while left > 0 {
-            let k = left.min(u64::from(u32::MAX)) as u32;
-            self.sim.step(k).map_err(to_step)?;
-            left -= u64::from(k);
-        }
-        // One round trip: the state and the divergence status come back together.
-        let states = self.sim.read_state().map_err(to_step)?;
-        let mut worst = 0.0f64;
-        for (rod, state) in self.mirror.rods.iter_mut().zip(states) {
-            let (lo, hi) = constraints::strain_extremes(&state.positions, &rod.params.rest_lengths);
-            worst = worst.max(f64::from(hi) - 1.0).max(1.0 - f64::from(lo));
-            rod.state = state;
-        }
-        Ok(worst)
-    }
-}
-
-#[cfg(feature = "gpu")]
-fn gpu_world(mirror: Rods<f32>, double: bool, environment: bool) -> Result<World, BuildError> {
-    if double {
-        return Err(BuildError::Setting(
-            "the GPU backend runs in f32: set solver.precision = \"f32\" or use --backend cpu"
-                .into(),
-        ));
-    }
-    if environment {
-        return Err(BuildError::Setting("the GPU backend does not collide with meshes yet: use --backend cpu for scenes with an [environment]".into()));
-    }
-    let inputs = mirror
-        .rods
+/// The rods of the builder in precision `T`, with their guides, meshes, reaction filters and
+/// constraint solvers.
+fn cpu_rods<T: Real>(b: &SimulationBuilder) -> Result<Vec<CpuRod<T>>, BuildError> {
+    b.rods
         .iter()
-        .map(|r| backend_gpu::GpuRodInput {
-            state: r.state.clone(),
-            params: r.params.clone(),
+        .enumerate()
+        .map(|(i, r)| {
+            let mut rod = r
+                .build::<T>(b.environment.as_ref())
+                .map_err(|source| BuildError::Rod { rod: i, source })?;
+            if let Some(hz) = b.reaction_cutoff_hz {
+                rod = rod.with_reaction_cutoff(hz);
+            }
+            if b.direct_constraints {
+                rod =
+                    rod.with_direct_solver(cosserat_constraints::direct::DirectSettings::default());
+            }
+            Ok(rod)
+        })
+        .collect()
+}
+
+/// The CPU stepper the scene needs: the stiff scheme (bound or not) or the explicit one
+/// (coupled or not).
+fn cpu_stepper<T: Real>(
+    b: &SimulationBuilder,
+    needs: Capabilities,
+) -> Result<Box<dyn Stepper>, BuildError> {
+    use cosserat_backend_cpu::{BoundStiff, Coupled, Explicit, Scheme, Stiff};
+    let settings: SolverSettings<T> = b.settings.cast();
+    let par = if b.backend == Backend::CpuRayon {
+        Par::Rayon
+    } else {
+        Par::Serial
+    };
+    let needs = needs.with_if(Capability::DoublePrecision, false);
+    let rods = cpu_rods::<T>(b)?;
+    let coupled = b.rod_contact.is_some() || !b.bindings.is_empty();
+    let to_explicit = "use solver.scheme = \"explicit\"";
+    Ok(match (b.stiff, coupled) {
+        (Some(st), true) => {
+            require(
+                <BoundStiff<T> as Scheme<T>>::NAME,
+                <BoundStiff<T> as Scheme<T>>::capabilities(),
+                needs,
+                to_explicit,
+            )?;
+            let bindings = cosserat_backend_cpu::StiffBindings::new(&rods, &b.bindings)
+                .map_err(BuildError::Setting)?;
+            Box::new(CpuStepper::bound_stiff(rods, settings, st, bindings))
+        }
+        (Some(st), false) => {
+            require(
+                <Stiff as Scheme<T>>::NAME,
+                <Stiff as Scheme<T>>::capabilities(),
+                needs,
+                to_explicit,
+            )?;
+            Box::new(CpuStepper::stiff(rods, settings, st, par))
+        }
+        (None, true) => {
+            require(
+                <Coupled<T> as Scheme<T>>::NAME,
+                <Coupled<T> as Scheme<T>>::capabilities(),
+                needs,
+                "use solver.constraint_solver = \"iterative\"",
+            )?;
+            let c = cosserat_backend_cpu::Coupling::new(&rods, &b.bindings, b.rod_contact)
+                .map_err(BuildError::Setting)?;
+            if c.is_active() {
+                Box::new(CpuStepper::with_scheme(rods, settings, par, Coupled(c)))
+            } else {
+                Box::new(CpuStepper::explicit(rods, settings, par))
+            }
+        }
+        (None, false) => {
+            require(
+                <Explicit as Scheme<T>>::NAME,
+                <Explicit as Scheme<T>>::capabilities(),
+                needs,
+                "use --backend cpu",
+            )?;
+            Box::new(CpuStepper::explicit(rods, settings, par))
+        }
+    })
+}
+
+#[cfg(feature = "gpu")]
+fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Stepper>, BuildError> {
+    require(
+        "gpu explicit",
+        Capabilities::NONE,
+        needs,
+        "use --backend cpu",
+    )?;
+    let rods = cpu_rods::<f32>(b)?;
+    let inputs = rods
+        .into_iter()
+        .map(|r| cosserat_backend_gpu::GpuRodInput {
+            state: r.state,
+            params: r.params,
             ends: r.ends,
-            loads: r.loads.clone(),
+            loads: r.loads,
         })
         .collect();
-    let sim = backend_gpu::GpuSimulation::new(
+    let stepper = cosserat_backend_gpu::GpuStepper::new(
         inputs,
-        &mirror.settings,
-        backend_gpu::GpuOptions::default(),
+        &b.settings.cast(),
+        cosserat_backend_gpu::GpuOptions::default(),
     )
     .map_err(|e| BuildError::Setting(e.to_string()))?;
-    Ok(World::Gpu(Box::new(GpuWorld { sim, mirror })))
+    Ok(Box::new(stepper))
 }
 
 #[cfg(not(feature = "gpu"))]
-fn gpu_world(_: Rods<f32>, _: bool, _: bool) -> Result<World, BuildError> {
+fn gpu_stepper(_: &SimulationBuilder, _: Capabilities) -> Result<Box<dyn Stepper>, BuildError> {
     Err(BuildError::Setting(
         "this build has no GPU backend: rebuild with the `gpu` feature, or use --backend cpu"
             .into(),
     ))
 }
 
-/// A running simulation: rods, their state and the clock.
+/// A simulation's state at one step, to return to with [`Simulation::restore`].
+#[derive(Debug)]
+pub struct SimulationSnapshot {
+    inner: Snapshot,
+    max_strain: f64,
+}
+
+impl SimulationSnapshot {
+    /// Steps taken when it was made.
+    pub fn steps(&self) -> u64 {
+        self.inner.clock().step
+    }
+}
+
+/// A running simulation: rods, their state and the clock, stepped by one [`Stepper`].
 pub struct Simulation {
-    world: World,
+    stepper: Box<dyn Stepper>,
     names: Vec<String>,
     radii: Vec<f64>,
     backend: Backend,
-    dt: f64,
-    time: f64,
-    steps: u64,
     max_strain: f64,
     extensible: bool,
     environment: Option<Environment>,
     divergence_speed: f64,
     warnings: Vec<String>,
+    /// Reused by the allocating getters ([`Simulation::positions`] and friends).
+    scratch: Vec<[f64; 3]>,
 }
 
 /// Contact measurements of a whole simulation.
@@ -902,48 +758,6 @@ pub struct ContactReport {
     pub contacts: usize,
     /// Mean wall time of collision detection per step [µs], all rods together.
     pub detection_us_per_step: f64,
-}
-
-/// What the stiff solver did since the simulation was built, over all rods
-/// (`backend_cpu::StiffReport` summed).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StiffSummary {
-    /// Rod-steps taken (steps × rods).
-    pub rod_steps: u64,
-    /// Newton iterations, all rods together.
-    pub iterations: u64,
-    /// Factorisations of the direct solve's matrix, all rods together (each iteration after
-    /// the first of a step reuses the last one unless the step's settings or a change of
-    /// its contacts ask for a new one).
-    pub factorisations: u64,
-    /// Rod-steps kept, each half of a step retaken in halves counted as a rod-step.
-    pub steps_kept: u64,
-    /// Rod-steps (of `steps_kept`) whose residual was still above the tolerance after the
-    /// last iteration.
-    pub unconverged_steps: u64,
-    /// Rod-steps that diverged or ended far from converged and were retaken in halves
-    /// (`StiffSettings::halve_above`, `max_halvings`).
-    pub halved_steps: u64,
-    /// Rod-steps of inextensible rods retaken with the material's axial compliance
-    /// (`StiffSettings::axial_fallback`).
-    pub axial_steps: u64,
-    /// Largest residual at the end of any rod-step.
-    pub max_residual: f64,
-    /// The largest residual tolerance a rod-step was held to (the settings', raised for `f32`
-    /// rods to the strain their positions resolve).
-    pub max_tolerance: f64,
-}
-
-impl StiffSummary {
-    /// Newton iterations per rod-step (0 before the first step).
-    pub fn iterations_per_step(&self) -> f64 {
-        self.iterations as f64 / self.rod_steps.max(1) as f64
-    }
-
-    /// Factorisations per rod-step (0 before the first step).
-    pub fn factorisations_per_step(&self) -> f64 {
-        self.factorisations as f64 / self.rod_steps.max(1) as f64
-    }
 }
 
 impl Simulation {
@@ -961,91 +775,230 @@ impl Simulation {
         if n == 0 {
             return Ok(());
         }
-        let par = if self.backend == Backend::CpuRayon {
-            Par::Rayon
-        } else {
-            Par::Serial
-        };
-        let (time, step) = (self.time, self.steps);
-        let result: Result<f64, StepError> = match &mut self.world {
-            World::F32(w) => w.run(time, step, n, par),
-            World::F64(w) => w.run(time, step, n, par),
-            #[cfg(feature = "gpu")]
-            World::Gpu(g) => g.run(n),
-        };
-        match &result {
-            Ok(worst) => {
-                self.max_strain = self.max_strain.max(*worst);
-                self.steps += n;
-                self.time = self.steps as f64 * self.dt;
-                return self.check_speed();
+        let worst = self.stepper.advance(n)?;
+        self.max_strain = self.max_strain.max(worst);
+        self.stepper
+            .check_speed(self.divergence_speed)
+            .map_err(StepError::Diverged)
+    }
+
+    /// The stepper: its name, precision and capabilities, and the whole control interface.
+    pub fn stepper(&self) -> &dyn Stepper {
+        self.stepper.as_ref()
+    }
+
+    /// What the stepper can do.
+    pub fn capabilities(&self) -> Capabilities {
+        self.stepper.capabilities()
+    }
+
+    /// The stepper's name and precision.
+    pub fn stepper_info(&self) -> StepperInfo {
+        self.stepper.info()
+    }
+
+    /// The condition at end `end` (0: first point, 1: last point) of a rod.
+    pub fn end_condition(
+        &self,
+        h: RodHandle,
+        end: usize,
+    ) -> Result<EndCondition<f64>, ControlError> {
+        self.stepper.end_condition(h.0, end)
+    }
+
+    /// Replaces the condition at end `end` of a rod from the next step on (see
+    /// [`Stepper::set_end_condition`]).
+    pub fn set_end_condition(
+        &mut self,
+        h: RodHandle,
+        end: usize,
+        condition: EndCondition<f64>,
+    ) -> Result<(), ControlError> {
+        self.stepper.set_end_condition(h.0, end, condition)
+    }
+
+    /// Drives a held end at a constant velocity [m/s] and angular velocity [rad/s] (world frame)
+    /// from now until changed: a haptic hand's push or pull and twist at one tick.
+    pub fn set_end_velocity(
+        &mut self,
+        h: RodHandle,
+        end: usize,
+        velocity: [f64; 3],
+        angular_velocity: [f64; 3],
+    ) -> Result<(), ControlError> {
+        let mut c = self.stepper.end_condition(h.0, end)?;
+        c.motion = Some(PrescribedMotion::constant(
+            velocity.into(),
+            angular_velocity.into(),
+            self.time(),
+        ));
+        self.stepper.set_end_condition(h.0, end, c)
+    }
+
+    /// Moves a held end to `position` [m] (and, for a clamped end, its frame to `frame`, a unit
+    /// quaternion `[w, x, y, z]`) in `duration` seconds, rounded to whole steps (at least one),
+    /// at constant velocity, and holds it there.
+    pub fn move_end_to(
+        &mut self,
+        h: RodHandle,
+        end: usize,
+        position: [f64; 3],
+        frame: Option<[f64; 4]>,
+        duration: f64,
+    ) -> Result<(), ControlError> {
+        let mut c = self.stepper.end_condition(h.0, end)?;
+        if !c.holds_point() {
+            return Err(ControlError::Value {
+                field: "end",
+                why: format!("end {end} of rod {} is free: hold it first", h.0),
+            });
+        }
+        if !(duration.is_finite() && duration >= 0.0) || !position.iter().all(|x| x.is_finite()) {
+            return Err(ControlError::Value {
+                field: "move",
+                why: format!("duration {duration} s and position must be finite, duration ≥ 0"),
+            });
+        }
+        let clock = self.stepper.clock();
+        let steps = ((duration / clock.dt).round() as u64).max(1);
+        let seconds = steps as f64 * clock.dt;
+        let n = self.stepper.elements(h.0)?;
+        let point = if end == 0 { 0 } else { n };
+        self.read_into_scratch(h, StateField::Positions)?;
+        let here = Vec3::from(self.scratch[point]);
+        let velocity = (Vec3::from(position) - here) / seconds;
+        let mut angular_velocity = Vec3::zeros();
+        if let Some(q) = frame {
+            let mut frames = vec![[0.0; 4]; n];
+            self.stepper.read_frames(h.0, &mut frames)?;
+            let now = frames[if end == 0 { 0 } else { n - 1 }];
+            let now = Quat::new(now[0], now[1], now[2], now[3]);
+            let target = Quat::new(q[0], q[1], q[2], q[3]);
+            if !(target.norm() > 1e-9) {
+                return Err(ControlError::Value {
+                    field: "frame",
+                    why: "the target frame is not a rotation".into(),
+                });
             }
-            Err(e) => {
-                if let Some(d) = e.divergence() {
-                    self.steps = d.step;
-                }
+            // The world-frame rotation that takes the current frame to the target one.
+            let mut turn = (target / target.norm()) * now.conjugate();
+            if turn.w < 0.0 {
+                turn = -turn;
+            }
+            let s = turn.imag().norm();
+            let angle = 2.0 * s.atan2(turn.w);
+            if s > 0.0 {
+                angular_velocity = turn.imag() * (angle / s / seconds);
             }
         }
-        self.time = self.steps as f64 * self.dt;
-        result.map(|_| ())
+        c.motion = Some(PrescribedMotion {
+            velocity,
+            angular_velocity,
+            start_time: clock.time(),
+            // Half a step before the last step's end: the motion covers exactly `steps` steps.
+            end_time: clock.time_of(steps) - 0.5 * clock.dt,
+        });
+        self.stepper.set_end_condition(h.0, end, c)
+    }
+
+    /// Holds end `end` of a rod (`EndKind::Pinned` or `EndKind::Clamped`) where it is, or frees
+    /// it (`EndKind::Free`).
+    pub fn hold_end(
+        &mut self,
+        h: RodHandle,
+        end: usize,
+        kind: EndKind,
+    ) -> Result<(), ControlError> {
+        self.stepper
+            .set_end_condition(h.0, end, EndCondition { kind, motion: None })
+    }
+
+    /// Replaces the point loads of a rod: `(point, force [N])` pairs; an empty slice removes
+    /// them.
+    pub fn set_loads(
+        &mut self,
+        h: RodHandle,
+        loads: &[(usize, [f64; 3])],
+    ) -> Result<(), ControlError> {
+        let loads: Vec<PointLoad<f64>> = loads
+            .iter()
+            .map(|&(point, f)| PointLoad {
+                point,
+                force: f.into(),
+            })
+            .collect();
+        self.stepper.set_loads(h.0, &loads)
+    }
+
+    /// Copies a field of a rod's state into `out` (length [`StateField::len`] of its element
+    /// count); allocates nothing.
+    pub fn read(
+        &self,
+        h: RodHandle,
+        field: StateField,
+        out: &mut [[f64; 3]],
+    ) -> Result<(), ControlError> {
+        self.stepper.read(h.0, field, out)
+    }
+
+    /// Copies a rod's frames into `out` as `[w, x, y, z]`.
+    pub fn read_frames(&self, h: RodHandle, out: &mut [[f64; 4]]) -> Result<(), ControlError> {
+        self.stepper.read_frames(h.0, out)
+    }
+
+    /// Overwrites a field of a rod's state.
+    pub fn write(
+        &mut self,
+        h: RodHandle,
+        field: StateField,
+        values: &[[f64; 3]],
+    ) -> Result<(), ControlError> {
+        self.stepper.write(h.0, field, values)
+    }
+
+    /// Overwrites a rod's frames (`[w, x, y, z]`).
+    pub fn write_frames(&mut self, h: RodHandle, values: &[[f64; 4]]) -> Result<(), ControlError> {
+        self.stepper.write_frames(h.0, values)
+    }
+
+    /// Replaces `out` with a rod's contacts at the last step.
+    pub fn contacts(&self, h: RodHandle, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {
+        self.stepper.contacts(h.0, out)
+    }
+
+    /// The whole state, to come back to with [`Simulation::restore`].
+    pub fn snapshot(&mut self) -> Result<SimulationSnapshot, StepError> {
+        Ok(SimulationSnapshot {
+            inner: self.stepper.snapshot()?,
+            max_strain: self.max_strain,
+        })
+    }
+
+    /// Returns to a snapshot of this simulation: the steps that follow are, bit for bit, those
+    /// that followed the snapshot.
+    pub fn restore(&mut self, snapshot: &SimulationSnapshot) -> Result<(), ControlError> {
+        self.stepper.restore(&snapshot.inner)?;
+        self.max_strain = snapshot.max_strain;
+        Ok(())
     }
 
     /// The filtered reaction at end `end` (0: first point, 1: last point) of a rod after the
     /// last step: the force and torque the holder applies to the rod (a haptic device renders
     /// its negative); `None` for a free end, and on the GPU backend, whose kernels do not
-    /// compute reactions (its CPU-side mirror of the rods would report zeros). See
-    /// `backend_cpu::reaction`.
+    /// compute reactions. See `cosserat_backend_cpu::reaction`.
     pub fn end_reaction(&self, h: RodHandle, end: usize) -> Option<EndReaction> {
-        if self.backend == Backend::Gpu {
-            return None;
-        }
-        with_rods!(&self.world, w => w.rods[h.0].end_reaction(end))
+        self.stepper.end_reaction(h.0, end)
     }
 
     /// Largest filtered reaction force at any held end of any rod so far [N]; `None` when no
     /// end is held, and on the GPU backend ([`end_reaction`](Self::end_reaction)).
     pub fn max_reaction_force(&self) -> Option<f64> {
-        if self.backend == Backend::Gpu {
-            return None;
-        }
-        with_rods!(&self.world, w => w.rods.iter().filter_map(|r| r.max_reaction_force()).reduce(f64::max))
+        self.stepper.max_reaction_force()
     }
 
     /// Measurements of bindings and rod contacts; `None` when the rods do not interact.
     pub fn coupling_stats(&self) -> Option<CouplingStats> {
-        with_rods!(&self.world, w => w
-            .coupling
-            .as_ref()
-            .map(|c| c.stats())
-            .or_else(|| w.stiff_bindings.as_ref().map(|b| b.stats())))
-    }
-
-    /// The runaway-energy check: the first point of any rod faster than the divergence speed,
-    /// or the first frame whose surface (at the rod's radius) spins faster than it. Twisting is
-    /// usually the fastest mode, so a frame can spin away while the centreline still looks fine.
-    fn check_speed(&self) -> Result<(), StepError> {
-        let limit = self.divergence_speed;
-        let step = self.steps;
-        with_rods!(&self.world, w => {
-            for (rod, r) in w.rods.iter().enumerate() {
-                let radius = r.params.radius;
-                let points = r.state.velocities.iter().map(|v| v.norm());
-                let frames = r.state.angular_velocities.iter().map(|w| w.norm() * radius);
-                for (element, speed) in points.chain(frames).enumerate() {
-                    let element = element % r.state.velocities.len();
-                    let speed = speed.to_f64();
-                    if !(speed <= limit) {
-                        let quantity = if speed.is_finite() {
-                            backend_cpu::DivergedQuantity::Speed(speed)
-                        } else {
-                            backend_cpu::DivergedQuantity::NonFinitePosition
-                        };
-                        return Err(StepError::Diverged(Divergence { rod, element, step, quantity }));
-                    }
-                }
-            }
-            Ok(())
-        })
+        self.stepper.coupling_stats()
     }
 
     /// Things the builder accepted but a user should know (a time step close to the stability
@@ -1056,15 +1009,15 @@ impl Simulation {
 
     /// Simulated time [s].
     pub fn time(&self) -> f64 {
-        self.time
+        self.stepper.clock().time()
     }
     /// Steps taken.
     pub fn steps(&self) -> u64 {
-        self.steps
+        self.stepper.clock().step
     }
     /// Time step [s].
     pub fn dt(&self) -> f64 {
-        self.dt
+        self.stepper.clock().dt
     }
     /// The backend stepping the rods.
     pub fn backend(&self) -> Backend {
@@ -1076,7 +1029,7 @@ impl Simulation {
     }
     /// Whether the simulation runs in `f64`.
     pub fn is_double_precision(&self) -> bool {
-        matches!(self.world, World::F64(_))
+        self.stepper.info().double_precision
     }
     /// Handles of all rods.
     pub fn rods(&self) -> impl Iterator<Item = RodHandle> {
@@ -1092,7 +1045,9 @@ impl Simulation {
     }
     /// Total number of elements of all rods.
     pub fn element_count(&self) -> usize {
-        with_rods!(&self.world, w => w.rods.iter().map(|r| r.elements()).sum())
+        (0..self.stepper.rod_count())
+            .map(|r| self.stepper.elements(r).unwrap_or(0))
+            .sum()
     }
     /// Largest `|l/l0 − 1|` of any segment at the end of any step so far.
     pub fn max_strain(&self) -> f64 {
@@ -1102,28 +1057,38 @@ impl Simulation {
     /// What the stiff solver did so far: iterations, steps that ended above the tolerance,
     /// steps retaken in halves or with axial compliance; `None` with the explicit scheme.
     pub fn stiff_summary(&self) -> Option<StiffSummary> {
-        let steps = self.steps;
-        match &self.world {
-            World::F32(r) => r.stiff_summary(steps),
-            World::F64(r) => r.stiff_summary(steps),
-            #[cfg(feature = "gpu")]
-            World::Gpu(_) => None,
+        self.stepper.stiff_summary()
+    }
+
+    fn read_into_scratch(&mut self, h: RodHandle, field: StateField) -> Result<(), ControlError> {
+        let n = self.stepper.elements(h.0)?;
+        self.scratch.resize(field.len(n), [0.0; 3]);
+        self.stepper.read(h.0, field, &mut self.scratch)
+    }
+
+    fn field(&self, h: RodHandle, field: StateField) -> Vec<[f64; 3]> {
+        let n = self.stepper.elements(h.0).unwrap_or(0);
+        let mut out = vec![[0.0; 3]; field.len(n)];
+        if let Err(e) = self.stepper.read(h.0, field, &mut out) {
+            panic!("rod {}: {e}", h.0);
         }
+        out
     }
 
-    /// Centreline points of a rod [m].
+    /// Centreline points of a rod [m] (allocates; [`Simulation::read`] does not).
     pub fn positions(&self, h: RodHandle) -> Vec<[f64; 3]> {
-        with_rods!(&self.world, w => w.rods[h.0].state.positions.iter().map(|p| [p.x.to_f64(), p.y.to_f64(), p.z.to_f64()]).collect())
+        self.field(h, StateField::Positions)
     }
 
-    /// Point velocities of a rod [m/s].
+    /// Point velocities of a rod [m/s] (allocates; [`Simulation::read`] does not).
     pub fn velocities(&self, h: RodHandle) -> Vec<[f64; 3]> {
-        with_rods!(&self.world, w => w.rods[h.0].state.velocities.iter().map(|p| [p.x.to_f64(), p.y.to_f64(), p.z.to_f64()]).collect())
+        self.field(h, StateField::Velocities)
     }
 
-    /// The first director `d1` of each element of a rod.
+    /// The first director `d1` of each element of a rod (allocates; [`Simulation::read`] does
+    /// not).
     pub fn first_directors(&self, h: RodHandle) -> Vec<[f64; 3]> {
-        with_rods!(&self.world, w => w.rods[h.0].state.frames.iter().map(|q| { let d = directors(q)[0]; [d.x.to_f64(), d.y.to_f64(), d.z.to_f64()] }).collect())
+        self.field(h, StateField::Director(0))
     }
 
     /// The environment, if the rods collide with one.
@@ -1137,17 +1102,15 @@ impl Simulation {
         let mut report = ContactReport::default();
         let mut seconds = 0.0;
         let mut steps = 0;
-        with_rods!(&self.world, w => {
-            for r in &w.rods {
-                if let Some(st) = r.collision_stats() {
-                    report.max_penetration = report.max_penetration.max(st.max_penetration);
-                    report.escaped_points += st.escaped_points;
-                    report.contacts += st.contacts;
-                    seconds += st.detection_seconds;
-                    steps = steps.max(st.steps);
-                }
+        for rod in 0..self.stepper.rod_count() {
+            if let Some(st) = self.stepper.collision_stats(rod) {
+                report.max_penetration = report.max_penetration.max(st.max_penetration);
+                report.escaped_points += st.escaped_points;
+                report.contacts += st.contacts;
+                seconds += st.detection_seconds;
+                steps = steps.max(st.steps);
             }
-        });
+        }
         let now: usize = self
             .rods()
             .map(|h| env.escaped(&self.positions(h), 1.0))
@@ -1163,16 +1126,6 @@ impl Simulation {
 
     /// Energies summed over all rods.
     pub fn energies(&self) -> Energies {
-        with_rods!(&self.world, w => {
-            let model = ForceModel { extensible: w.settings.extensible, gravity: w.settings.gravity };
-            w.rods.iter().map(|r| energies(&r.state, &r.params, &model)).fold(Energies::default(), |a, b| Energies {
-                bend_twist: a.bend_twist + b.bend_twist,
-                parallel: a.parallel + b.parallel,
-                stretch: a.stretch + b.stretch,
-                gravity: a.gravity + b.gravity,
-                kinetic_translation: a.kinetic_translation + b.kinetic_translation,
-                kinetic_rotation: a.kinetic_rotation + b.kinetic_rotation,
-            })
-        })
+        self.stepper.energies()
     }
 }

@@ -125,7 +125,7 @@ proptest! {
     /// gravity, driven clamps, extensible or not, f32 or f64) at haptic steps far above the
     /// explicit limit: nothing diverges and the energy stays bounded. The rods start straight,
     /// up to two turns away from their rest shape, which the stiff solver's first steps can only
-    /// cross in halves ([`StiffSettings::max_halvings`](cosserat::backend_cpu::StiffSettings));
+    /// cross in halves ([`StiffSettings::max_halvings`](cosserat::cosserat_backend_cpu::StiffSettings));
     /// without them, a 7-element rod (E 1.6e11 Pa) released 1 rad per element from its rest
     /// shape diverged in its first step at dt = 1e-3. The drive is limited to 0.1 rad and a
     /// tenth of an element per step, what a hand can do within one step.

@@ -15,8 +15,8 @@
 
 use super::direct_stepper::DirectRod;
 use super::reference as refs;
-use cosserat::constraints::BindingVariant;
 use cosserat::convergence::grid_convergence;
+use cosserat::cosserat_constraints::BindingVariant;
 use cosserat::cosserat_model::energy::bend_twist_node;
 use cosserat::cosserat_model::quat::frame_from_tangent;
 use cosserat::cosserat_model::rod::{RestShape, RodSpec, straight_polyline};
@@ -217,7 +217,7 @@ fn simulation(rod: RodBuilder, dt: f64, gravity: [f64; 3], iterations: usize) ->
 pub enum Scheme {
     /// The paper's explicit forces and impulse-based distance constraints, at a stable step.
     Explicit,
-    /// The stiff solver (`backend_cpu::stiff`, default settings), at steps far above the
+    /// The stiff solver (`cosserat_backend_cpu::stiff`, default settings), at steps far above the
     /// explicit limit: statics at `0.1/ω₁`, frequencies at `0.02/ω` of the mode measured.
     Stiff,
     /// The stiff solver at a fixed step in seconds, for every case (issue 4's haptic steps).
@@ -259,9 +259,9 @@ fn simulation_in(
 fn with_scheme(b: SimulationBuilder, scheme: Scheme) -> SimulationBuilder {
     match scheme {
         Scheme::Explicit => b,
-        Scheme::Stiff | Scheme::StiffAt(_) => {
-            b.stiff_solver(Some(cosserat::backend_cpu::StiffSettings::default()))
-        }
+        Scheme::Stiff | Scheme::StiffAt(_) => b.stiff_solver(Some(
+            cosserat::cosserat_backend_cpu::StiffSettings::default(),
+        )),
     }
 }
 
@@ -1408,7 +1408,7 @@ pub fn stiff_scheme_at(size: Size, dt: f64) -> Result<Vec<Row>, String> {
     Ok(rows)
 }
 
-/// The catheter–guidewire binding at rest (paper section 3.4; `constraints::binding` and the
+/// The catheter–guidewire binding at rest (paper section 3.4; `cosserat_constraints::binding` and the
 /// stiff scheme's `stiff/binding.rs`): a catheter (the test rod) with a wire (half its radius,
 /// four times its modulus, so a quarter of its bending stiffness) bound inside along its first
 /// three quarters, both clamped at the origin, and a tip load on the catheter. Two-way the pair

@@ -8,7 +8,7 @@
 #![allow(dead_code)]
 
 use cosserat::EndCondition;
-use cosserat::constraints::direct::{
+use cosserat::cosserat_constraints::direct::{
     DirectReport, DirectScratch, DirectSettings, solve_distance_direct,
 };
 use cosserat::cosserat_model::energy::{Energies, ForceModel, accumulate_forces, energies};

@@ -143,7 +143,7 @@ impl TrialRod {
         // oscillates from the initial kinks.
         let stiff = self
             .stiff
-            .then(cosserat::backend_cpu::StiffSettings::default);
+            .then(cosserat::cosserat_backend_cpu::StiffSettings::default);
         let mut sim = SimulationBuilder::new()
             .check_stability(false)
             .stiff_solver(stiff)

@@ -20,7 +20,7 @@
 use crate::support::cases::{pendulum, pendulum_spec, workspace_file};
 use crate::support::direct_stepper::DirectRod;
 use crate::support::reference::elastica_tip;
-use cosserat::backend_cpu::StiffSettings;
+use cosserat::cosserat_backend_cpu::StiffSettings;
 use cosserat::cosserat_model::rod::straight_polyline;
 use cosserat::cosserat_model::stability::{StabilityInput, stable_step};
 use cosserat::cosserat_model::{Material, Real, Vec3};

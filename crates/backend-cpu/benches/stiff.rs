@@ -14,7 +14,7 @@
 //!
 //! `cargo bench -p cosserat-backend-cpu --bench stiff`; results in `docs/benchmarks/stiff.md`.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, EndCondition, Ordering, Refactor, SolverSettings, StiffScratch, StiffSettings,
     step_rod, step_rod_stiff,
 };

@@ -9,12 +9,12 @@
 //! `cargo bench -p cosserat-backend-cpu --bench stiff_contact`; results in
 //! `docs/benchmarks/stiff-insertion.md`.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, EndCondition, MeshContactSettings, Ordering, PrescribedMotion, SolverSettings,
     StiffScratch, StiffSettings, step_rod_stiff,
 };
-use collide::{MeshCollider, Vessel};
-use constraints::Friction;
+use cosserat_collide::{MeshCollider, Vessel};
+use cosserat_constraints::Friction;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};

@@ -4,8 +4,10 @@
 //! `cargo run --release -p cosserat-backend-cpu --example stiff_profile -- [f32|f64] [STEPS]`;
 //! `N` (elements, default 1000), `ITERS`, `TOL`, `GEOM`, `REFACTOR` (`newton`, `step`, `lag`) override the stiff settings (default settings otherwise).
 
-use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings};
-use backend_cpu::{step_rod, step_rod_stiff};
+use cosserat_backend_cpu::{
+    CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings,
+};
+use cosserat_backend_cpu::{step_rod, step_rod_stiff};
 use cosserat_model::presets::preset;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Real, Vec3};
@@ -42,9 +44,9 @@ fn run<T: Real>(steps: u64) {
         st.geometric = g;
     }
     match std::env::var("REFACTOR").as_deref() {
-        Ok("step") => st.refactor = backend_cpu::Refactor::EveryStep,
-        Ok("lag") => st.refactor = backend_cpu::Refactor::Lagged,
-        Ok("newton") => st.refactor = backend_cpu::Refactor::EveryIteration,
+        Ok("step") => st.refactor = cosserat_backend_cpu::Refactor::EveryStep,
+        Ok("lag") => st.refactor = cosserat_backend_cpu::Refactor::Lagged,
+        Ok("newton") => st.refactor = cosserat_backend_cpu::Refactor::EveryIteration,
         _ => {}
     }
     let n = env("N").map_or(1000, |v| v as usize);

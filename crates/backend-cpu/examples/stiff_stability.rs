@@ -17,7 +17,7 @@
 //! `ELEMENTS` (element count of `bisect`, default 500), `LENGTH` (rod length of `stability`
 //! and `bisect` in metres, default 1).
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, EndCondition, Integrator, Ordering, PointLoad, PrescribedMotion, Refactor,
     SolverSettings, StiffScheme, StiffScratch, StiffSettings, step_rod_batch, step_rod_stiff,
 };

@@ -11,11 +11,11 @@
 //! 1. per rod: forces, velocity integration, end conditions, mesh-contact detection (the same
 //!    code as a single rod);
 //! 2. once: the coupling's detection — nearest outer-centreline point of every inner point of a
-//!    binding ([`constraints::BindingSet::update`]) and the bounding-sphere broad phase plus
-//!    segment–segment narrow phase between and within rods ([`collide::RodCollider`]);
+//!    binding ([`cosserat_constraints::BindingSet::update`]) and the bounding-sphere broad phase plus
+//!    segment–segment narrow phase between and within rods ([`cosserat_collide::RodCollider`]);
 //! 3. `iterations` times: each rod's distance sweep and mesh-contact sweep, then the binding
 //!    sweeps, then the rod–rod contact sweep, the latter two reaching the rods' velocities
-//!    through [`constraints::PointVelocities`] in whatever layout the distance solver keeps
+//!    through [`cosserat_constraints::PointVelocities`] in whatever layout the distance solver keeps
 //!    them;
 //! 4. per rod: reaction at held ends, position integration, divergence check.
 //!
@@ -26,12 +26,13 @@ use crate::stepper::{
     BatchConsts, CpuRod, Divergence, SolverSettings, StepStats, after_constraints,
     before_constraints, gauss_seidel_sweep, red_black_of, uses_red_black,
 };
-use collide::{Chain, RodCollider, RodCollisionConfig, RodContact};
-use constraints::{
+use cosserat_collide::{Chain, RodCollider, RodCollisionConfig, RodContact};
+use cosserat_constraints::{
     BindingSet, BindingVariant, Friction, PointVelocities, RodContactSet, SegmentContact,
     SoaVelocities, SplitVelocities,
 };
 use cosserat_model::{Real, Vec3};
+pub(crate) use cosserat_problem::CouplingStats;
 
 /// A binding of an inner rod to an outer rod (paper section 3.4).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -106,54 +107,14 @@ impl Default for RodContactSpec {
     }
 }
 
-/// Measurements of the coupling since the start.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CouplingStats {
-    /// Inner points bound at the last step (all bindings).
-    pub bound_points: usize,
-    /// Rod–rod and self-contacts at the last step.
-    pub contacts: usize,
-    /// Most contacts at any step.
-    pub max_contacts: usize,
-    /// Smallest centreline distance of any two non-neighbouring segments seen at the start of
-    /// any step [m] (`f64::INFINITY` if none came within the contact margin).
-    pub min_separation: f64,
-    /// Sum of the two radii of that pair [m].
-    pub min_separation_radii: f64,
-    /// Smallest `distance / (r_a + r_b)` of any pair seen.
-    pub min_separation_ratio: f64,
-    /// Wall time of the coupling's detection (bindings and rod contacts) [s].
-    pub detection_seconds: f64,
-    /// Steps taken.
-    pub steps: u64,
-    /// Steps at which a held end point of an inner rod was bound inside its outer rod (counted
-    /// by the stiff scheme only, whose partitioned binding can be unstable there:
-    /// `stiff/binding.rs`).
-    pub held_ends_inside: u64,
-}
-
-impl Default for CouplingStats {
-    fn default() -> Self {
-        Self {
-            bound_points: 0,
-            contacts: 0,
-            max_contacts: 0,
-            min_separation: f64::INFINITY,
-            min_separation_radii: 0.0,
-            min_separation_ratio: f64::INFINITY,
-            detection_seconds: 0.0,
-            steps: 0,
-            held_ends_inside: 0,
-        }
-    }
-}
-
+#[derive(Clone, Debug)]
 struct Binding<T: Real> {
     inner: usize,
     outer: usize,
     set: BindingSet<T>,
 }
 
+#[derive(Clone, Debug)]
 struct RodContacts<T: Real> {
     collider: RodCollider,
     friction: Friction<T>,
@@ -167,6 +128,7 @@ struct RodContacts<T: Real> {
 }
 
 /// The coupling of a group of rods: its bindings and rod contacts with their scratch.
+#[derive(Clone, Debug)]
 pub struct Coupling<T: Real> {
     bindings: Vec<Binding<T>>,
     contacts: Option<RodContacts<T>>,

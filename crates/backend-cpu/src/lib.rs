@@ -18,25 +18,25 @@
 //! quantity instead of letting NaNs spread.
 
 pub mod coupling;
-pub mod ends;
 pub mod guide;
 pub mod mesh_contact;
 pub mod reaction;
 mod soa;
 pub mod stepper;
+pub mod steppers;
 pub mod stiff;
 
-pub use constraints::Ordering;
-pub use coupling::{BindingSpec, Coupling, CouplingStats, RodContactSpec, step_coupled_batch};
-pub use ends::{EndCondition, EndKind, PrescribedMotion};
+pub use cosserat_problem::{
+    Clock, CollisionStats, CouplingStats, DivergedQuantity, Divergence, EndCondition, EndKind,
+    EndReaction, Integrator, Ordering, Par, PointLoad, PrescribedMotion, Refactor, SolverSettings,
+    StepStats, StiffReport, StiffScheme, StiffSettings,
+};
+pub use coupling::{BindingSpec, Coupling, RodContactSpec, step_coupled_batch};
 pub use guide::Guide;
-pub use mesh_contact::{CollisionStats, MeshContactSettings};
-pub use reaction::EndReaction;
-pub use stepper::{
-    CpuRod, DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats, step_rod,
-    step_rod_batch, step_rods, step_rods_batch,
+pub use mesh_contact::MeshContactSettings;
+pub use stepper::{CpuRod, step_rod, step_rod_batch, step_rods, step_rods_batch};
+pub use steppers::{
+    BoundStiff, BoundStiffStepper, Coupled, CoupledStepper, CpuStepper, Explicit, ExplicitStepper,
+    Scheme, Stiff, StiffStepper,
 };
-pub use stiff::{
-    Integrator, Refactor, StiffBindings, StiffReport, StiffScheme, StiffScratch, StiffSettings,
-    step_bound_stiff, step_rod_stiff, step_rods_stiff,
-};
+pub use stiff::{StiffBindings, StiffScratch, step_bound_stiff, step_rod_stiff, step_rods_stiff};

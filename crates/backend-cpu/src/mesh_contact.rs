@@ -1,7 +1,7 @@
 //! Contact of a rod with a static triangle mesh (a vessel wall, a floor).
 //!
 //! Once per step the rod's points are tested against the mesh as spheres of the rod's radius
-//! plus a small speculative margin ([`collide::MeshCollider::detect`]); each point in contact
+//! plus a small speculative margin ([`cosserat_collide::MeshCollider::detect`]); each point in contact
 //! becomes one [`PointContact`] whose direction is the paper's penetration-weighted mean of the
 //! touched triangles' normals. The contacts are then solved inside the constraint iterations
 //! together with the distance constraints. A rod without a mesh carries `None` here and runs
@@ -24,10 +24,12 @@
 //! exactly those of the tree query. The skin is half the query radius: a wire sliding at
 //! 0.2 m/s with steps of a few microseconds remakes its lists every few hundred steps.
 
-use collide::{Contact, MeshCollider};
-use constraints::{ContactSet, Friction, PointContact};
+use cosserat_collide::{Contact, MeshCollider};
+use cosserat_constraints::{ContactSet, Friction, PointContact};
 use cosserat_model::{Real, Vec3};
 use std::sync::Arc;
+
+pub(crate) use cosserat_problem::CollisionStats;
 
 /// What a rod touches and how.
 #[derive(Clone, Debug)]
@@ -39,28 +41,6 @@ pub struct MeshContactSettings {
     /// Speculative margin [m]: points this close to the surface get a contact that stops them
     /// reaching it within the step.
     pub margin: f64,
-}
-
-/// Measurements of a rod's contact with the mesh since the last reset.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct CollisionStats {
-    /// Largest penetration of a point's sphere into the surface at the start of any step [m].
-    pub max_penetration: f64,
-    /// Largest number of points whose centre was behind the wall at the start of a step.
-    pub escaped_points: usize,
-    /// Points in contact at the last step.
-    pub contacts: usize,
-    /// Most points in contact at any step.
-    pub max_contacts: usize,
-    /// Wall time spent in collision detection [s].
-    pub detection_seconds: f64,
-    /// Steps with collision detection.
-    pub steps: u64,
-    /// Stiff scheme: point queries between the iterations of a step answered from the point's
-    /// last query instead of the mesh ([`StiffSettings::reuse_contact_queries`]).
-    ///
-    /// [`StiffSettings::reuse_contact_queries`]: crate::StiffSettings::reuse_contact_queries
-    pub reused_queries: u64,
 }
 
 /// How far beyond the query radius the nearest wall is searched for a point's clearance [m].
@@ -219,7 +199,7 @@ impl<T: Real> RodMeshContact<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use collide::{ContactBuffer, TriMesh};
+    use cosserat_collide::{ContactBuffer, TriMesh};
 
     /// A 1 m square floor at z = 0 of 2·20² triangles, normals +z.
     fn floor() -> Arc<MeshCollider> {

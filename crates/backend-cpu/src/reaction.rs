@@ -13,7 +13,7 @@
 //! and `J_{c,k}` is the impulse constraint `c` would have given the point had it been free: for
 //! the end's distance constraint that is minus the impulse it gave its other point (measured
 //! inside the red–black or Gauss–Seidel sweeps), for a binding or rod–rod contact it is the
-//! kinematic point's share, recorded by [`constraints::PointVelocities`]. A clamped end also
+//! kinematic point's share, recorded by [`cosserat_constraints::PointVelocities`]. A clamped end also
 //! holds its frame; its torque is the Euler balance of the held frame,
 //! `M = R I (ω_prescribed − ω_integrated) / h` in world coordinates, with `ω_integrated` the
 //! body angular velocity the torques alone would have given it.
@@ -33,33 +33,14 @@
 //! (`Integrator::Bdf2`) would otherwise keep in its forces. The raw per-step value is available
 //! too.
 
-use constraints::KinematicImpulses;
+use cosserat_constraints::KinematicImpulses;
 use cosserat_model::quat::rotate;
 use cosserat_model::{Quat, Real, Vec3};
+pub use cosserat_problem::EndReaction;
 
 /// Default cut-off of the reaction low-pass filter [Hz]: well below a haptic loop's 1 kHz and
 /// above the few hertz of deliberate hand motion.
 pub const DEFAULT_CUTOFF_HZ: f64 = 50.0;
-
-/// Force and torque applied by the holder of an end to the rod.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct EndReaction {
-    /// Force [N], world frame.
-    pub force: [f64; 3],
-    /// Torque about the held point [N m], world frame (zero for a pinned end).
-    pub torque: [f64; 3],
-}
-
-impl EndReaction {
-    /// `|force|` [N].
-    pub fn force_norm(&self) -> f64 {
-        self.force.iter().map(|x| x * x).sum::<f64>().sqrt()
-    }
-    /// `|torque|` [N m].
-    pub fn torque_norm(&self) -> f64 {
-        self.torque.iter().map(|x| x * x).sum::<f64>().sqrt()
-    }
-}
 
 fn to_f64<T: Real>(v: Vec3<T>) -> [f64; 3] {
     [v.x.to_f64(), v.y.to_f64(), v.z.to_f64()]
@@ -97,6 +78,10 @@ impl<T: Real> Reactions<T> {
 
     pub(crate) fn set_cutoff(&mut self, hz: f64) {
         self.cutoff_hz = hz;
+    }
+
+    pub(crate) fn cutoff(&self) -> f64 {
+        self.cutoff_hz
     }
 
     /// Before the end conditions overwrite the velocities: the force on the held point, its

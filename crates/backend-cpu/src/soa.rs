@@ -6,7 +6,7 @@
 //! hundred flops per element, so the CPU backend copies a rod into the layout below once per
 //! batch of steps, runs every phase as a loop over contiguous slices with no dependency between
 //! iterations (which the compiler turns into AVX2 code), and copies back. The arithmetic is the
-//! same as `cosserat_model::energy::accumulate_forces` and `constraints::distance`; the tests
+//! same as `cosserat_model::energy::accumulate_forces` and `cosserat_constraints::distance`; the tests
 //! in `stepper.rs` hold the two to agreement.
 
 use cosserat_model::{Quat, Real, RodParams, RodState, Vec3};

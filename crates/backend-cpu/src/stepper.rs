@@ -1,53 +1,21 @@
 //! The time step (paper Fig. 5, without collisions) and its parallel driver.
 
-use crate::ends::EndCondition;
 use crate::guide::Guide;
-use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
-use crate::reaction::{EndReaction, Reactions};
+use crate::mesh_contact::{MeshContactSettings, RodMeshContact};
+use crate::reaction::Reactions;
 use crate::soa::{self, SoaParams, SoaState};
-use constraints::{
+use cosserat_constraints::{
     ContactSet, KinematicImpulses, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa,
 };
 use cosserat_model::energy::{bend_damping_node, stretch_damping_element};
 use cosserat_model::quat::rotate_inv;
 use cosserat_model::{Real, RodParams, RodState, Vec3};
-
-/// Serial or parallel execution, chosen at run time.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Par {
-    /// One thread.
-    #[default]
-    Serial,
-    /// Rods spread over rayon's thread pool (serial when the `rayon` feature is off).
-    Rayon,
-}
-
-/// Solver settings shared by every rod of a simulation.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SolverSettings<T: Real> {
-    /// Time step `h` [s].
-    pub dt: T,
-    /// Distance-constraint sweeps per step (the paper uses 10).
-    pub iterations: usize,
-    /// Order of each sweep.
-    pub ordering: Ordering,
-    /// Extensible mode (stretch energy, no distance constraints) instead of inextensible.
-    pub extensible: bool,
-    /// Gravitational acceleration [m/s²].
-    pub gravity: Vec3<T>,
-    /// A segment stretched or compressed by more than this fraction of its rest length means the
-    /// simulation has diverged.
-    pub divergence_strain: T,
-}
-
-/// A constant external force on one point.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointLoad<T: Real> {
-    /// Index of the point.
-    pub point: usize,
-    /// Force [N], world frame.
-    pub force: Vec3<T>,
-}
+use cosserat_problem::CollisionStats;
+use cosserat_problem::EndCondition;
+use cosserat_problem::EndReaction;
+pub(crate) use cosserat_problem::{
+    DivergedQuantity, Divergence, Par, PointLoad, SolverSettings, StepStats,
+};
 
 /// One rod as the CPU backend steps it: state, parameters, end conditions, loads and scratch.
 #[derive(Clone, Debug)]
@@ -113,12 +81,12 @@ impl HeldPath {
 }
 
 /// State of the direct (Newton, tridiagonal) distance-constraint solver of one rod
-/// (`constraints::direct`): settings, scratch, and array-of-structs copies of the working
+/// (`cosserat_constraints::direct`): settings, scratch, and array-of-structs copies of the working
 /// layout's positions and velocities, which that solver takes.
 #[derive(Clone, Debug)]
 pub(crate) struct DirectState<T: Real> {
-    settings: constraints::direct::DirectSettings,
-    scratch: constraints::direct::DirectScratch,
+    settings: cosserat_constraints::direct::DirectSettings,
+    scratch: cosserat_constraints::direct::DirectScratch,
     r: Vec<Vec3<T>>,
     v: Vec<Vec3<T>>,
 }
@@ -131,7 +99,7 @@ impl<T: Real> DirectState<T> {
             self.r[i] = w.r.get(i);
             self.v[i] = w.v.get(i);
         }
-        constraints::direct::solve_distance_direct(
+        cosserat_constraints::direct::solve_distance_direct(
             &self.r,
             &mut self.v,
             &p.inv_masses,
@@ -196,16 +164,19 @@ impl<T: Real> CpuRod<T> {
     }
 
     /// Replaces the iterative distance-constraint sweeps by the exact direct solver
-    /// (`constraints::direct`: Newton iterations on the tridiagonal system `J M⁻¹ Jᵀ λ = b`),
+    /// (`cosserat_constraints::direct`: Newton iterations on the tridiagonal system `J M⁻¹ Jᵀ λ = b`),
     /// which leaves every segment at its rest length to the solver's tolerance after each
     /// step. Contacts, if any, are then swept `iterations` times. End reactions are not tracked
     /// through it.
     #[must_use]
-    pub fn with_direct_solver(mut self, settings: constraints::direct::DirectSettings) -> Self {
+    pub fn with_direct_solver(
+        mut self,
+        settings: cosserat_constraints::direct::DirectSettings,
+    ) -> Self {
         let n = self.elements();
         self.direct = Some(Box::new(DirectState {
             settings,
-            scratch: constraints::direct::DirectScratch::new(n),
+            scratch: cosserat_constraints::direct::DirectScratch::new(n),
             r: vec![Vec3::zeros(); n + 1],
             v: vec![Vec3::zeros(); n + 1],
         }));
@@ -240,6 +211,43 @@ impl<T: Real> CpuRod<T> {
         self.reaction.as_ref().map(|r| r.max_filtered())
     }
 
+    /// Replaces the condition at end `end` (0: first point, 1: last point). A change of motion
+    /// takes effect at the next step; a change of how the end is held (free, pinned, clamped)
+    /// also gives the end point back its mass or takes it away, and restarts the reaction
+    /// bookkeeping and the constraint solver's cached inverse masses.
+    ///
+    /// # Panics
+    /// If `end > 1`.
+    pub fn set_end_condition(&mut self, end: usize, condition: EndCondition<T>) {
+        let old = self.ends[end];
+        self.ends[end] = condition;
+        if old.kind == condition.kind {
+            return;
+        }
+        let n = self.elements();
+        let point = if end == 0 { 0 } else { n };
+        self.params.inv_masses[point] = if condition.holds_point() {
+            T::zero()
+        } else {
+            T::one() / self.params.masses[point]
+        };
+        self.work_params = SoaParams::new(&self.params);
+        self.red_black = None;
+        self.held_path[end] = HeldPath::default();
+        let held = [self.ends[0].holds_point(), self.ends[1].holds_point()];
+        let cutoff = self.reaction.as_ref().map(|r| r.cutoff());
+        self.reaction = (held[0] || held[1]).then(|| {
+            let mut r = Reactions::new(
+                held,
+                [self.ends[0].holds_frame(), self.ends[1].holds_frame()],
+            );
+            if let Some(hz) = cutoff {
+                r.set_cutoff(hz);
+            }
+            Box::new(r)
+        });
+    }
+
     /// Number of elements.
     pub fn elements(&self) -> usize {
         self.state.elements()
@@ -261,93 +269,6 @@ impl<T: Real> CpuRod<T> {
     /// mesh.
     pub fn contacts(&self) -> Option<&ContactSet<T>> {
         self.mesh.as_ref().map(|m| &m.contacts)
-    }
-}
-
-/// What went wrong when a rod diverged.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum DivergedQuantity {
-    /// A point position became NaN or infinite.
-    NonFinitePosition,
-    /// A frame became NaN, infinite or degenerate.
-    NonFiniteFrame,
-    /// A segment's length ratio `l / l0` left the allowed band.
-    Strain(f64),
-    /// A point moved faster than the allowed speed [m/s]: energy is running away while the
-    /// lengths still hold (an explicit scheme past its stable step).
-    Speed(f64),
-    /// The stiff solver's step ended with this residual (a strain, or a bend–twist angle per
-    /// element), far above its tolerance (`StiffSettings::halve_above`), also in halves.
-    Unconverged(f64),
-}
-
-/// A rod that diverged: which one, where, when, and what.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Divergence {
-    /// Index of the rod in the simulation.
-    pub rod: usize,
-    /// The first offending element (or point, for positions).
-    pub element: usize,
-    /// Step index at which it was detected.
-    pub step: u64,
-    /// The quantity that left its bounds.
-    pub quantity: DivergedQuantity,
-}
-
-impl std::fmt::Display for Divergence {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let what = match self.quantity {
-            DivergedQuantity::NonFinitePosition => "position is not finite".to_string(),
-            DivergedQuantity::NonFiniteFrame => "frame is not finite".to_string(),
-            DivergedQuantity::Strain(s) => {
-                format!("strain |l/l0 - 1| = {s:.3e} exceeds the divergence limit")
-            }
-            DivergedQuantity::Speed(v) => {
-                format!("speed {v:.3e} m/s exceeds the divergence limit")
-            }
-            DivergedQuantity::Unconverged(r) => {
-                format!("the stiff solver's step ended at residual {r:.3e}, far from converged")
-            }
-        };
-        write!(
-            f,
-            "simulation diverged: rod {}, element {}, step {}: {what} (reduce dt or raise the damping)",
-            self.rod, self.element, self.step
-        )
-    }
-}
-
-impl std::error::Error for Divergence {}
-
-/// Per-step measurements of one rod.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepStats {
-    /// Smallest segment length ratio `l / l0` after the step.
-    pub min_stretch: f64,
-    /// Largest segment length ratio `l / l0` after the step.
-    pub max_stretch: f64,
-}
-
-impl StepStats {
-    /// The statistics of no step (the identity of [`Self::merged`]).
-    pub fn none() -> Self {
-        Self {
-            min_stretch: f64::MAX,
-            max_stretch: 0.0,
-        }
-    }
-
-    /// The statistics of two runs together.
-    pub fn merged(self, other: Self) -> Self {
-        Self {
-            min_stretch: self.min_stretch.min(other.min_stretch),
-            max_stretch: self.max_stretch.max(other.max_stretch),
-        }
-    }
-
-    /// Largest `|l / l0 − 1|`.
-    pub fn max_strain(&self) -> f64 {
-        (self.max_stretch - 1.0).max(1.0 - self.min_stretch)
     }
 }
 
@@ -661,8 +582,14 @@ pub(crate) fn gauss_seidel_sweep<T: Real>(
     let lo = usize::from(track[0] && n > 0);
     let hi = if track[1] { n.saturating_sub(1) } else { n };
     if lo == 1 {
-        distance[0] +=
-            constraints::project_distance_soa(r, [vx, vy, vz], inv_masses, rest_lengths[0], h, 0);
+        distance[0] += cosserat_constraints::project_distance_soa(
+            r,
+            [vx, vy, vz],
+            inv_masses,
+            rest_lengths[0],
+            h,
+            0,
+        );
     }
     if hi > lo {
         solve_distance_gauss_seidel_soa(
@@ -675,7 +602,7 @@ pub(crate) fn gauss_seidel_sweep<T: Real>(
     }
     if track[1] && n > 0 && hi >= lo {
         // The impulse on point n − 1 is minus the one on the held point n.
-        distance[1] -= constraints::project_distance_soa(
+        distance[1] -= cosserat_constraints::project_distance_soa(
             r,
             [vx, vy, vz],
             inv_masses,

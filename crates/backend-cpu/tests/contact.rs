@@ -1,7 +1,7 @@
 //! Rods against static meshes: resting contact, Coulomb friction on an incline, and a wire
 //! pushed into a wall.
 
-use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod_batch};
+use cosserat_backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod_batch};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 

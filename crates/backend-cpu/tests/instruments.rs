@@ -1,12 +1,12 @@
 //! Interacting instruments: bindings (paper section 3.4), self-contact (section 3.5) and the
 //! reaction force at held ends.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     BindingSpec, Coupling, CpuRod, EndCondition, MeshContactSettings, Ordering, PrescribedMotion,
     RodContactSpec, SolverSettings, StepStats, step_coupled_batch, step_rod,
 };
-use collide::MeshCollider;
-use constraints::{BindingVariant, Friction};
+use cosserat_collide::MeshCollider;
+use cosserat_constraints::{BindingVariant, Friction};
 use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 use std::sync::Arc;
@@ -203,7 +203,7 @@ fn catheter_and_wire(
         &cath,
         [EndCondition::clamped(), EndCondition::free()],
     );
-    outer.loads.push(backend_cpu::PointLoad {
+    outer.loads.push(cosserat_backend_cpu::PointLoad {
         point: 20,
         force: Vec3::new(0.0, 2e-4, 0.0),
     });
@@ -413,7 +413,7 @@ fn min_pair_distance(p: &[Vec3<f64>], skip: usize) -> f64 {
     for i in 0..a.len() - 1 {
         for j in i + skip + 1..a.len() - 1 {
             let (_, _, c1, c2) =
-                collide::rods::closest_points_segments(a[i], a[i + 1], a[j], a[j + 1]);
+                cosserat_collide::rods::closest_points_segments(a[i], a[i + 1], a[j], a[j + 1]);
             let d = ((c1[0] - c2[0]).powi(2) + (c1[1] - c2[1]).powi(2) + (c1[2] - c2[2]).powi(2))
                 .sqrt();
             best = best.min(d);

@@ -1,6 +1,6 @@
 //! The CPU stepper against the model's reference definitions, and its own invariants.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, DivergedQuantity, EndCondition, Ordering, Par, PrescribedMotion, SolverSettings,
     step_rod, step_rod_batch, step_rods,
 };

@@ -3,8 +3,8 @@
 //! and short stability runs of every material preset. The long runs (10 s of simulated time,
 //! 500 elements) are in `examples/stiff_stability.rs`.
 
-use backend_cpu::stiff::constraints::{bend_twist, stretch_shear};
-use backend_cpu::{
+use cosserat_backend_cpu::stiff::constraints::{bend_twist, stretch_shear};
+use cosserat_backend_cpu::{
     CpuRod, DivergedQuantity, EndCondition, Integrator, Ordering, Par, PointLoad, PrescribedMotion,
     Refactor, SolverSettings, StiffScratch, StiffSettings, step_rod_stiff, step_rods_stiff,
 };
@@ -444,7 +444,12 @@ fn released_cantilever_swings_at_its_first_frequency() {
 fn pinned_push(
     p: &Preset,
     stiff: &StiffSettings,
-) -> (Result<(), String>, f64, f64, backend_cpu::StiffReport) {
+) -> (
+    Result<(), String>,
+    f64,
+    f64,
+    cosserat_backend_cpu::StiffReport,
+) {
     let n = 40;
     let motion = PrescribedMotion {
         velocity: Vec3::new(0.02, 0.0, 0.0),
@@ -633,7 +638,7 @@ fn torque_reaches_the_tip_as_in_the_explicit_scheme() {
     let explicit = spin_up(p, |rod, t| {
         let s = settings::<f64>(explicit_dt, Vec3::zeros(), false);
         let n = (1e-2 / explicit_dt).round() as u64;
-        backend_cpu::step_rod_batch(rod, &s, t, 0, (t / explicit_dt) as u64, n).unwrap();
+        cosserat_backend_cpu::step_rod_batch(rod, &s, t, 0, (t / explicit_dt) as u64, n).unwrap();
     });
     for dt in [1e-3, 1e-4] {
         let mut scratch = StiffScratch::new();

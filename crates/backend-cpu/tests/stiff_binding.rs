@@ -4,11 +4,11 @@
 //! stepped alone (one-way), and for a wire pushed through a bent catheter (it follows the
 //! centreline and slides freely).
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     BindingSpec, CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, SolverSettings,
     StepStats, StiffBindings, StiffScratch, StiffSettings, step_bound_stiff,
 };
-use constraints::BindingVariant;
+use cosserat_constraints::BindingVariant;
 use cosserat_model::presets::{Preset, preset};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Real, Vec3};
@@ -213,7 +213,7 @@ fn one_way_leaves_the_catheter_as_it_is_alone() {
     let mut rods = vec![make_outer(), inner];
     let (bindings, _) = step_pair(&mut rods, BindingVariant::OneWay, &s, 200);
     let mut alone = make_outer();
-    backend_cpu::step_rod_stiff(
+    cosserat_backend_cpu::step_rod_stiff(
         &mut alone,
         &s,
         &stiff,

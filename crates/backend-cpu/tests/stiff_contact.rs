@@ -2,7 +2,7 @@
 //! `contact.rs` for the explicit scheme (resting contact, Coulomb friction on an incline
 //! against its analytic motion, a wire pushed into a wall), and a stiff guidewire on a floor.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, EndCondition, Ordering, SolverSettings, StiffScratch, StiffSettings, step_rod_stiff,
 };
 use cosserat_model::presets::preset;
@@ -209,8 +209,8 @@ fn a_wire_pushed_into_a_wall_buckles_at_a_millisecond() {
 /// dt 1 ms.
 #[test]
 fn reused_contact_queries_give_the_steps_of_full_queries() {
-    use backend_cpu::PrescribedMotion;
-    use collide::{MeshCollider, Vessel};
+    use cosserat_backend_cpu::PrescribedMotion;
+    use cosserat_collide::{MeshCollider, Vessel};
     let vessel = Vessel::default_tree().unwrap();
     let collider = std::sync::Arc::new(MeshCollider::new(vessel.mesh.clone()));
     let entry = Vec3::from(vessel.entry_point);
@@ -280,7 +280,7 @@ fn a_wire_pushed_along_a_floor_slides_as_a_whole() {
     let r = nitinol.radius;
     let floor = square(Vec3::zeros(), Vec3::x(), Vec3::y(), 1.0);
     let speed = 3e-3;
-    let push = backend_cpu::PrescribedMotion::push(Vec3::x() * speed);
+    let push = cosserat_backend_cpu::PrescribedMotion::push(Vec3::x() * speed);
     let ends = [EndCondition::clamped().driven(push), EndCondition::free()];
     let start = Vec3::new(-0.025, 0.0, r);
     let mut rod =

@@ -19,8 +19,10 @@
 //! workgroup layout, threads per workgroup, rods per workgroup), so that one run on the device
 //! says where the time goes.
 
-use backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod};
-use backend_gpu::{GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant};
+use cosserat_backend_cpu::{CpuRod, EndCondition, Ordering, SolverSettings, step_rod};
+use cosserat_backend_gpu::{
+    GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant,
+};
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Vec3};
 use serde_json::{Value, json};

@@ -1,6 +1,6 @@
 //! GPU time stepping of Cosserat rods with wgpu compute shaders.
 //!
-//! The step is the CPU backend's (`backend_cpu::step_rod`, the paper's Fig. 5 without
+//! The step is the CPU backend's (`cosserat_backend_cpu::step_rod`, the paper's Fig. 5 without
 //! collisions): forces and torques → integrate velocities and Euler's equations → held ends take
 //! their prescribed velocities → red–black distance-constraint sweeps (inextensible mode) →
 //! integrate positions and frames → NaN / strain check. What differs is where the rod lives
@@ -32,16 +32,18 @@
 
 mod shader;
 mod sim;
+mod stepper;
 
-pub use backend_cpu::stepper::DivergedQuantity;
-pub use backend_cpu::{
-    Divergence, EndCondition, EndKind, Ordering, PointLoad, PrescribedMotion, SolverSettings,
+pub use cosserat_problem::{
+    DivergedQuantity, Divergence, EndCondition, EndKind, Ordering, PointLoad, PrescribedMotion,
+    SolverSettings,
 };
-pub use sim::{AdapterSummary, GpuSimulation};
+pub use sim::{AdapterSummary, GpuField, GpuSimulation, GpuSnapshot};
+pub use stepper::GpuStepper;
 
 use cosserat_model::{RodParams, RodState};
 
-/// One rod to simulate on the GPU: the same pieces as `backend_cpu::CpuRod::new` takes.
+/// One rod to simulate on the GPU: the same pieces as `cosserat_backend_cpu::CpuRod::new` takes.
 #[derive(Clone, Debug)]
 pub struct GpuRodInput {
     /// Initial state.

@@ -146,6 +146,28 @@ struct Pending {
     mapped: Arc<AtomicBool>,
 }
 
+/// A field of a rod's state on the device, for [`GpuSimulation::write_rod_field`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GpuField {
+    /// Centreline points.
+    Positions,
+    /// Point velocities.
+    Velocities,
+    /// Frames as `[x, y, z, w]`.
+    Frames,
+    /// Frame angular velocities (body coordinates).
+    AngularVelocities,
+}
+
+/// The state of a [`GpuSimulation`] at one step ([`GpuSimulation::snapshot`]).
+#[derive(Clone, Debug)]
+pub struct GpuSnapshot {
+    state: Vec<u8>,
+    steps: u64,
+    drives: Vec<DriveG>,
+    tracks: Vec<EndTrack>,
+}
+
 /// Rods stepped on the GPU. See the crate docs for the kernel paths.
 pub struct GpuSimulation {
     device: wgpu::Device,
@@ -1311,6 +1333,128 @@ impl GpuSimulation {
                 }
             })
             .collect())
+    }
+
+    /// The whole device state (points, frames, their velocities, the status words) and the
+    /// host's bookkeeping of held ends, for [`Self::restore`] (blocking, one round trip).
+    pub fn snapshot(&mut self) -> Result<GpuSnapshot, GpuError> {
+        self.ensure_idle()?;
+        let bytes = 16 * self.slots;
+        let status_bytes = 16 * self.plan.items.len() as u64;
+        let state = self.read_buffers(&[
+            (Part::Positions, bytes),
+            (Part::Velocities, bytes),
+            (Part::Frames, bytes),
+            (Part::AngularVelocities, bytes),
+            (Part::Status, status_bytes),
+        ])?;
+        Ok(GpuSnapshot {
+            state,
+            steps: self.steps,
+            drives: self.drives.clone(),
+            tracks: self.tracks.clone(),
+        })
+    }
+
+    /// Returns to a snapshot of this simulation: the next steps are, bit for bit, those that
+    /// followed it.
+    pub fn restore(&mut self, snapshot: &GpuSnapshot) -> Result<(), GpuError> {
+        self.ensure_idle()?;
+        let bytes = (16 * self.slots) as usize;
+        let status_bytes = 16 * self.plan.items.len();
+        if snapshot.state.len() != 4 * bytes + status_bytes
+            || snapshot.drives.len() != self.drives.len()
+        {
+            return Err(GpuError::InvalidInput(
+                "the snapshot was taken of other rods".into(),
+            ));
+        }
+        let st = &self.states[self.current];
+        for (k, buf) in [&st.pos, &st.vel, &st.frm, &st.omg].into_iter().enumerate() {
+            self.queue
+                .write_buffer(buf, 0, &snapshot.state[k * bytes..(k + 1) * bytes]);
+        }
+        self.queue
+            .write_buffer(&self.status_buf, 0, &snapshot.state[4 * bytes..]);
+        self.steps = snapshot.steps;
+        self.drives.clone_from(&snapshot.drives);
+        self.tracks.clone_from(&snapshot.tracks);
+        self.drives_dirty = true;
+        self.queue.submit([]);
+        self.take_wgpu_error()
+    }
+
+    /// Overwrites one field of rod `rod` (`xyz` of each of its points or frames; frames as
+    /// `[x, y, z, w]`), keeping whatever else the device stores beside them.
+    pub fn write_rod_field(
+        &mut self,
+        rod: usize,
+        field: GpuField,
+        values: &[[f32; 4]],
+    ) -> Result<(), GpuError> {
+        self.ensure_idle()?;
+        let Some(&(base, n)) = self.rods.get(rod) else {
+            return Err(GpuError::InvalidInput(format!("no rod {rod}")));
+        };
+        let (base, n) = (base as usize, n as usize);
+        let (part, count, width) = match field {
+            GpuField::Positions => (Part::Positions, n + 1, 3),
+            GpuField::Velocities => (Part::Velocities, n + 1, 3),
+            GpuField::Frames => (Part::Frames, n, 4),
+            GpuField::AngularVelocities => (Part::AngularVelocities, n, 3),
+        };
+        if values.len() != count {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod}: expected {count} entries, got {}",
+                values.len()
+            )));
+        }
+        let bytes = self.read_buffers(&[(part, 16 * self.slots)])?;
+        let mut words: Vec<[f32; 4]> = bytemuck::cast_slice(&bytes).to_vec();
+        for (w, v) in words[base..base + count].iter_mut().zip(values) {
+            w[..width].copy_from_slice(&v[..width]);
+        }
+        let st = &self.states[self.current];
+        let buf = match part {
+            Part::Positions => &st.pos,
+            Part::Velocities => &st.vel,
+            Part::Frames => &st.frm,
+            _ => &st.omg,
+        };
+        self.queue.write_buffer(
+            buf,
+            16 * base as u64,
+            bytemuck::cast_slice(&words[base..base + count]),
+        );
+        if field == GpuField::Positions {
+            // A held end starts its path again from where it was put.
+            for end in 0..2 {
+                let i = 2 * rod + end;
+                let p = words[base + if end == 0 { 0 } else { n }];
+                self.tracks[i] = EndTrack {
+                    origin: [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])],
+                    reference: self.steps,
+                };
+                let mut d = self.drives[i];
+                d.window[2] = self.steps as u32;
+                d.origin = [p[0], p[1], p[2], 0.0];
+                self.drives[i] = d;
+            }
+            self.drives_dirty = true;
+        }
+        self.queue.submit([]);
+        self.take_wgpu_error()
+    }
+
+    /// Refuses to change the state while a position readback is in flight.
+    fn ensure_idle(&self) -> Result<(), GpuError> {
+        if self.pending.is_empty() {
+            Ok(())
+        } else {
+            Err(GpuError::InvalidInput(
+                "read the requested positions before changing or saving the state".into(),
+            ))
+        }
     }
 
     /// GPU time in seconds of all batches submitted since the last call, from timestamp queries

@@ -17,10 +17,12 @@
 //! Tests that need an adapter print a note and pass when there is none (machines without
 //! Vulkan); CI installs Mesa's lavapipe, where they run.
 
-use backend_cpu::{
+use cosserat_backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, SolverSettings, step_rod,
 };
-use backend_gpu::{GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant};
+use cosserat_backend_gpu::{
+    GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant,
+};
 use cosserat_model::Vec3;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, RodParams, RodState};

@@ -8,7 +8,7 @@
 
 use std::hint::black_box;
 
-use collide::{
+use cosserat_collide::{
     BroadPhase, Chain, ContactBuffer, MeshCollider, RodCollider, RodCollisionConfig, Vessel,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};

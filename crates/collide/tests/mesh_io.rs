@@ -1,6 +1,6 @@
 //! Mesh loading and validation: every error case, the repairs, and the real meshes.
 
-use collide::{
+use cosserat_collide::{
     Bvh, MeshCollider, MeshError, TriMesh, load_mesh, load_obj, load_stl, parse_obj, parse_stl,
 };
 use std::io::Write;
@@ -356,7 +356,7 @@ fn check_real(path: &str, triangles: usize) {
     // A point on a vertex, with a radius: at least the triangles around it are in contact.
     let c = MeshCollider::new(mesh.clone());
     let v: [f64; 3] = mesh.vertices()[mesh.triangles()[0][0] as usize].into();
-    let mut buf = collide::ContactBuffer::new();
+    let mut buf = cosserat_collide::ContactBuffer::new();
     c.detect(&[v], 1e-4, &mut buf);
     assert!(buf.contacts().len() >= 3);
 }

@@ -7,8 +7,8 @@
 
 use std::collections::BTreeMap;
 
-use collide::vessel::{VesselParams, generate};
-use collide::{Bvh, ContactBuffer, MeshCollider, TriMesh};
+use cosserat_collide::vessel::{VesselParams, generate};
+use cosserat_collide::{Bvh, ContactBuffer, MeshCollider, TriMesh};
 use parry3d_f64::bounding_volume::Aabb;
 use parry3d_f64::math::Vector as PV;
 use parry3d_f64::query::PointQuery;

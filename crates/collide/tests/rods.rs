@@ -1,7 +1,7 @@
 //! Rod–rod and self-collision: against brute force, and on known configurations.
 
-use collide::rods::closest_points_segments;
-use collide::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
+use cosserat_collide::rods::closest_points_segments;
+use cosserat_collide::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 use rand::rngs::StdRng;

@@ -1,7 +1,7 @@
 //! The procedural vessel: valid mesh, size, orientation, inside/outside behaviour.
 
-use collide::vessel::{Centreline, VesselParams, generate};
-use collide::{Bvh, ContactBuffer, MeshCollider, Vessel};
+use cosserat_collide::vessel::{Centreline, VesselParams, generate};
+use cosserat_collide::{Bvh, ContactBuffer, MeshCollider, Vessel};
 
 fn default_vessel() -> (Vessel, MeshCollider) {
     let v = Vessel::default_tree().expect("default vessel must generate");

@@ -17,18 +17,7 @@
 
 use cosserat_model::{Real, Vec3};
 
-/// The order in which the constraints of one sweep are visited.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Ordering {
-    /// Elements `0, 1, 2, …` in turn, each seeing the previous one's impulse: the fastest
-    /// convergence per sweep; inherently serial.
-    #[default]
-    GaussSeidel,
-    /// All even elements, then all odd ones. Constraints of one colour share no point, so each
-    /// half-sweep can run in parallel (threads, SIMD lanes or GPU invocations) with the same
-    /// result in any order.
-    RedBlack,
-}
+pub use cosserat_problem::Ordering;
 
 /// Applies the impulse of the distance constraint between points `a` and `a + 1`.
 #[inline(always)]

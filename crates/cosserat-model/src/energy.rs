@@ -142,6 +142,19 @@ pub struct Energies {
 }
 
 impl Energies {
+    /// The energies of two rods together.
+    #[must_use]
+    pub fn sum(self, other: Self) -> Self {
+        Self {
+            bend_twist: self.bend_twist + other.bend_twist,
+            parallel: self.parallel + other.parallel,
+            stretch: self.stretch + other.stretch,
+            gravity: self.gravity + other.gravity,
+            kinetic_translation: self.kinetic_translation + other.kinetic_translation,
+            kinetic_rotation: self.kinetic_rotation + other.kinetic_rotation,
+        }
+    }
+
     /// Elastic plus gravitational potential energy.
     pub fn potential(&self) -> f64 {
         self.bend_twist + self.parallel + self.stretch + self.gravity

@@ -41,7 +41,7 @@ use super::work::Work;
 use super::{Consts, Coupled, LinePin, StiffScratch, StiffSettings, step_rod_stiff};
 use crate::coupling::{BindingSpec, CouplingStats};
 use crate::stepper::{CpuRod, Divergence, SolverSettings, StepStats};
-use constraints::{BindingSet, BindingVariant};
+use cosserat_constraints::{BindingSet, BindingVariant};
 use cosserat_model::{Real, Vec3};
 
 /// One binding: its spec's rods and the explicit scheme's nearest-point search.

@@ -45,7 +45,7 @@ use super::lanes::V3s;
 use super::work::Work;
 use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
-use constraints::{Friction, PointContact};
+use cosserat_constraints::{Friction, PointContact};
 use cosserat_model::Vec3;
 
 /// Largest number of re-solves per step after the active set changed.

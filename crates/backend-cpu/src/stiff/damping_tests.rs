@@ -12,10 +12,10 @@
 
 use super::*;
 use crate::Ordering;
-use crate::ends::EndCondition;
 use crate::stepper::PointLoad;
 use cosserat_model::presets::preset;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
+use cosserat_problem::ends::EndCondition;
 
 fn settings(dt: f64, extensible: bool) -> SolverSettings<f64> {
     SolverSettings {

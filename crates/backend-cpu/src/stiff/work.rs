@@ -875,7 +875,6 @@ fn put(emit: &mut impl FnMut(usize, [F; 4]), entry: usize, m: M, mask: F) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ends::EndCondition;
     use crate::stepper::CpuRod;
     use crate::stiff::constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
     use crate::stiff::direct::{Masses, blocks};
@@ -883,6 +882,7 @@ mod tests {
     use cosserat_model::presets::preset;
     use cosserat_model::quat::exp_rotation;
     use cosserat_model::rod::{RodSpec, build_rod};
+    use cosserat_problem::ends::EndCondition;
 
     /// A curved, twisted rod of `n` elements (not a multiple of four, so that the last chunk
     /// is partial) with a clamped start and a free end, its constants, and a working state

@@ -1,8 +1,8 @@
 //! Scenes shared by the contact tests of both schemes (`contact.rs`, `stiff_contact.rs`).
 
-use backend_cpu::{CpuRod, EndCondition, MeshContactSettings, PrescribedMotion};
-use collide::{MeshCollider, TriMesh};
-use constraints::Friction;
+use cosserat_backend_cpu::{CpuRod, EndCondition, MeshContactSettings, PrescribedMotion};
+use cosserat_collide::{MeshCollider, TriMesh};
+use cosserat_constraints::Friction;
 use cosserat_model::rod::{RodSpec, build_rod};
 use cosserat_model::{Material, Vec3};
 use std::sync::Arc;

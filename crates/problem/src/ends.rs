@@ -43,6 +43,27 @@ impl<T: Real> PrescribedMotion<T> {
         }
     }
 
+    /// A constant velocity and angular velocity from time `from` on, until replaced: what a
+    /// haptic hand or a controller sets at a tick.
+    pub fn constant(velocity: Vec3<T>, angular_velocity: Vec3<T>, from: f64) -> Self {
+        Self {
+            velocity,
+            angular_velocity,
+            start_time: from,
+            end_time: f64::INFINITY,
+        }
+    }
+
+    /// The same motion in another precision.
+    pub fn cast<U: Real>(&self) -> PrescribedMotion<U> {
+        PrescribedMotion {
+            velocity: cast_vec(&self.velocity),
+            angular_velocity: cast_vec(&self.angular_velocity),
+            start_time: self.start_time,
+            end_time: self.end_time,
+        }
+    }
+
     /// Velocity and angular velocity in effect at time `t`.
     pub fn at(&self, t: f64) -> (Vec3<T>, Vec3<T>) {
         if t >= self.start_time && t < self.end_time {
@@ -87,6 +108,13 @@ impl<T: Real> EndCondition<T> {
         self.motion = Some(motion);
         self
     }
+    /// The same condition in another precision.
+    pub fn cast<U: Real>(&self) -> EndCondition<U> {
+        EndCondition {
+            kind: self.kind,
+            motion: self.motion.map(|m| m.cast()),
+        }
+    }
     /// Whether the end point is kinematic.
     pub fn holds_point(&self) -> bool {
         self.kind != EndKind::Free
@@ -100,4 +128,13 @@ impl<T: Real> EndCondition<T> {
         self.motion
             .map_or((Vec3::zeros(), Vec3::zeros()), |m| m.at(t))
     }
+}
+
+/// `v` in another precision.
+pub fn cast_vec<T: Real, U: Real>(v: &Vec3<T>) -> Vec3<U> {
+    Vec3::new(
+        U::lit(v.x.to_f64()),
+        U::lit(v.y.to_f64()),
+        U::lit(v.z.to_f64()),
+    )
 }
