@@ -33,6 +33,6 @@ pub use cosserat_model::{self, Material};
 pub use environment::Environment;
 pub use sim::{
     Backend, BuildError, Capabilities, Capability, ContactReport, ContactSample, ControlError,
-    RodBuilder, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot, StateField,
-    StepError, Stepper, StepperInfo, StiffSettings, StiffSummary,
+    RodBuilder, RodContactSpec, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot,
+    StateField, StepError, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };

@@ -554,10 +554,8 @@ impl SimulationBuilder {
 
     /// What the scene asks of its stepper.
     fn needs(&self) -> Capabilities {
-        let held = self
-            .rods
-            .iter()
-            .any(|r| r.ends.iter().any(|e| e.holds_point()));
+        // Reactions are not a need: a stepper without them runs held ends and reports no force
+        // (`Simulation::end_reaction` is `None`).
         Capabilities::NONE
             .with_if(
                 Capability::MeshContact,
@@ -572,7 +570,6 @@ impl SimulationBuilder {
             .with_if(Capability::StiffScheme, self.stiff.is_some())
             .with_if(Capability::DirectConstraints, self.direct_constraints)
             .with_if(Capability::DoublePrecision, self.double_precision)
-            .with_if(Capability::Reactions, held && self.backend != Backend::Gpu)
     }
 }
 

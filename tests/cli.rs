@@ -258,6 +258,10 @@ fn the_gpu_backend_agrees_with_the_cpu() {
             err.contains("adapter"),
             "the GPU run failed for another reason than a missing adapter: {err}"
         );
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_GPU=1 but: {err}"
+        );
         eprintln!("note: no GPU adapter here, skipping: {err}");
         return;
     }

@@ -15,7 +15,8 @@
 //! [`REL_TOL`] leaves an order of magnitude over the worst case seen.
 //!
 //! Tests that need an adapter print a note and pass when there is none (machines without
-//! Vulkan); CI installs Mesa's lavapipe, where they run.
+//! Vulkan), unless `COSSERAT_REQUIRE_GPU=1`, which makes a missing adapter a failure; CI
+//! installs Mesa's lavapipe and sets it.
 
 use cosserat_backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, SolverSettings, step_rod,
@@ -139,6 +140,10 @@ fn gpu_variant(
     match GpuSimulation::with_variant(case.gpu_input(), settings, options, variant) {
         Ok(sim) => Some(sim),
         Err(GpuError::NoAdapter(why)) => {
+            assert!(
+                std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+                "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {why}"
+            );
             eprintln!("note: skipping GPU test, no adapter: {why}");
             None
         }

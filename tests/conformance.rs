@@ -1,0 +1,374 @@
+//! One conformance suite for every stepper: the explicit scheme in `f32` and `f64`, on rayon's
+//! pool, coupled rods, the stiff scheme, bound rods with the stiff scheme, and the GPU.
+//!
+//! Each stepper runs the same cases through the facade's control API and is held to the same
+//! statements:
+//! - a snapshot restored and stepped `N` times gives the state of the `N` steps that followed
+//!   it, bit for bit, also when the end's motion was changed in between;
+//! - a held end driven with [`Simulation::set_end_velocity`] moves by exactly `v · k · dt` over
+//!   `k` steps (to the rounding of its precision), and stops when told;
+//! - state written is state read, and a write moves the rod;
+//! - a scene that needs what a stepper lacks is refused with one error that lists all of it.
+//!
+//! The GPU cases run where an adapter exists (Mesa's lavapipe in CI). With
+//! `COSSERAT_REQUIRE_GPU=1` a missing adapter fails them instead of skipping them.
+
+use cosserat::cosserat_constraints::BindingVariant;
+use cosserat::{
+    Backend, EndCondition, EndKind, Material, RodBuilder, RodContactSpec, RodHandle, Simulation,
+    SimulationBuilder, StateField, StiffSettings,
+};
+
+const STIFF_DT: f64 = 1e-3;
+const EXPLICIT_DT: f64 = 1e-5;
+
+fn material() -> Material {
+    Material::new(1e6, 1e6 / 3.0, 1100.0, 5e-3)
+}
+
+fn wire(y: f64) -> RodBuilder {
+    RodBuilder::straight([0.0, y, 0.0], [1.0, 0.0, 0.0], 0.3, 10, material())
+        .clamp_start()
+        .damping(1e-6, 0.0, 1.0)
+}
+
+/// Every stepper, as (name, builder): each simulation's rod 0 has a clamped first end.
+fn steppers() -> Vec<(&'static str, SimulationBuilder)> {
+    let explicit = || SimulationBuilder::new().dt(EXPLICIT_DT).with_rod(wire(0.0));
+    let stiff = || {
+        SimulationBuilder::new()
+            .dt(STIFF_DT)
+            .double_precision(true)
+            .stiff_solver(Some(StiffSettings::default()))
+    };
+    let mut bound = stiff();
+    let outer = bound.add_rod(wire(0.0));
+    let inner = bound.add_rod(
+        RodBuilder::straight([-0.05, 0.0, 0.0], [1.0, 0.0, 0.0], 0.2, 20, material())
+            .clamp_start()
+            .damping(1e-6, 0.0, 1.0),
+    );
+    vec![
+        ("cpu explicit f32", explicit()),
+        ("cpu explicit f64", explicit().double_precision(true)),
+        (
+            "cpu-rayon explicit",
+            explicit().with_rod(wire(0.1)).backend(Backend::CpuRayon),
+        ),
+        (
+            "cpu coupled",
+            explicit()
+                .with_rod(wire(0.015))
+                .rod_contacts(RodContactSpec::default()),
+        ),
+        ("cpu stiff", stiff().with_rod(wire(0.0))),
+        (
+            "cpu stiff bound",
+            bound.bind(inner, outer, BindingVariant::TwoWay),
+        ),
+        ("gpu explicit", explicit().backend(Backend::Gpu)),
+    ]
+}
+
+/// Whether the GPU cases must run (CI sets it with lavapipe installed).
+fn gpu_required() -> bool {
+    std::env::var("COSSERAT_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+/// The simulations that can be built here; a missing GPU adapter skips the GPU case unless it
+/// is required.
+fn built() -> Vec<(&'static str, Simulation)> {
+    let mut out = Vec::new();
+    for (name, b) in steppers() {
+        match b.build() {
+            Ok(sim) => out.push((name, sim)),
+            Err(e) if name.starts_with("gpu") && e.to_string().contains("no GPU adapter") => {
+                assert!(!gpu_required(), "{name}: COSSERAT_REQUIRE_GPU=1 but {e}");
+                eprintln!("note: skipping {name}: {e}");
+            }
+            Err(e) if name.starts_with("gpu") && cfg!(not(feature = "gpu")) => {
+                assert!(!gpu_required(), "{name}: COSSERAT_REQUIRE_GPU=1 but {e}");
+                eprintln!("note: skipping {name}: {e}");
+            }
+            Err(e) => panic!("{name}: {e}"),
+        }
+    }
+    out
+}
+
+/// Every rod's positions and velocities.
+fn state(sim: &Simulation) -> Vec<Vec<[f64; 3]>> {
+    sim.rods()
+        .flat_map(|h| [sim.positions(h), sim.velocities(h)])
+        .collect()
+}
+
+fn dt(name: &str) -> f64 {
+    if name.contains("stiff") {
+        STIFF_DT
+    } else {
+        EXPLICIT_DT
+    }
+}
+
+#[test]
+fn a_restored_snapshot_repeats_the_steps_that_followed_it_bit_for_bit() {
+    for (name, mut sim) in built() {
+        let steps = if name.contains("stiff") { 5 } else { 40 };
+        let h = RodHandle(0);
+        sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let snap = sim.snapshot().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let play = |sim: &mut Simulation| {
+            sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+            sim.set_end_velocity(h, 0, [0.05, 0.0, 0.0], [0.0, 0.0, 2.0])
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+            (state(sim), sim.steps(), sim.time(), sim.end_reaction(h, 0))
+        };
+        let first = play(&mut sim);
+        sim.restore(&snap).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // The motion set after the snapshot is gone with the restore.
+        let held = sim
+            .end_condition(h, 0)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(
+            held.motion.is_none(),
+            "{name}: the restore brought back the end's motion"
+        );
+        assert_eq!(sim.steps(), steps, "{name}");
+        let second = play(&mut sim);
+        assert_eq!(first.1, second.1, "{name}: step counts");
+        assert_eq!(first.2.to_bits(), second.2.to_bits(), "{name}: times");
+        assert!(
+            first.0 == second.0,
+            "{name}: the replay differs from the original"
+        );
+        assert_eq!(first.3, second.3, "{name}: reactions");
+    }
+}
+
+#[test]
+fn a_driven_end_moves_exactly_as_told_and_stops_when_told() {
+    for (name, mut sim) in built() {
+        let h = RodHandle(0);
+        let start = sim.positions(h)[0];
+        let k = 25;
+        let v = [0.04, -0.02, 0.01];
+        sim.set_end_velocity(h, 0, v, [0.0; 3])
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.run(k).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let moved = sim.positions(h)[0];
+        // f32 rods hold their end on an f64 path and round it once per read.
+        let tol = if sim.is_double_precision() {
+            1e-12
+        } else {
+            1e-6
+        };
+        for c in 0..3 {
+            let want = start[c] + v[c] * k as f64 * dt(name);
+            assert!(
+                (moved[c] - want).abs() <= tol,
+                "{name}: coordinate {c} of the held end is {} after {k} steps, expected {want}",
+                moved[c]
+            );
+        }
+        sim.set_end_velocity(h, 0, [0.0; 3], [0.0; 3])
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.run(k).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let stopped = sim.positions(h)[0];
+        for c in 0..3 {
+            assert!(
+                (stopped[c] - moved[c]).abs() <= tol,
+                "{name}: the held end moved after it was stopped"
+            );
+        }
+        // A timed move arrives where it was sent.
+        let target = [moved[0] + 0.01, moved[1], moved[2] - 0.005];
+        sim.move_end_to(h, 0, target, None, 10.0 * dt(name))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.run(15).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let arrived = sim.positions(h)[0];
+        for c in 0..3 {
+            assert!(
+                (arrived[c] - target[c]).abs() <= tol,
+                "{name}: move_end_to ended at {arrived:?}, not {target:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn written_state_is_read_back_and_moves_the_rod() {
+    for (name, mut sim) in built() {
+        let h = RodHandle(0);
+        let n = sim
+            .stepper()
+            .elements(0)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut p = vec![[0.0; 3]; n + 1];
+        sim.read(h, StateField::Positions, &mut p)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let shifted: Vec<[f64; 3]> = p.iter().map(|q| [q[0], q[1], q[2] + 0.25]).collect();
+        sim.write(h, StateField::Positions, &shifted)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut back = vec![[0.0; 3]; n + 1];
+        sim.read(h, StateField::Positions, &mut back)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        for (a, b) in back.iter().zip(&shifted) {
+            for c in 0..3 {
+                assert!(
+                    (a[c] - b[c]).abs() < 1e-6,
+                    "{name}: wrote {b:?}, read {a:?}"
+                );
+            }
+        }
+        // Directors and frames agree: d3 of a straight rod along x is x.
+        let mut d3 = vec![[0.0; 3]; n];
+        sim.read(h, StateField::Director(2), &mut d3)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!((d3[0][0] - 1.0).abs() < 1e-5, "{name}: d3 = {:?}", d3[0]);
+        let mut frames = vec![[0.0; 4]; n];
+        sim.read_frames(h, &mut frames)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.write_frames(h, &frames)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        // The held end was moved with the rod and stays there.
+        sim.run(10).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let end = sim.positions(h)[0];
+        assert!(
+            (end[2] - shifted[0][2]).abs() < 1e-6,
+            "{name}: held end at {end:?}"
+        );
+        // Wrong lengths and values are refused with what was wrong.
+        let err = sim
+            .write(h, StateField::Positions, &shifted[..n])
+            .expect_err("a short buffer is refused");
+        assert!(err.to_string().contains("expected"), "{name}: {err}");
+        let mut bad = shifted.clone();
+        bad[3][1] = f64::NAN;
+        let err = sim
+            .write(h, StateField::Positions, &bad)
+            .expect_err("NaN is refused");
+        assert!(err.to_string().contains("entry 3"), "{name}: {err}");
+        assert!(
+            sim.set_end_velocity(RodHandle(9), 0, [0.0; 3], [0.0; 3])
+                .is_err()
+        );
+        assert!(sim.set_end_velocity(h, 2, [0.0; 3], [0.0; 3]).is_err());
+    }
+}
+
+#[test]
+fn loads_and_releases_act_where_the_stepper_can_do_them() {
+    for (name, mut sim) in built() {
+        let h = RodHandle(0);
+        let twin = sim.snapshot().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let steps = if name.contains("stiff") { 20 } else { 1000 };
+        let n = sim
+            .stepper()
+            .elements(0)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        match sim.set_loads(h, &[(n, [0.0, 0.0, -0.5])]) {
+            Ok(()) => {
+                sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+                let loaded = sim.positions(h)[n][2];
+                sim.restore(&twin).unwrap_or_else(|e| panic!("{name}: {e}"));
+                sim.set_loads(h, &[])
+                    .unwrap_or_else(|e| panic!("{name}: {e}"));
+                sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+                let free = sim.positions(h)[n][2];
+                assert!(
+                    loaded < free - 1e-4,
+                    "{name}: the tip load did not pull the tip down"
+                );
+            }
+            Err(e) => {
+                assert!(name.starts_with("gpu"), "{name}: {e}");
+                assert!(e.to_string().contains("loads"), "{name}: {e}");
+            }
+        }
+        sim.restore(&twin).unwrap_or_else(|e| panic!("{name}: {e}"));
+        match sim.hold_end(h, 0, EndKind::Free) {
+            Ok(()) => {
+                sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+                let fell = sim.positions(h)[0][2];
+                assert!(fell < -1e-4, "{name}: a released end did not fall ({fell})");
+                assert!(
+                    sim.end_reaction(h, 0).is_none(),
+                    "{name}: a free end has no reaction"
+                );
+                sim.hold_end(h, 0, EndKind::Pinned)
+                    .unwrap_or_else(|e| panic!("{name}: {e}"));
+                let pinned_at = sim.positions(h)[0];
+                sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+                assert_eq!(sim.positions(h)[0], pinned_at, "{name}: a pinned end moved");
+            }
+            Err(e) => {
+                let coupled = name.contains("coupled") || name.contains("bound");
+                assert!(coupled || name.starts_with("gpu"), "{name}: {e}");
+                assert!(
+                    e.to_string().contains("change how an end is held"),
+                    "{name}: {e}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_snapshot_of_another_stepper_is_refused() {
+    let mut sims = built();
+    let (a_name, mut a) = sims.remove(0);
+    let (b_name, mut b) = sims.remove(0);
+    let snap = a.snapshot().unwrap_or_else(|e| panic!("{a_name}: {e}"));
+    let err = b.restore(&snap).expect_err("another stepper's snapshot");
+    assert!(
+        err.to_string().contains("cannot restore"),
+        "{b_name}: {err}"
+    );
+}
+
+#[test]
+fn a_scene_that_needs_what_the_stepper_lacks_is_refused_with_everything_missing() {
+    // The GPU lacks the guide and f64 (and is checked before any adapter is asked for).
+    let err = SimulationBuilder::new()
+        .dt(EXPLICIT_DT)
+        .double_precision(true)
+        .backend(Backend::Gpu)
+        .with_rod(wire(0.0).guide(0.1))
+        .build()
+        .err()
+        .expect("refused");
+    let msg = err.to_string();
+    if cfg!(feature = "gpu") {
+        assert!(msg.contains("gpu explicit"), "{msg}");
+        assert!(msg.contains("introducer guide"), "{msg}");
+        assert!(msg.contains("f64"), "{msg}");
+    }
+    // The stiff scheme lacks rod contact.
+    let err = SimulationBuilder::new()
+        .dt(STIFF_DT)
+        .stiff_solver(Some(StiffSettings::default()))
+        .with_rod(wire(0.0))
+        .with_rod(wire(0.015))
+        .rod_contacts(RodContactSpec::default())
+        .build()
+        .err()
+        .expect("refused");
+    let msg = err.to_string();
+    assert!(msg.contains("cpu stiff bound"), "{msg}");
+    assert!(msg.contains("rod–rod"), "{msg}");
+    assert!(msg.contains("solver.scheme = \"explicit\""), "{msg}");
+    // The explicit scheme's capabilities as reported.
+    let sim = SimulationBuilder::new()
+        .dt(EXPLICIT_DT)
+        .with_rod(wire(0.0))
+        .build()
+        .expect("builds");
+    let caps = sim.capabilities();
+    assert!(caps.contains(cosserat::Capability::MeshContact));
+    assert!(!caps.contains(cosserat::Capability::DoublePrecision));
+    assert_eq!(sim.stepper_info().name, "cpu explicit");
+    let cond = sim.end_condition(RodHandle(0), 0).expect("end 0");
+    assert_eq!(cond, EndCondition::clamped());
+}
