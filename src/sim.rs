@@ -850,7 +850,7 @@ impl Simulation {
                 why: format!("end {end} of rod {} is free: hold it first", h.0),
             });
         }
-        if !(duration.is_finite() && duration >= 0.0) || !position.iter().all(|x| x.is_finite()) {
+        if !(duration.is_finite() && duration >= 0.0 && position.iter().all(|x| x.is_finite())) {
             return Err(ControlError::Value {
                 field: "move",
                 why: format!("duration {duration} s and position must be finite, duration ≥ 0"),

@@ -46,7 +46,7 @@ impl Capability {
             Capability::MeshContact => "mesh contact ([environment])",
             Capability::Guide => "an introducer guide",
             Capability::Bindings => "bindings ([[binding]])",
-            Capability::RodContact => "rod–rod and self-contact ([rod_contact])",
+            Capability::RodContact => "rod–rod contact and self-contact ([rod_contact])",
             Capability::StiffScheme => "the stiff scheme (solver.scheme = \"stiff\")",
             Capability::DirectConstraints => {
                 "direct distance constraints (solver.constraint_solver = \"direct\")"
