@@ -7,8 +7,9 @@
 
 use clap::{Parser, Subcommand};
 use cosserat::convergence::{self, Refinement};
+use cosserat::report::{RunReport, StepTimes};
 use cosserat::scene::{load_scene, parse_scene};
-use cosserat::{Backend, RodHandle, Simulation};
+use cosserat::{Backend, Simulation};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -125,22 +126,8 @@ struct RunOutcome {
     steps: u64,
     wall_s: f64,
     divergence: Option<String>,
-    /// With `--step-times`: [`step_time_summary`] of the steps' wall times.
-    step_times: Option<[f64; 4]>,
-}
-
-/// The first step's time, then the median, 99th percentile and largest of the later steps'
-/// times (nearest-rank percentiles), in µs. The first step is apart: it also builds what the
-/// solver keeps between steps.
-fn step_time_summary(times: &[f64]) -> Option<[f64; 4]> {
-    let (first, rest) = times.split_first()?;
-    let mut t: Vec<f64> = rest.iter().map(|s| s * 1e6).collect();
-    if t.is_empty() {
-        return Some([first * 1e6, f64::NAN, f64::NAN, f64::NAN]);
-    }
-    t.sort_by(f64::total_cmp);
-    let rank = |q: f64| t[((q * t.len() as f64).ceil() as usize).clamp(1, t.len()) - 1];
-    Some([first * 1e6, rank(0.5), rank(0.99), t[t.len() - 1]])
+    /// With `--step-times`: the steps' wall times.
+    step_times: Option<StepTimes>,
 }
 
 /// Steps `sim` by `steps` steps, in batches (or one at a time with `time_each`), recording
@@ -208,7 +195,7 @@ fn step_for(
         steps: done,
         wall_s: wall,
         divergence,
-        step_times: step_time_summary(&times),
+        step_times: StepTimes::of(&times),
     }
 }
 
@@ -573,191 +560,83 @@ fn write_output(dir: &Path, rec: &Recorder) -> Result<(), String> {
     Ok(())
 }
 
-/// What a finished run did that makes its results doubtful: points found through the mesh's
-/// wall, or stiff steps that ended far from converged or often above their tolerance (more
-/// than 1 % of them, or a residual a hundred times the tolerance).
-fn run_warnings(sim: &Simulation) -> Vec<String> {
-    let mut warnings = Vec::new();
-    if let Some(c) = sim.contact_report()
-        && c.escaped_points > 0
-    {
-        warnings.push(format!(
-            "{} points were found behind the mesh's wall at the start of a step: the contacts \
-             did not keep the rod inside",
-            c.escaped_points
-        ));
-    }
-    if let Some(c) = sim.coupling_stats()
-        && c.held_ends_inside > 0
-    {
-        warnings.push(format!(
-            "for {} steps a bound rod's held end was inside the rod it is bound in: the stiff \
-             scheme's binding lags a step and can be unstable there; keep the hand behind the \
-             hub (docs/stiff-solver.md, \"Bindings\")",
-            c.held_ends_inside
-        ));
-    }
-    if let Some(st) = sim.stiff_summary()
-        && (st.unconverged_steps * 100 > st.steps_kept
-            || st.max_residual > 100.0 * st.max_tolerance)
-    {
-        warnings.push(format!(
-            "{} of {} stiff rod-steps ended above their tolerance (largest residual {:.2e} \
-             against {:.1e}): the run is not converged (docs/stiff-solver.md)",
-            st.unconverged_steps, st.steps_kept, st.max_residual, st.max_tolerance
-        ));
-    }
-    warnings
-}
-
 fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
-    if !json {
-        for w in sim.warnings() {
-            eprintln!("warning: {w}");
-        }
-    }
-    let run_warnings = run_warnings(sim);
-    let e = sim.energies();
-    let tip = sim
-        .positions(RodHandle(0))
-        .last()
-        .copied()
-        .unwrap_or([f64::NAN; 3]);
-    let us_per_step = if o.steps > 0 {
-        o.wall_s * 1e6 / o.steps as f64
-    } else {
-        f64::NAN
-    };
+    let r = RunReport::new(
+        sim,
+        name,
+        o.steps,
+        o.wall_s,
+        o.divergence.clone(),
+        o.step_times,
+    );
     if json {
-        let v = serde_json::json!({
-            "scene": name,
-            "backend": sim.backend().name(),
-            "precision": if sim.is_double_precision() { "f64" } else { "f32" },
-            "mode": if sim.is_extensible() { "extensible" } else { "inextensible" },
-            "elements": sim.element_count(),
-            "steps": o.steps,
-            "dt": sim.dt(),
-            "simulated_s": sim.time(),
-            "wall_s": o.wall_s,
-            "us_per_step": us_per_step,
-            "max_strain": sim.max_strain(),
-            "kinetic_energy": e.kinetic(),
-            "potential_energy": e.potential(),
-            "tip": tip,
-            "tips": sim
-                .rods()
-                .map(|h| {
-                    let last = sim.positions(h).last().copied().unwrap_or([f64::NAN; 3]);
-                    (sim.rod_name(h).to_string(), serde_json::json!(last))
-                })
-                .collect::<serde_json::Map<_, _>>(),
-            "diverged": o.divergence.is_some(),
-            "divergence": o.divergence,
-            "warnings": sim.warnings(),
-            "run_warnings": run_warnings,
-        });
-        let mut v = v;
-        if let Some([first, median, p99, max]) = o.step_times {
-            v["step_us"] =
-                serde_json::json!({"first": first, "median": median, "p99": p99, "max": max});
+        match serde_json::to_string(&r) {
+            Ok(text) => println!("{text}"),
+            Err(e) => eprintln!("error: the report could not be written as JSON: {e}"),
         }
-        if let Some(c) = sim.contact_report() {
-            v["triangles"] = serde_json::json!(sim.environment().map_or(0, |e| e.triangles()));
-            v["max_penetration"] = serde_json::json!(c.max_penetration);
-            v["escaped_points"] = serde_json::json!(c.escaped_points);
-            v["contacts"] = serde_json::json!(c.contacts);
-            v["collision_us_per_step"] = serde_json::json!(c.detection_us_per_step);
-        }
-        if let Some(f) = sim.max_reaction_force() {
-            v["max_reaction_force"] = serde_json::json!(f);
-        }
-        if let Some(st) = sim.stiff_summary() {
-            v["stiff"] = serde_json::json!({
-                "iterations_per_step": st.iterations_per_step(),
-                "factorisations_per_step": st.factorisations_per_step(),
-                "steps_kept": st.steps_kept,
-                "unconverged_steps": st.unconverged_steps,
-                "halved_steps": st.halved_steps,
-                "axial_steps": st.axial_steps,
-                "max_residual": st.max_residual,
-                "max_tolerance": st.max_tolerance,
-            });
-        }
-        if let Some(c) = sim.coupling_stats() {
-            v["bound_points"] = serde_json::json!(c.bound_points);
-            v["rod_contacts"] = serde_json::json!(c.contacts);
-            v["max_rod_contacts"] = serde_json::json!(c.max_contacts);
-            let finite = |x: f64| x.is_finite().then_some(x);
-            v["min_separation"] = serde_json::json!(finite(c.min_separation));
-            v["min_separation_radii"] = serde_json::json!(c.min_separation_radii);
-            v["min_separation_ratio"] = serde_json::json!(finite(c.min_separation_ratio));
-            v["coupling_detection_us_per_step"] = serde_json::json!(if c.steps > 0 {
-                c.detection_seconds * 1e6 / c.steps as f64
-            } else {
-                0.0
-            });
-        }
-        println!("{v}");
-    } else {
+        return;
+    }
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!(
+        "scene      {name} ({} elements, {} backend, {} stepper, {})",
+        r.elements, r.backend, r.stepper, r.precision
+    );
+    let per_step = r
+        .us_per_step
+        .map_or_else(|| "no steps".to_string(), |us| format!("{us:.2} µs/step"));
+    println!(
+        "ran        {} steps of {:.3e} s = {:.4} s simulated in {:.3} s wall ({per_step}, {:.1}× real time)",
+        r.steps,
+        r.dt,
+        r.simulated_s,
+        r.wall_s,
+        r.simulated_s / r.wall_s.max(1e-12)
+    );
+    if let Some(t) = r.step_us {
+        let us = |x: Option<f64>| x.map_or_else(|| "n/a".to_string(), |x| format!("{x:.2} µs"));
         println!(
-            "scene      {name} ({} elements, {} backend, {})",
-            sim.element_count(),
-            sim.backend().name(),
-            if sim.is_double_precision() {
-                "f64"
-            } else {
-                "f32"
-            }
+            "step time  median {}, 99th percentile {}, largest {} after the first ({:.2} µs; each step timed on its own)",
+            us(t.median),
+            us(t.p99),
+            us(t.max),
+            t.first
         );
+    }
+    println!("accuracy   max strain |l/l0 - 1| = {:.3e}", r.max_strain);
+    println!(
+        "energy     kinetic {:.6e} J, potential {:.6e} J",
+        r.kinetic_energy, r.potential_energy
+    );
+    println!(
+        "tip        [{:.6}, {:.6}, {:.6}] m",
+        r.tip[0], r.tip[1], r.tip[2]
+    );
+    if let Some(c) = r.contact {
         println!(
-            "ran        {} steps of {:.3e} s = {:.4} s simulated in {:.3} s wall ({:.2} µs/step, {:.1}× real time)",
-            o.steps,
-            sim.dt(),
-            sim.time(),
-            o.wall_s,
-            us_per_step,
-            sim.time() / o.wall_s.max(1e-12)
+            "contact    {} points in contact, max penetration {:.3e} m, {} escaped, detection {:.2} µs/step",
+            c.contacts, c.max_penetration, c.escaped_points, c.collision_us_per_step
         );
-        if let Some([first, median, p99, max]) = o.step_times {
-            println!(
-                "step time  median {median:.2} µs, 99th percentile {p99:.2} µs, largest {max:.2} µs after the first ({first:.2} µs; each step timed on its own)"
-            );
-        }
+    }
+    if let Some(st) = r.stiff {
         println!(
-            "accuracy   max strain |l/l0 - 1| = {:.3e}",
-            sim.max_strain()
+            "stiff      {:.2} iterations and {:.2} factorisations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken in halves, {} with axial compliance",
+            st.iterations_per_step,
+            st.factorisations_per_step,
+            st.unconverged_steps,
+            st.steps_kept,
+            st.max_tolerance,
+            st.max_residual,
+            st.halved_steps,
+            st.axial_steps
         );
-        println!(
-            "energy     kinetic {:.6e} J, potential {:.6e} J",
-            e.kinetic(),
-            e.potential()
-        );
-        println!("tip        [{:.6}, {:.6}, {:.6}] m", tip[0], tip[1], tip[2]);
-        if let Some(c) = sim.contact_report() {
-            println!(
-                "contact    {} points in contact, max penetration {:.3e} m, {} escaped, detection {:.2} µs/step",
-                c.contacts, c.max_penetration, c.escaped_points, c.detection_us_per_step
-            );
-        }
-        if let Some(st) = sim.stiff_summary() {
-            println!(
-                "stiff      {:.2} iterations and {:.2} factorisations per step; {} of {} rod-steps ended above their tolerance (up to {:.1e}; largest residual {:.2e}); {} retaken in halves, {} with axial compliance",
-                st.iterations_per_step(),
-                st.factorisations_per_step(),
-                st.unconverged_steps,
-                st.steps_kept,
-                st.max_tolerance,
-                st.max_residual,
-                st.halved_steps,
-                st.axial_steps
-            );
-        }
-        if let Some(d) = &o.divergence {
-            println!("DIVERGED   {d}");
-        }
-        for w in &run_warnings {
-            eprintln!("warning: {w}");
-        }
+    }
+    if let Some(d) = &r.divergence {
+        println!("DIVERGED   {d}");
+    }
+    for w in &r.run_warnings {
+        eprintln!("warning: {w}");
     }
 }
 

@@ -59,6 +59,44 @@ fn run_json_reports_every_field() {
     );
 }
 
+/// The JSON report reads back as the library's typed `RunReport`, with its optional parts
+/// present exactly when the scene has them.
+#[test]
+fn the_json_report_is_the_typed_run_report() {
+    use cosserat::report::RunReport;
+    let typed = |args: &[&str]| -> RunReport {
+        serde_json::from_value(run_json(args)).expect("a RunReport")
+    };
+    let free = typed(&[
+        "run",
+        "scenes/pendulum.toml",
+        "--elements",
+        "16",
+        "--steps",
+        "20",
+        "--json",
+    ]);
+    assert_eq!(free.steps, 20);
+    assert_eq!(free.stepper, "cpu explicit");
+    assert!(free.us_per_step.is_some_and(|us| us > 0.0));
+    assert!(free.contact.is_none() && free.stiff.is_none() && free.coupling.is_none());
+    assert_eq!(free.tips.len(), 1);
+    let vessel = typed(&[
+        "run",
+        "scenes/stiff-guidewire-insertion.toml",
+        "--elements",
+        "32",
+        "--steps",
+        "5",
+        "--json",
+    ]);
+    assert_eq!(vessel.stepper, "cpu stiff");
+    let contact = vessel.contact.expect("mesh contact figures");
+    assert!(contact.triangles > 1000, "{contact:?}");
+    assert!(vessel.stiff.is_some_and(|s| s.steps_kept == 5));
+    assert!(vessel.max_reaction_force.is_some());
+}
+
 /// A run with the stiff solver says how well its steps converged.
 #[test]
 fn stiff_runs_report_their_convergence() {

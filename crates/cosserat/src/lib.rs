@@ -22,6 +22,7 @@
 pub mod convergence;
 pub mod environment;
 pub mod output;
+pub mod report;
 pub mod scene;
 pub mod sim;
 

@@ -1,0 +1,277 @@
+//! What a run did, as one typed value: the `cosserat run --json` object, built from a
+//! [`Simulation`] after its steps and read back typed by whoever consumes it (the command's
+//! tests, scripts through serde).
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::sim::{RodHandle, Simulation};
+
+/// The report of one run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    /// The scene's name.
+    pub scene: String,
+    /// `cpu`, `cpu-rayon` or `gpu`.
+    pub backend: String,
+    /// The stepper that ran it ("cpu explicit", "cpu stiff", …).
+    pub stepper: String,
+    /// `f32` or `f64`.
+    pub precision: String,
+    /// `inextensible` or `extensible`.
+    pub mode: String,
+    /// Elements of all rods.
+    pub elements: usize,
+    /// Steps taken.
+    pub steps: u64,
+    /// Time step [s].
+    pub dt: f64,
+    /// Simulated time [s].
+    pub simulated_s: f64,
+    /// Wall time of the steps [s].
+    pub wall_s: f64,
+    /// Wall time per step [µs] (`None` for a run of no steps).
+    pub us_per_step: Option<f64>,
+    /// Largest `|l/l0 − 1|` of any segment over the run.
+    pub max_strain: f64,
+    /// Kinetic energy at the end [J].
+    pub kinetic_energy: f64,
+    /// Potential energy at the end [J].
+    pub potential_energy: f64,
+    /// Last point of the first rod [m].
+    pub tip: [f64; 3],
+    /// Last point of every rod, by name [m].
+    pub tips: BTreeMap<String, [f64; 3]>,
+    /// Whether the run stopped on a divergence.
+    pub diverged: bool,
+    /// The divergence, in words.
+    pub divergence: Option<String>,
+    /// What the builder accepted but a user should know.
+    pub warnings: Vec<String>,
+    /// What makes the results doubtful ([`run_warnings`]).
+    pub run_warnings: Vec<String>,
+    /// Step times with `--step-times`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_us: Option<StepTimes>,
+    /// Mesh contact, for scenes with an environment.
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactFigures>,
+    /// Largest filtered reaction force at any held end [N], where reactions are computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_reaction_force: Option<f64>,
+    /// What the stiff solver did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stiff: Option<StiffFigures>,
+    /// Bindings and rod contacts.
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub coupling: Option<CouplingFigures>,
+}
+
+/// Step times of a run whose steps were timed one by one [µs].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepTimes {
+    /// The first step (it also builds what the solver keeps between steps).
+    pub first: f64,
+    /// Median of the later steps (`None` for a run of one step, as the two below).
+    pub median: Option<f64>,
+    /// 99th percentile of the later steps (nearest rank).
+    pub p99: Option<f64>,
+    /// Largest of the later steps.
+    pub max: Option<f64>,
+}
+
+impl StepTimes {
+    /// The first step's time, then the median, 99th percentile and largest of the later
+    /// steps' times, from step times in seconds; `None` for no steps.
+    pub fn of(seconds: &[f64]) -> Option<Self> {
+        let (first, rest) = seconds.split_first()?;
+        let mut t: Vec<f64> = rest.iter().map(|s| s * 1e6).collect();
+        t.sort_by(f64::total_cmp);
+        let rank = |p: f64| {
+            (!t.is_empty()).then(|| t[((p * t.len() as f64).ceil() as usize).clamp(1, t.len()) - 1])
+        };
+        Some(Self {
+            first: first * 1e6,
+            median: rank(0.5),
+            p99: rank(0.99),
+            max: t.last().copied(),
+        })
+    }
+}
+
+/// Mesh contact over a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactFigures {
+    /// Triangles of the environment.
+    pub triangles: usize,
+    /// Largest penetration of a point's sphere into the wall at the start of a step [m].
+    pub max_penetration: f64,
+    /// Points found outside the lumen.
+    pub escaped_points: usize,
+    /// Points in contact at the end.
+    pub contacts: usize,
+    /// Wall time of collision detection per step [µs].
+    pub collision_us_per_step: f64,
+}
+
+/// The stiff solver over a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StiffFigures {
+    /// Iterations per rod-step.
+    pub iterations_per_step: f64,
+    /// Factorisations per rod-step.
+    pub factorisations_per_step: f64,
+    /// Rod-steps kept.
+    pub steps_kept: u64,
+    /// Rod-steps left above the tolerance.
+    pub unconverged_steps: u64,
+    /// Rod-steps retaken in halves.
+    pub halved_steps: u64,
+    /// Rod-steps retaken with axial compliance.
+    pub axial_steps: u64,
+    /// Largest residual at the end of a rod-step.
+    pub max_residual: f64,
+    /// Largest tolerance a rod-step was held to.
+    pub max_tolerance: f64,
+}
+
+/// Bindings and rod contacts over a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CouplingFigures {
+    /// Inner points bound at the end.
+    pub bound_points: usize,
+    /// Rod–rod and self-contacts at the end.
+    pub rod_contacts: usize,
+    /// Most rod contacts at any step.
+    pub max_rod_contacts: usize,
+    /// Smallest centreline distance of two non-neighbouring segments [m] (`None` if none came
+    /// within the contact margin).
+    pub min_separation: Option<f64>,
+    /// Sum of the two radii of that pair [m].
+    pub min_separation_radii: f64,
+    /// Smallest `distance / (r_a + r_b)` (`None` as `min_separation`).
+    pub min_separation_ratio: Option<f64>,
+    /// Wall time of the coupling's detection per step [µs].
+    pub coupling_detection_us_per_step: f64,
+}
+
+impl RunReport {
+    /// The report of `sim` after a run of `steps` steps in `wall_s` seconds.
+    pub fn new(
+        sim: &Simulation,
+        scene: &str,
+        steps: u64,
+        wall_s: f64,
+        divergence: Option<String>,
+        step_us: Option<StepTimes>,
+    ) -> Self {
+        let e = sim.energies();
+        let last = |h| sim.positions(h).last().copied().unwrap_or([f64::NAN; 3]);
+        let finite = |x: f64| x.is_finite().then_some(x);
+        Self {
+            scene: scene.to_string(),
+            backend: sim.backend().name().to_string(),
+            stepper: sim.stepper_info().name.to_string(),
+            precision: if sim.is_double_precision() {
+                "f64"
+            } else {
+                "f32"
+            }
+            .into(),
+            mode: if sim.is_extensible() {
+                "extensible"
+            } else {
+                "inextensible"
+            }
+            .into(),
+            elements: sim.element_count(),
+            steps,
+            dt: sim.dt(),
+            simulated_s: sim.time(),
+            wall_s,
+            us_per_step: (steps > 0).then(|| wall_s * 1e6 / steps as f64),
+            max_strain: sim.max_strain(),
+            kinetic_energy: e.kinetic(),
+            potential_energy: e.potential(),
+            tip: last(RodHandle(0)),
+            tips: sim
+                .rods()
+                .map(|h| (sim.rod_name(h).to_string(), last(h)))
+                .collect(),
+            diverged: divergence.is_some(),
+            divergence,
+            warnings: sim.warnings().to_vec(),
+            run_warnings: run_warnings(sim),
+            step_us,
+            contact: sim.contact_report().map(|c| ContactFigures {
+                triangles: sim.environment().map_or(0, |e| e.triangles()),
+                max_penetration: c.max_penetration,
+                escaped_points: c.escaped_points,
+                contacts: c.contacts,
+                collision_us_per_step: c.detection_us_per_step,
+            }),
+            max_reaction_force: sim.max_reaction_force(),
+            stiff: sim.stiff_summary().map(|st| StiffFigures {
+                iterations_per_step: st.iterations_per_step(),
+                factorisations_per_step: st.factorisations_per_step(),
+                steps_kept: st.steps_kept,
+                unconverged_steps: st.unconverged_steps,
+                halved_steps: st.halved_steps,
+                axial_steps: st.axial_steps,
+                max_residual: st.max_residual,
+                max_tolerance: st.max_tolerance,
+            }),
+            coupling: sim.coupling_stats().map(|c| CouplingFigures {
+                bound_points: c.bound_points,
+                rod_contacts: c.contacts,
+                max_rod_contacts: c.max_contacts,
+                min_separation: finite(c.min_separation),
+                min_separation_radii: c.min_separation_radii,
+                min_separation_ratio: finite(c.min_separation_ratio),
+                coupling_detection_us_per_step: if c.steps > 0 {
+                    c.detection_seconds * 1e6 / c.steps as f64
+                } else {
+                    0.0
+                },
+            }),
+        }
+    }
+}
+
+/// What a finished run did that makes its results doubtful: points found through the mesh's
+/// wall, or stiff steps that ended far from converged or often above their tolerance (more
+/// than 1 % of them, or a residual a hundred times the tolerance).
+pub fn run_warnings(sim: &Simulation) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if let Some(c) = sim.contact_report()
+        && c.escaped_points > 0
+    {
+        warnings.push(format!(
+            "{} points were found behind the mesh's wall at the start of a step: the contacts \
+             did not keep the rod inside",
+            c.escaped_points
+        ));
+    }
+    if let Some(c) = sim.coupling_stats()
+        && c.held_ends_inside > 0
+    {
+        warnings.push(format!(
+            "for {} steps a bound rod's held end was inside the rod it is bound in: the stiff \
+             scheme's binding lags a step and can be unstable there; keep the hand behind the \
+             hub (docs/stiff-solver.md, \"Bindings\")",
+            c.held_ends_inside
+        ));
+    }
+    if let Some(st) = sim.stiff_summary()
+        && (st.unconverged_steps * 100 > st.steps_kept
+            || st.max_residual > 100.0 * st.max_tolerance)
+    {
+        warnings.push(format!(
+            "{} of {} stiff rod-steps ended above their tolerance (largest residual {:.2e} \
+             against {:.1e}): the run is not converged (docs/stiff-solver.md)",
+            st.unconverged_steps, st.steps_kept, st.max_residual, st.max_tolerance
+        ));
+    }
+    warnings
+}
