@@ -124,6 +124,8 @@ fn parse_backend(name: &str) -> Result<Backend, String> {
 /// Outcome of stepping a simulation for a while.
 struct RunOutcome {
     steps: u64,
+    /// Stopped by Ctrl-C or SIGTERM before the last step.
+    interrupted: bool,
     wall_s: f64,
     divergence: Option<String>,
     /// With `--step-times`: the steps' wall times.
@@ -159,7 +161,12 @@ fn step_for(
     };
     capture(sim, record);
     let mut times = Vec::new();
+    let mut interrupted = false;
     while done < steps {
+        if STOP.load(std::sync::atomic::Ordering::Relaxed) {
+            interrupted = true;
+            break;
+        }
         let n = if time_each {
             1
         } else {
@@ -191,8 +198,16 @@ fn step_for(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    if interrupted
+        && record
+            .as_ref()
+            .is_some_and(|r| r.last_captured != sim.steps())
+    {
+        capture(sim, record);
+    }
     RunOutcome {
         steps: done,
+        interrupted,
         wall_s: wall,
         divergence,
         step_times: StepTimes::of(&times),
@@ -203,10 +218,19 @@ fn step_for(
 struct Recorder {
     every: u64,
     trajectory: cosserat::output::Trajectory,
+    /// The `.vtp` files, written as frames are captured.
+    series: cosserat::output::VtpSeries,
+    /// The step of the last frame captured.
+    last_captured: u64,
 }
 
 impl Recorder {
-    fn new(sim: &Simulation, steps: u64, frames: u64) -> Result<Self, String> {
+    fn new(
+        sim: &Simulation,
+        steps: u64,
+        frames: u64,
+        series: cosserat::output::VtpSeries,
+    ) -> Result<Self, String> {
         let mut trajectory = cosserat::output::Trajectory::new();
         for h in sim.rods() {
             let n = sim.positions(h).len() - 1;
@@ -217,6 +241,8 @@ impl Recorder {
         Ok(Self {
             every: (steps / frames.max(1)).max(1),
             trajectory,
+            series,
+            last_captured: u64::MAX,
         })
     }
     fn capture(&mut self, sim: &Simulation) -> Result<(), String> {
@@ -233,6 +259,10 @@ impl Recorder {
             .collect();
         self.trajectory
             .push_frame(sim.time(), &frames)
+            .map_err(|e| e.to_string())?;
+        self.last_captured = sim.steps();
+        self.series
+            .append(&self.trajectory)
             .map_err(|e| e.to_string())
     }
 }
@@ -278,6 +308,12 @@ fn load(args: &SceneArgs, extra: &[(String, String)]) -> Result<LoadedScene, Str
         }
         (None, None) => length.steps,
     };
+    if steps == 0 {
+        return Err(format!(
+            "{}: the run has no steps (dt = {dt:e} s): give --steps N with N ≥ 1 or a --duration of at least one step",
+            args.scene.display()
+        ));
+    }
     let builder = builder.backend(parse_backend(&args.backend)?);
     Ok(LoadedScene {
         builder,
@@ -293,14 +329,23 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
         name,
         steps,
     } = load(args, &[])?;
+    // An unwritable output directory is found before the run, not after it.
+    let series = run_args
+        .out
+        .as_ref()
+        .map(|dir| cosserat::output::VtpSeries::create(dir).map_err(|e| format!("--out: {e}")))
+        .transpose()?;
     let mut sim = builder
         .build()
         .map_err(|e| format!("{}: {e}", args.scene.display()))?;
-    let mut recorder = run_args
-        .out
-        .as_ref()
-        .map(|_| Recorder::new(&sim, steps, run_args.frames))
+    let mut recorder = series
+        .map(|series| Recorder::new(&sim, steps, run_args.frames, series))
         .transpose()?;
+    // Ctrl-C or SIGTERM stops the run between two batches; what was run is written and
+    // reported. A second signal while the handler is installed does nothing more.
+    if let Err(e) = ctrlc::set_handler(|| STOP.store(true, std::sync::atomic::Ordering::Relaxed)) {
+        eprintln!("warning: Ctrl-C will not save the run: {e}");
+    }
     let outcome = step_for(
         &mut sim,
         steps,
@@ -314,10 +359,16 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
     report(&sim, &name, &outcome, args.json);
     Ok(if outcome.divergence.is_some() {
         ExitCode::from(1)
+    } else if outcome.interrupted {
+        // The shell's convention for a process ended by SIGINT.
+        ExitCode::from(130)
     } else {
         ExitCode::SUCCESS
     })
 }
+
+/// Set by Ctrl-C or SIGTERM: the run stops before its next batch of steps.
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 fn converge(c: &ConvergeArgs) -> Result<ExitCode, String> {
     let args = &c.scene;
@@ -551,17 +602,15 @@ fn count_rods(path: &Path) -> Result<usize, String> {
         .map_or(0, |a| a.len()))
 }
 
+/// Writes the NumPy file of the recorded frames (the `.vtp` files were written as the frames
+/// were made).
 fn write_output(dir: &Path, rec: &Recorder) -> Result<(), String> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| format!("{}: cannot create the output folder: {e}", dir.display()))?;
     cosserat::output::write_npz(&dir.join("trajectory.npz"), &rec.trajectory)
-        .map_err(|e| e.to_string())?;
-    cosserat::output::write_vtp_series(dir, &rec.trajectory).map_err(|e| e.to_string())?;
-    Ok(())
+        .map_err(|e| e.to_string())
 }
 
 fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
-    let r = RunReport::new(
+    let mut r = RunReport::new(
         sim,
         name,
         o.steps,
@@ -569,6 +618,7 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         o.divergence.clone(),
         o.step_times,
     );
+    r.interrupted = o.interrupted;
     if json {
         match serde_json::to_string(&r) {
             Ok(text) => println!("{text}"),
@@ -634,6 +684,12 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
     }
     if let Some(d) = &r.divergence {
         println!("DIVERGED   {d}");
+    }
+    if r.interrupted {
+        println!(
+            "STOPPED    by a signal after {} steps; the output holds the frames so far",
+            r.steps
+        );
     }
     for w in &r.run_warnings {
         eprintln!("warning: {w}");

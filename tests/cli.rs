@@ -181,6 +181,118 @@ fn a_diverging_run_says_where_and_exits_nonzero() {
 }
 
 /// `--out` writes the frames asked for, also when `--step-times` steps one step at a time.
+/// A run of no steps is refused, whether asked for by steps or by a duration shorter than
+/// half a step.
+#[test]
+fn a_run_of_no_steps_is_refused() {
+    for extra in [["--steps", "0"], ["--duration", "1e-9"]] {
+        let out = cosserat()
+            .args(["run", "scenes/pendulum.toml"])
+            .args(extra)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{extra:?} ran");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("no steps") && err.contains("pendulum.toml"),
+            "{err}"
+        );
+    }
+}
+
+/// An output folder that cannot be made is an error before the first step: the run, which
+/// would take minutes, does not start.
+#[test]
+fn an_unwritable_out_is_refused_before_the_run() {
+    let file = std::env::temp_dir().join(format!("cosserat-cli-file-{}", std::process::id()));
+    std::fs::write(&file, "a file, not a folder").unwrap();
+    let target = file.join("out");
+    let started = std::time::Instant::now();
+    let out = cosserat()
+        .args(["run", "scenes/guidewire-insertion.toml", "--out"])
+        .arg(&target)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    std::fs::remove_file(&file).ok();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--out") && err.contains("cosserat-cli-file"),
+        "{err}"
+    );
+    assert!(
+        started.elapsed().as_secs_f64() < 60.0,
+        "the refusal came after the run"
+    );
+}
+
+/// SIGTERM (and Ctrl-C) stop a run between two batches: the frames so far are on disk as a
+/// valid series, the NumPy file is written, the summary covers the steps taken, and the exit
+/// status is 130.
+#[test]
+fn a_terminated_run_leaves_its_frames_and_its_summary() {
+    let dir = std::env::temp_dir().join(format!("cosserat-cli-term-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let child = cosserat()
+        .args([
+            "run",
+            "scenes/pendulum.toml",
+            "--elements",
+            "16",
+            "--steps",
+            "100000000",
+            "--frames",
+            "100000",
+            "--json",
+            "--out",
+        ])
+        .arg(&dir)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until a few frames are on disk.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !dir.join("frame_00003.vtp").is_file() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no frames were written"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let killed = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: cosserat::report::RunReport = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(report.interrupted && !report.diverged);
+    assert!(report.steps > 0 && report.steps < 100_000_000);
+    let index = std::fs::read_to_string(dir.join("trajectory.pvd")).unwrap();
+    let listed: Vec<&str> = index
+        .lines()
+        .filter_map(|l| l.split("file=\"").nth(1))
+        .map(|l| l.trim_end_matches("\"/>"))
+        .collect();
+    assert!(listed.len() >= 4, "{index}");
+    for f in &listed {
+        let text = std::fs::read_to_string(dir.join(f)).unwrap();
+        assert!(text.trim_end().ends_with("</VTKFile>"), "{f} is cut short");
+    }
+    assert!(dir.join("trajectory.npz").is_file());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn out_writes_the_trajectory() {
     for (tag, extra) in [("batched", &[][..]), ("timed", &["--step-times"][..])] {

@@ -223,7 +223,7 @@ fn insertion(docs: &Path) -> Result<bool, String> {
     let _ = writeln!(ins, "# Guidewire insertion: time per step against depth\n");
     let _ = writeln!(
         ins,
-        "Machine: {}; {}. Command: `cargo xtask bench` or `cargo xtask bench --insertion` (`benches/insertion.rs`, `benches/free_space.rs`). The paper's test 3.3: a 512-element wire pushed at 0.2 m/s through a straight introducer into the vessel (and, as a benchmark only, the phantom of `../shared/data/meshes/`) to full depth (2.45 s of simulated time, 700 000 steps), 10 constraint iterations with friction per step, serial CPU, f32. Each row is a window of simulated time; `µs/step` is the wall time of the whole step, `detection` the part of it spent finding contacts, `contacts` the points in contact at the end of the window, `max penetration` and `escaped` the largest seen since the start.",
+        "Machine: {}; {}. Command: `cargo xtask bench` or `cargo xtask bench --insertion` (`benches/insertion.rs`, `benches/free_space.rs`). The paper's test 3.3: a 512-element wire pushed at 0.2 m/s through a straight introducer into the vessel (and, as a benchmark only, the phantom of `data/meshes/`) to full depth (2.45 s of simulated time, 700 000 steps), 10 constraint iterations with friction per step, serial CPU, f32. Each row is a window of simulated time; `µs/step` is the wall time of the whole step, `detection` the part of it spent finding contacts, `contacts` the points in contact at the end of the window, `max penetration` and `escaped` the largest seen since the start.",
         machine(),
         conditions()
     );

@@ -45,6 +45,10 @@ pub struct RunReport {
     pub tips: BTreeMap<String, [f64; 3]>,
     /// Whether the run stopped on a divergence.
     pub diverged: bool,
+    /// Whether the run was stopped from outside (Ctrl-C, SIGTERM) before its last step; the
+    /// report then covers the steps taken.
+    #[serde(default)]
+    pub interrupted: bool,
     /// The divergence, in words.
     pub divergence: Option<String>,
     /// What the builder accepted but a user should know.
@@ -200,6 +204,7 @@ impl RunReport {
                 .map(|h| (sim.rod_name(h).to_string(), last(h)))
                 .collect(),
             diverged: divergence.is_some(),
+            interrupted: false,
             divergence,
             warnings: sim.warnings().to_vec(),
             run_warnings: run_warnings(sim),

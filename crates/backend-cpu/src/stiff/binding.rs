@@ -36,7 +36,8 @@
 //! A rod may be the inner rod of one binding only (two lines on one point would fight), and
 //! bindings may not form a cycle. Rod–rod contact is not handled in the stiff scheme.
 
-use super::contact::{Pinned, pin_impulse};
+use super::contact::pin_impulse;
+use super::pin::Pinned;
 use super::work::Work;
 use super::{Consts, Coupled, LinePin, StiffScratch, StiffSettings, step_rod_stiff};
 use crate::coupling::{BindingSpec, CouplingStats};

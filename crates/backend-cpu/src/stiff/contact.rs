@@ -42,6 +42,7 @@
 
 use super::Consts;
 use super::lanes::V3s;
+use super::pin::Pinned;
 use super::work::Work;
 use crate::guide::Guide;
 use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
@@ -73,26 +74,6 @@ fn shortest_element(k: &Consts, i: usize) -> f64 {
         .flatten()
         .filter_map(|j| k.l0.get(j))
         .fold(f64::INFINITY, |a, &b| a.min(b))
-}
-
-/// A point held on the mesh's surface for one step's solve.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Pinned {
-    /// Index of the point.
-    pub(crate) point: usize,
-    /// Unit normal of the wall, out of the mesh.
-    pub(crate) normal: Vec3<f64>,
-    /// Sticking (no motion), or sliding in the tangent plane.
-    pub(crate) stick: bool,
-    /// Held on a line along `normal` (a guide, [`pin_guided`]) instead of a plane across it;
-    /// the contact updates leave such points alone.
-    pub(crate) line: bool,
-    /// Kinetic friction of a sliding point as the shift it gives the inertial target `x̃`
-    /// (`μ_k p_n t / m` for a unit direction `t` against the slip), already added to `x_pred`.
-    pub(crate) push: Vec3<f64>,
-    /// Its normal impulse times the step, `p_n = n · g` [kg m], at the last update (from the
-    /// last step before the first).
-    pub(crate) pn: f64,
 }
 
 /// What [`StiffContacts::update`] changed.

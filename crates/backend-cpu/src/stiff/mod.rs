@@ -58,6 +58,7 @@ pub mod constraints;
 mod contact;
 mod direct;
 mod lanes;
+mod pin;
 mod work;
 mod xpbd;
 

@@ -3,9 +3,9 @@
 //! `tests` at the bottom compares every pass with them, element by element.
 
 use super::Consts;
-use super::contact::Pinned;
 use super::direct::Assembled;
 use super::lanes::{F, Q, Q4s, V, V3s, below, load, mask_ge, padded, store};
+use super::pin::Pinned;
 use super::{angle_over_sin_half, exp_small, inv_w, relative_rotation};
 use cosserat_model::Vec3;
 

@@ -58,4 +58,4 @@ mod tests;
 pub use error::{OutputError, ShapeError};
 pub use npz::write_npz;
 pub use trajectory::{RodFrame, RodTrajectory, Trajectory};
-pub use vtk::{PVD_FILE_NAME, vtp_frame_file_name, write_vtp_series};
+pub use vtk::{PVD_FILE_NAME, VtpSeries, vtp_frame_file_name, write_vtp_series};

@@ -54,11 +54,7 @@ pub fn write_vtp_series(dir: &Path, traj: &Trajectory) -> Result<(), OutputError
         source,
     })?;
     fs::create_dir_all(dir).map_err(OutputError::io(dir))?;
-    let mut pvd = String::from(
-        "<?xml version=\"1.0\"?>\n\
-         <VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  \
-         <Collection>\n",
-    );
+    let mut entries = String::new();
     let mut buf = String::new();
     for (frame, &time) in traj.times.iter().enumerate() {
         let name = vtp_frame_file_name(frame);
@@ -67,13 +63,88 @@ pub fn write_vtp_series(dir: &Path, traj: &Trajectory) -> Result<(), OutputError
         let path = dir.join(&name);
         fs::write(&path, &buf).map_err(OutputError::io(&path))?;
         let _ = writeln!(
-            pvd,
+            entries,
             "    <DataSet timestep=\"{time:?}\" group=\"\" part=\"0\" file=\"{name}\"/>"
         );
     }
-    pvd.push_str("  </Collection>\n</VTKFile>\n");
     let path = dir.join(PVD_FILE_NAME);
-    fs::write(&path, pvd).map_err(OutputError::io(&path))
+    fs::write(&path, index_text(&entries)).map_err(OutputError::io(&path))
+}
+
+/// A `.vtp` series written while a run makes it: each frame's file as soon as the frame is
+/// recorded, and the ParaView index rewritten after it (to a temporary file, then renamed), so
+/// that a run stopped at any moment — Ctrl-C, a kill, a crash — leaves a valid series of the
+/// frames made so far. [`write_vtp_series`] writes the same files for a finished trajectory.
+#[derive(Debug)]
+pub struct VtpSeries {
+    dir: std::path::PathBuf,
+    entries: String,
+    written: usize,
+}
+
+impl VtpSeries {
+    /// Creates `dir` if needed and writes an empty index into it, so that a directory that
+    /// cannot be written is found before a run starts, not after it.
+    ///
+    /// # Errors
+    /// [`OutputError::Io`] naming the directory or the index.
+    pub fn create(dir: &Path) -> Result<Self, OutputError> {
+        fs::create_dir_all(dir).map_err(OutputError::io(dir))?;
+        let series = Self {
+            dir: dir.to_path_buf(),
+            entries: String::new(),
+            written: 0,
+        };
+        series.write_index()?;
+        Ok(series)
+    }
+
+    /// Frames written so far.
+    pub fn frames(&self) -> usize {
+        self.written
+    }
+
+    /// Writes the frames of `traj` not yet written, then the index.
+    ///
+    /// # Errors
+    /// [`OutputError::Inconsistent`] (nothing written) if the trajectory is malformed or holds
+    /// values VTK cannot read; [`OutputError::Io`] naming a file that cannot be written.
+    pub fn append(&mut self, traj: &Trajectory) -> Result<(), OutputError> {
+        check(traj).map_err(|source| OutputError::Inconsistent {
+            path: self.dir.clone(),
+            source,
+        })?;
+        let mut buf = String::new();
+        for frame in self.written..traj.times.len() {
+            let name = vtp_frame_file_name(frame);
+            buf.clear();
+            frame_vtp(&mut buf, traj, frame);
+            let path = self.dir.join(&name);
+            fs::write(&path, &buf).map_err(OutputError::io(&path))?;
+            let _ = writeln!(
+                self.entries,
+                "    <DataSet timestep=\"{:?}\" group=\"\" part=\"0\" file=\"{name}\"/>",
+                traj.times[frame]
+            );
+            self.written = frame + 1;
+        }
+        self.write_index()
+    }
+
+    fn write_index(&self) -> Result<(), OutputError> {
+        let text = index_text(&self.entries);
+        let path = self.dir.join(PVD_FILE_NAME);
+        let partial = self.dir.join(format!("{PVD_FILE_NAME}.partial"));
+        fs::write(&partial, text).map_err(OutputError::io(&partial))?;
+        fs::rename(&partial, &path).map_err(OutputError::io(&path))
+    }
+}
+
+/// The ParaView collection listing `entries` (one `<DataSet …/>` line each).
+fn index_text(entries: &str) -> String {
+    format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  <Collection>\n{entries}  </Collection>\n</VTKFile>\n"
+    )
 }
 
 /// Shapes, and finiteness of every value (VTK cannot read `nan`/`inf`).
