@@ -13,7 +13,6 @@
 
 #![allow(dead_code)]
 
-use super::direct_stepper::DirectRod;
 use super::reference as refs;
 use cosserat::convergence::grid_convergence;
 use cosserat::cosserat_constraints::BindingVariant;
@@ -998,19 +997,25 @@ pub fn pendulum_spec(n: usize) -> PendulumSpec {
 /// Tip of the pendulum after `steps` steps with the exact (direct) constraint solver, so that
 /// the convergence studies see only the time and space discretisation.
 fn pendulum_tip_direct(n: usize, dt: f64, steps: u64) -> Result<[f64; 3], String> {
-    let spec = pendulum_spec(n);
-    let mut rod = DirectRod::<f64>::new(
-        &spec.points,
-        &spec.spec,
-        [EndCondition::pinned(), EndCondition::free()],
-        &[],
-    );
-    for k in 0..steps {
-        if !rod.step(dt, Vec3::from(spec.gravity), k as f64 * dt) {
-            return Err(format!("direct pendulum diverged (N = {n}, dt = {dt:e})"));
-        }
-    }
-    Ok(*rod.positions().last().expect("points"))
+    let mut sim = direct_pendulum(n, dt, "f64")?;
+    sim.run(steps)
+        .map_err(|e| format!("direct pendulum diverged (N = {n}, dt = {dt:e}): {e}"))?;
+    Ok(*sim.positions(RodHandle(0)).last().expect("points"))
+}
+
+/// The pendulum scene with `n` elements, steps of `dt` and exact (direct) distance constraints,
+/// in `precision`, without the explicit scheme's stability check (the convergence studies
+/// choose their own steps).
+fn direct_pendulum(n: usize, dt: f64, precision: &str) -> Result<Simulation, String> {
+    pendulum(&[
+        ("rod.0.elements", n.to_string()),
+        ("solver.dt", format!("{dt:e}")),
+        ("solver.precision", precision.into()),
+        ("solver.constraint_solver", "direct".into()),
+        ("solver.check_stability", "false".into()),
+    ])?
+    .build()
+    .map_err(|e| e.to_string())
 }
 
 /// Energy of the undamped pendulum over 10⁴ steps, its convergence in dt and N, and the
@@ -1176,34 +1181,22 @@ pub fn inextensibility(size: Size) -> Result<Vec<Row>, String> {
             }
         }
     }
-    // The direct solver, through the stand-alone loop: exact up to its Newton tolerance plus
-    // the round-off of positions of size |r| ~ L against elements of l = L/N.
+    // The direct solver: exact up to its Newton tolerance plus the round-off of positions of
+    // size |r| ~ L against elements of l = L/N.
     let spec = pendulum_spec(n);
-    let g = Vec3::from(spec.gravity);
-    let mut rod64 = DirectRod::<f64>::new(
-        &spec.points,
-        &spec.spec,
-        [EndCondition::pinned(), EndCondition::free()],
-        &[],
-    );
-    let mut rod32 = DirectRod::<f32>::new(
-        &spec.points,
-        &spec.spec,
-        [EndCondition::pinned(), EndCondition::free()],
-        &[],
-    );
-    for k in 0..steps {
-        let t = k as f64 * spec.dt;
-        if !rod64.step(spec.dt, g, t) || !rod32.step(spec.dt as f32, g.cast(), t) {
-            return Err("direct-solver pendulum diverged".into());
-        }
+    let mut rod64 = direct_pendulum(n, spec.dt, "f64")?;
+    let mut rod32 = direct_pendulum(n, spec.dt, "f32")?;
+    for sim in [&mut rod64, &mut rod32] {
+        sim.run(steps)
+            .map_err(|e| format!("direct-solver pendulum diverged: {e}"))?;
     }
     let length = dist(&spec.points[0], spec.points.last().expect("points"));
     for (precision, strain, eps) in [
-        ("f64", rod64.max_strain, f64::EPSILON),
-        ("f32", rod32.max_strain, f32::EPSILON as f64),
+        ("f64", rod64.max_strain(), f64::EPSILON),
+        ("f32", rod32.max_strain(), f32::EPSILON as f64),
     ] {
-        let bound = rod64.settings.tolerance + 4.0 * eps * length / (length / n as f64);
+        let tolerance = cosserat::cosserat_constraints::direct::DirectSettings::default().tolerance;
+        let bound = tolerance + 4.0 * eps * length / (length / n as f64);
         rows.push(Row {
             case: "inextensibility (pendulum)".into(),
             quantity: format!("max strain, direct (Newton), {precision}"),

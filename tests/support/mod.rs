@@ -3,6 +3,5 @@
 //! inextensibility solver.
 
 pub mod cases;
-pub mod direct_stepper;
 pub mod reference;
 pub mod stability;

@@ -9,7 +9,7 @@
 //! per problem, and `docs/benchmarks/pareto.md` (which setting to choose for which accuracy).
 //!
 //! The direct solver is not wired into the facade yet; it runs through the stand-alone loop of
-//! `tests/support/direct_stepper.rs`, the same Fig. 5 step with the constraint solve replaced.
+//! the explicit scheme with `solver.constraint_solver = "direct"`, the same Fig. 5 step with the constraint solve replaced.
 //!
 //! The stiff scheme (`solver.scheme = "stiff"`, `docs/stiff-solver.md`: XPBD compliant
 //! constraints, direct banded solve, implicit Euler) joins both diagrams with its default
@@ -18,13 +18,11 @@
 //! fails is reported and left out.
 
 use crate::support::cases::{pendulum, pendulum_spec, workspace_file};
-use crate::support::direct_stepper::DirectRod;
 use crate::support::reference::elastica_tip;
 use cosserat::cosserat_backend_cpu::StiffSettings;
-use cosserat::cosserat_model::rod::straight_polyline;
+use cosserat::cosserat_model::Material;
 use cosserat::cosserat_model::stability::{StabilityInput, stable_step};
-use cosserat::cosserat_model::{Material, Real, Vec3};
-use cosserat::{EndCondition, Ordering, RodBuilder, RodHandle, SimulationBuilder};
+use cosserat::{Ordering, RodBuilder, RodHandle, SimulationBuilder};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
@@ -82,67 +80,39 @@ fn pendulum_run(
     dt: f64,
 ) -> Result<([f64; 3], f64), String> {
     let steps = (PENDULUM_T / dt).round() as u64;
-    match solver {
-        Solver::Direct => {
-            let spec = pendulum_spec(n);
-            let ends = [EndCondition::pinned(), EndCondition::free()];
-            let g = Vec3::from(spec.gravity);
-            fn go<T: Real>(
-                points: &[[f64; 3]],
-                spec: &cosserat::cosserat_model::rod::RodSpec,
-                ends: [EndCondition<f64>; 2],
-                g: Vec3<f64>,
-                dt: f64,
-                steps: u64,
-            ) -> Result<([f64; 3], f64), String> {
-                let mut rod = DirectRod::<T>::new(points, spec, ends, &[]);
-                let (h, g) = (T::lit(dt), Vec3::new(T::lit(g.x), T::lit(g.y), T::lit(g.z)));
-                let t = Instant::now();
-                for k in 0..steps {
-                    if !rod.step(h, g, k as f64 * dt) {
-                        return Err("direct run diverged".into());
-                    }
-                }
-                let wall = t.elapsed().as_secs_f64();
-                Ok((*rod.positions().last().expect("points"), wall))
-            }
-            if double {
-                go::<f64>(&spec.points, &spec.spec, ends, g, dt, steps)
-            } else {
-                go::<f32>(&spec.points, &spec.spec, ends, g, dt, steps)
-            }
-        }
-        Solver::Iterative(_) | Solver::Extensible | Solver::Stiff | Solver::StiffBdf2 => {
-            let (mode, sweeps) = match solver {
-                Solver::Iterative(k) => ("inextensible", k),
-                Solver::Stiff | Solver::StiffBdf2 => ("inextensible", 10),
-                _ => ("extensible", 0),
-            };
-            let mut overrides = vec![
-                ("rod.0.elements", n.to_string()),
-                ("solver.dt", format!("{dt:e}")),
-                (
-                    "solver.precision",
-                    if double { "f64" } else { "f32" }.into(),
-                ),
-                ("solver.iterations", sweeps.to_string()),
-                ("solver.mode", mode.into()),
-                ("solver.ordering", "gauss-seidel".into()),
-            ];
-            if solver.stiff() {
-                overrides.push(("solver.scheme", "stiff".into()));
-            }
-            if solver == Solver::StiffBdf2 {
-                overrides.push(("solver.stiff.integrator", "bdf2".into()));
-            }
-            let b = pendulum(&overrides)?;
-            let mut sim = b.build().map_err(|e| e.to_string())?;
-            let t = Instant::now();
-            sim.run(steps).map_err(|e| e.to_string())?;
-            let wall = t.elapsed().as_secs_f64();
-            Ok((*sim.positions(RodHandle(0)).last().expect("points"), wall))
-        }
+    let (mode, sweeps) = match solver {
+        Solver::Iterative(k) => ("inextensible", k),
+        Solver::Direct => ("inextensible", 1),
+        Solver::Stiff | Solver::StiffBdf2 => ("inextensible", 10),
+        _ => ("extensible", 0),
+    };
+    let mut overrides = vec![
+        ("rod.0.elements", n.to_string()),
+        ("solver.dt", format!("{dt:e}")),
+        (
+            "solver.precision",
+            if double { "f64" } else { "f32" }.into(),
+        ),
+        ("solver.iterations", sweeps.to_string()),
+        ("solver.mode", mode.into()),
+        ("solver.ordering", "gauss-seidel".into()),
+    ];
+    if solver.stiff() {
+        overrides.push(("solver.scheme", "stiff".into()));
     }
+    if solver == Solver::Direct {
+        overrides.push(("solver.constraint_solver", "direct".into()));
+        overrides.push(("solver.check_stability", "false".into()));
+    }
+    if solver == Solver::StiffBdf2 {
+        overrides.push(("solver.stiff.integrator", "bdf2".into()));
+    }
+    let b = pendulum(&overrides)?;
+    let mut sim = b.build().map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    sim.run(steps).map_err(|e| e.to_string())?;
+    let wall = t.elapsed().as_secs_f64();
+    Ok((*sim.positions(RodHandle(0)).last().expect("points"), wall))
 }
 
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -256,89 +226,40 @@ fn cantilever_run(
     };
     let chunk = (1.0 / (w1 * dt)).ceil() as u64;
     let max_chunks = 80;
-    match solver {
-        Solver::Direct => {
-            let mut spec = cosserat::cosserat_model::rod::RodSpec::new(material);
-            spec.drag = drag;
-            let points = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], length, n);
-            fn go<T: Real>(
-                points: &[[f64; 3]],
-                spec: &cosserat::cosserat_model::rod::RodSpec,
-                n: usize,
-                force: f64,
-                dt: f64,
-                chunk: u64,
-                max_chunks: usize,
-                length: f64,
-            ) -> Result<(f64, f64), String> {
-                let mut rod = DirectRod::<T>::new(
-                    points,
-                    spec,
-                    [EndCondition::clamped(), EndCondition::free()],
-                    &[(n, [0.0, 0.0, -force])],
-                );
-                let t = Instant::now();
-                let mut prev = 0.0;
-                let mut k = 0u64;
-                for _ in 0..max_chunks {
-                    for _ in 0..chunk {
-                        if !rod.step(T::lit(dt), Vec3::zeros(), k as f64 * dt) {
-                            return Err("direct cantilever diverged".into());
-                        }
-                        k += 1;
-                    }
-                    let y = -rod.positions()[n][2] / length;
-                    if (y - prev).abs() < 1e-8 {
-                        prev = y;
-                        break;
-                    }
-                    prev = y;
-                }
-                Ok((prev, t.elapsed().as_secs_f64()))
-            }
-            let (y, wall) = if double {
-                go::<f64>(&points, &spec, n, force, dt, chunk, max_chunks, length)?
-            } else {
-                go::<f32>(&points, &spec, n, force, dt, chunk, max_chunks, length)?
-            };
-            Ok((y, wall, dt))
+    let sweeps = if let Solver::Iterative(k) = solver {
+        k
+    } else {
+        0
+    };
+    let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], length, n, material)
+        .clamp_start()
+        .damping(0.0, 0.0, drag)
+        .load(n, [0.0, 0.0, -force]);
+    let mut sim = SimulationBuilder::new()
+        .check_stability(false)
+        .stiff_solver((solver == Solver::Stiff).then(StiffSettings::default))
+        .direct_constraints(solver == Solver::Direct)
+        .dt(dt)
+        .iterations(sweeps)
+        .ordering(Ordering::GaussSeidel)
+        .extensible(solver == Solver::Extensible)
+        .gravity([0.0; 3])
+        .double_precision(double)
+        .with_rod(rod)
+        .build()
+        .map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    let mut prev = 0.0;
+    for _ in 0..max_chunks {
+        sim.run(chunk).map_err(|e| e.to_string())?;
+        let y = -sim.positions(RodHandle(0))[n][2] / length;
+        if (y - prev).abs() < 1e-8 {
+            prev = y;
+            break;
         }
-        _ => {
-            let sweeps = if let Solver::Iterative(k) = solver {
-                k
-            } else {
-                0
-            };
-            let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], length, n, material)
-                .clamp_start()
-                .damping(0.0, 0.0, drag)
-                .load(n, [0.0, 0.0, -force]);
-            let mut sim = SimulationBuilder::new()
-                .check_stability(false)
-                .stiff_solver((solver == Solver::Stiff).then(StiffSettings::default))
-                .dt(dt)
-                .iterations(sweeps)
-                .ordering(Ordering::GaussSeidel)
-                .extensible(solver == Solver::Extensible)
-                .gravity([0.0; 3])
-                .double_precision(double)
-                .with_rod(rod)
-                .build()
-                .map_err(|e| e.to_string())?;
-            let t = Instant::now();
-            let mut prev = 0.0;
-            for _ in 0..max_chunks {
-                sim.run(chunk).map_err(|e| e.to_string())?;
-                let y = -sim.positions(RodHandle(0))[n][2] / length;
-                if (y - prev).abs() < 1e-8 {
-                    prev = y;
-                    break;
-                }
-                prev = y;
-            }
-            Ok((prev, t.elapsed().as_secs_f64(), dt))
-        }
+        prev = y;
     }
+    Ok((prev, t.elapsed().as_secs_f64(), dt))
 }
 
 fn cantilever_sweep() -> Result<Vec<Point>, String> {

@@ -262,6 +262,8 @@ pub struct Nearest {
 pub struct MeshCollider {
     mesh: TriMesh,
     bvh: Bvh,
+    /// Far-field data for inside/outside queries ([`MeshCollider::lumen_winding`]).
+    winding: crate::winding::WindingNumber,
     tris: Vec<TriData>,
     /// Angle-weighted vertex pseudo-normals (by mesh vertex).
     vertex_normals: Vec<Vector3<f64>>,
@@ -335,7 +337,9 @@ impl MeshCollider {
             edge_normals.push(en);
             edge_on_boundary.push(boundary);
         }
+        let winding = crate::winding::WindingNumber::new(&mesh, &bvh);
         Self {
+            winding,
             mesh,
             bvh,
             tris,
@@ -344,6 +348,12 @@ impl MeshCollider {
             edge_on_boundary,
             vertex_on_boundary,
         }
+    }
+
+    /// The winding number of the lumen at `p` ([`crate::winding`]): about 1 inside the lumen
+    /// (the side the normals point to), about 0 outside, whatever the distance to the wall.
+    pub fn lumen_winding(&self, p: &[f64; 3]) -> f64 {
+        self.winding.lumen(&self.mesh, &self.bvh, p)
     }
 
     /// The mesh.

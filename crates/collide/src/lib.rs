@@ -43,6 +43,7 @@ pub mod io;
 pub mod mesh;
 pub mod rods;
 pub mod vessel;
+pub mod winding;
 
 pub use bvh::{Bvh, BvhNode, InvariantViolation, STACK_SIZE};
 pub use contact::{Contact, ContactBuffer, MeshCollider, Nearest, PointResponse};
@@ -51,3 +52,4 @@ pub use io::{load_mesh, load_obj, load_stl, parse_obj, parse_stl};
 pub use mesh::{MeshError, MeshReport, TriMesh};
 pub use rods::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
 pub use vessel::{Vessel, VesselParams};
+pub use winding::WindingNumber;

@@ -1,0 +1,160 @@
+//! Inside or outside the lumen, for any point, from the generalised winding number.
+//!
+//! The contact queries look for walls within a reach of each point; a point that has passed far
+//! through a wall finds none, or finds the wrong side's, and the sign of the nearest feature
+//! says nothing reliable on meshes with seams, gaps or open ends. The generalised winding number
+//! (Jacobson, Kavan & Sorkine-Hornung 2013) does not depend on reach or on the nearest
+//! feature: it sums the signed solid angles of all triangles seen from the point,
+//! `w(p) = Σ Ω_t(p) / 4π`, which is 1 inside a closed surface, 0 outside, and degrades smoothly
+//! (not catastrophically) across holes and open ends. Here the surface's normals point into the
+//! lumen, so `w` is taken with the opposite sign: 1 in the lumen.
+//!
+//! Summing over every triangle costs `O(triangles)` per point. As Barill et al. (2018) do, the
+//! triangles of a tree node far from the point are replaced by their dipole: the node's
+//! area-weighted normal `N = Σ a_t n_t` at its area-weighted centroid `c`, which subtends
+//! `N · (c − p) / |c − p|³`. A node counts as far when `|c − p| > β r`, `r` its radius about
+//! `c`; [`WindingNumber::BETA`] keeps the error below about 1 % of a full turn on the meshes of
+//! the tests (measured against the exact sum there), far below the 0.5 that separates inside
+//! from outside.
+
+use nalgebra::Vector3;
+
+use crate::bvh::Bvh;
+use crate::mesh::TriMesh;
+
+/// Precomputed far-field data of every tree node, for winding numbers of a fixed mesh.
+#[derive(Clone, Debug)]
+pub struct WindingNumber {
+    /// Per node: area-weighted centroid, area-weighted normal sum (outward convention, as the
+    /// triangles are wound), and the radius about the centroid that bounds the node's box.
+    centroid: Vec<Vector3<f64>>,
+    dipole: Vec<Vector3<f64>>,
+    radius: Vec<f64>,
+}
+
+/// Signed solid angle of triangle `(a, b, c)` seen from `p` (Van Oosterom & Strackee 1983):
+/// positive when `p` lies on the side its winding's normal points away from.
+fn solid_angle(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>, p: &Vector3<f64>) -> f64 {
+    let (x, y, z) = (a - p, b - p, c - p);
+    let (lx, ly, lz) = (x.norm(), y.norm(), z.norm());
+    let num = x.dot(&y.cross(&z));
+    let den = lx * ly * lz + x.dot(&y) * lz + x.dot(&z) * ly + y.dot(&z) * lx;
+    2.0 * num.atan2(den)
+}
+
+impl WindingNumber {
+    /// How far (in node radii) a node must be for its dipole to stand for its triangles.
+    pub const BETA: f64 = 4.0;
+
+    /// Builds the far-field data of `mesh` over its tree `bvh`.
+    pub fn new(mesh: &TriMesh, bvh: &Bvh) -> Self {
+        let nodes = bvh.nodes();
+        let n = nodes.len();
+        let mut out = Self {
+            centroid: vec![Vector3::zeros(); n],
+            dipole: vec![Vector3::zeros(); n],
+            radius: vec![0.0; n],
+        };
+        let mut area = vec![0.0; n];
+        // Children come after their parents in the node array, so a reverse sweep sees both
+        // children of a node before the node.
+        for i in (0..n).rev() {
+            let node = &nodes[i];
+            if node.is_leaf() {
+                let (first, count) = (node.first as usize, node.count as usize);
+                let mut sum = Vector3::zeros();
+                for &t in &bvh.tri_indices()[first..first + count] {
+                    let [a, b, c] = mesh.triangle(t as usize);
+                    let twice = (b - a).cross(&(c - a));
+                    let at = 0.5 * twice.norm();
+                    out.dipole[i] += 0.5 * twice;
+                    sum += at * (a + b + c) / 3.0;
+                    area[i] += at;
+                }
+                out.centroid[i] = if area[i] > 0.0 {
+                    sum / area[i]
+                } else {
+                    box_centre(node)
+                };
+            } else {
+                let (l, r) = (node.first as usize, node.first as usize + 1);
+                area[i] = area[l] + area[r];
+                out.dipole[i] = out.dipole[l] + out.dipole[r];
+                out.centroid[i] = if area[i] > 0.0 {
+                    (out.centroid[l] * area[l] + out.centroid[r] * area[r]) / area[i]
+                } else {
+                    box_centre(node)
+                };
+            }
+            // The farthest corner of the node's box bounds every point of its triangles.
+            let c = out.centroid[i];
+            let mut r2: f64 = 0.0;
+            for corner in 0..8 {
+                let q = Vector3::from_fn(|k, _| {
+                    f64::from(if corner >> k & 1 == 0 {
+                        node.min[k]
+                    } else {
+                        node.max[k]
+                    })
+                });
+                r2 = r2.max((q - c).norm_squared());
+            }
+            out.radius[i] = r2.sqrt();
+        }
+        out
+    }
+
+    /// The winding number of the lumen at `p`: about 1 inside, about 0 outside.
+    pub fn lumen(&self, mesh: &TriMesh, bvh: &Bvh, p: &[f64; 3]) -> f64 {
+        -self.outward(mesh, bvh, p)
+    }
+
+    /// The winding number with the triangles' own orientation (1 inside a closed surface whose
+    /// normals point out).
+    pub fn outward(&self, mesh: &TriMesh, bvh: &Bvh, p: &[f64; 3]) -> f64 {
+        let p = Vector3::from(*p);
+        let nodes = bvh.nodes();
+        if nodes.is_empty() {
+            return 0.0;
+        }
+        let mut total = 0.0;
+        let mut stack = vec![0u32];
+        while let Some(i) = stack.pop() {
+            let i = i as usize;
+            let d = self.centroid[i] - p;
+            let dist = d.norm();
+            if dist > Self::BETA * self.radius[i] {
+                total += self.dipole[i].dot(&d) / (dist * dist * dist);
+                continue;
+            }
+            let node = &nodes[i];
+            if node.is_leaf() {
+                let (first, count) = (node.first as usize, node.count as usize);
+                for &t in &bvh.tri_indices()[first..first + count] {
+                    let [a, b, c] = mesh.triangle(t as usize);
+                    total += solid_angle(&a, &b, &c, &p);
+                }
+            } else {
+                stack.push(node.first);
+                stack.push(node.first + 1);
+            }
+        }
+        total / (4.0 * std::f64::consts::PI)
+    }
+
+    /// The exact winding number (every triangle's solid angle, no far field), for checking.
+    pub fn exact_outward(mesh: &TriMesh, p: &[f64; 3]) -> f64 {
+        let p = Vector3::from(*p);
+        (0..mesh.triangles().len())
+            .map(|t| {
+                let [a, b, c] = mesh.triangle(t);
+                solid_angle(&a, &b, &c, &p)
+            })
+            .sum::<f64>()
+            / (4.0 * std::f64::consts::PI)
+    }
+}
+
+fn box_centre(node: &crate::bvh::BvhNode) -> Vector3<f64> {
+    Vector3::from_fn(|k, _| 0.5 * (f64::from(node.min[k]) + f64::from(node.max[k])))
+}
