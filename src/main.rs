@@ -153,6 +153,11 @@ fn step_for(
     let mut done = 0;
     let mut divergence = None;
     let chunk = record.as_ref().map_or(1000, |r| r.every).max(1);
+    // The inside test against the lumen every few thousand steps (about 200 times a run) and
+    // after the last: a wire that left the vessel stops the run, and the report's penetration
+    // and escaped points are measured at any depth.
+    let check_every = (steps / 200).max(chunk).max(1000);
+    let mut checked_at = 0;
     let capture = |sim: &Simulation, record: &mut Option<Recorder>| {
         if let Some(Err(e)) = record.as_mut().map(|r| r.capture(sim)) {
             // A non-finite state cannot be recorded; the divergence check reports it.
@@ -176,6 +181,15 @@ fn step_for(
         let res = sim.run(n);
         let elapsed = t0.elapsed().as_secs_f64();
         wall += elapsed;
+        let res = res.and_then(|()| {
+            let due = sim.steps() - checked_at >= check_every || sim.steps() >= steps;
+            if due {
+                checked_at = sim.steps();
+                sim.check_lumen()
+            } else {
+                Ok(())
+            }
+        });
         match res {
             Ok(()) => done += n,
             Err(e) => {

@@ -181,6 +181,63 @@ fn a_diverging_run_says_where_and_exits_nonzero() {
 }
 
 /// `--out` writes the frames asked for, also when `--step-times` steps one step at a time.
+/// A rod across the vessel's wall, most of it deep outside where no contact query reaches:
+/// the run stops as diverged naming the rod and point, and with `environment.stop_outside =
+/// false` it runs on and reports the true count and depth.
+#[test]
+fn a_rod_outside_the_lumen_stops_the_run_and_is_measured_at_any_depth() {
+    let scene =
+        std::env::temp_dir().join(format!("cosserat-cli-outside-{}.toml", std::process::id()));
+    std::fs::write(
+        &scene,
+        r#"
+name = "across-the-wall"
+[solver]
+dt = 1e-5
+duration = 0.02
+gravity = [0.0, 0.0, 0.0]
+[environment]
+mesh = { kind = "vessel", triangles = 26000 }
+[[rod]]
+elements = 20
+shape = { kind = "straight", start = [0.05, 0.0, 0.0], direction = [0.0, 1.0, 0.0], length = 0.05 }
+material = { young_modulus = 1.0e6, poisson_ratio = 0.5, density = 1100.0, radius = 0.0005 }
+start = { kind = "clamped" }
+"#,
+    )
+    .unwrap();
+    let path = scene.to_str().unwrap();
+    let out = cosserat().args(["run", path, "--json"]).output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stopped: cosserat::report::RunReport = serde_json::from_slice(&out.stdout).unwrap();
+    let why = stopped.divergence.clone().unwrap_or_default();
+    assert!(
+        why.contains("outside the lumen") && why.contains("rod 0"),
+        "{why}"
+    );
+    assert!(stopped.steps < 2000, "stopped at step {}", stopped.steps);
+    let v = run_json(&[
+        "run",
+        path,
+        "--json",
+        "--set",
+        "environment.stop_outside=false",
+    ]);
+    let went_on: cosserat::report::RunReport = serde_json::from_value(v).unwrap();
+    std::fs::remove_file(&scene).ok();
+    assert!(!went_on.diverged);
+    let c = went_on.contact.expect("contact figures");
+    // The rod reaches 5 cm off the trunk's axis, whose lumen is about 1 cm wide: the deepest
+    // point is more than 3 cm behind the wall, far beyond any contact query's reach.
+    assert!(c.escaped_points >= 10, "{c:?}");
+    assert!(c.max_penetration > 0.03, "{c:?}");
+}
+
 /// A run of no steps is refused, whether asked for by steps or by a duration shorter than
 /// half a step.
 #[test]

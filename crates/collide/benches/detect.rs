@@ -4,6 +4,8 @@
 //!   ~26k-triangle vessel, every 16th point pushed to 0.3 mm from the wall so contacts exist; one
 //!   batch `MeshCollider::detect` call (the paper's Fig. 11 measures 512 points: 1.17 ms on CPU).
 //! * `build/tree`: building the AABB tree and query data of the default vessel.
+//! * `winding/N`: the inside test (`MeshCollider::lumen_winding`) of the same N points, as a
+//!   simulation runs it after every batch of steps.
 //! * `rods/{all_pairs,sweep}/N`: self-collision of one N-point coiled chain, both broad phases.
 
 use std::hint::black_box;
@@ -48,6 +50,21 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 collider.detect(black_box(pts), ROD_RADIUS, &mut buf);
                 black_box(buf.contacts().len())
+            })
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("winding");
+    for n in [128usize, 512] {
+        let pts = trunk_points(&vessel, n);
+        assert!(pts.iter().all(|p| collider.lumen_winding(p) > 0.5));
+        group.bench_with_input(BenchmarkId::from_parameter(n), &pts, |b, pts| {
+            b.iter(|| {
+                black_box(pts)
+                    .iter()
+                    .filter(|p| collider.lumen_winding(p) < 0.5)
+                    .count()
             })
         });
     }

@@ -356,6 +356,12 @@ impl MeshCollider {
         self.winding.lumen(&self.mesh, &self.bvh, p)
     }
 
+    /// Whether the mesh, its openings closed, encloses a volume (a lumen), so that
+    /// [`Self::lumen_winding`] tells inside from outside; a sheet does not.
+    pub fn encloses_volume(&self) -> bool {
+        self.winding.encloses_volume(&self.mesh)
+    }
+
     /// The mesh.
     pub fn mesh(&self) -> &TriMesh {
         &self.mesh

@@ -79,7 +79,7 @@ fn a_closed_sphere_is_one_inside_and_zero_outside_as_parry_and_geometry_say() {
         let inside = radius < 1.0;
         assert_eq!(w > 0.5, inside, "p = {p:?}: w = {w}");
         assert!(
-            (w - if inside { 1.0 } else { 0.0 }).abs() < 0.02,
+            (w - if inside { 1.0 } else { 0.0 }).abs() < 0.05,
             "p = {p:?}: w = {w}"
         );
         let q = PV::new(p[0], p[1], p[2]);
@@ -89,7 +89,7 @@ fn a_closed_sphere_is_one_inside_and_zero_outside_as_parry_and_geometry_say() {
             "parry at {p:?}"
         );
     }
-    assert!(worst_far_field < 0.01, "far field off by {worst_far_field}");
+    assert!(worst_far_field < 0.05, "far field off by {worst_far_field}");
 }
 
 #[test]
@@ -98,8 +98,9 @@ fn the_generated_vessel_is_inside_along_its_centrelines_and_outside_beyond_its_w
     let collider = MeshCollider::new(vessel.mesh.clone());
     let mut checked = 0;
     for line in std::iter::once(&vessel.trunk).chain(&vessel.branches) {
-        // Away from the open ends, where the winding number falls towards 1/2.
-        for k in 2..=18 {
+        // All along, up to a twentieth of the line from the open ends (the ends themselves lie
+        // on the caps, where the winding number is not defined).
+        for k in 1..=19 {
             let (p, r) = line.sample(k as f64 / 20.0);
             let w = collider.lumen_winding(&p);
             assert!(
@@ -137,6 +138,33 @@ fn the_generated_vessel_is_inside_along_its_centrelines_and_outside_beyond_its_w
     let w = collider.lumen_winding(&off);
     assert!(w < 0.5, "two radii beside the trunk at {off:?}: w = {w}");
     assert!(checked > 40);
+    // Just inside the inlet, on its axis, and just outside it.
+    let e = vessel.entry_point;
+    let d = vessel.entry_direction;
+    let inside: [f64; 3] = std::array::from_fn(|k| e[k] + 1e-3 * d[k]);
+    let before: [f64; 3] = std::array::from_fn(|k| e[k] - 1e-3 * d[k]);
+    let (wi, wb) = (
+        collider.lumen_winding(&inside),
+        collider.lumen_winding(&before),
+    );
+    assert!(wi > 0.9, "1 mm into the inlet: w = {wi}");
+    assert!(wb < 0.1, "1 mm before the inlet: w = {wb}");
+}
+
+#[test]
+fn a_vessel_and_a_sphere_enclose_a_volume_and_a_floor_does_not() {
+    let vessel = generate(&VesselParams::default()).expect("the default vessel");
+    assert!(MeshCollider::new(vessel.mesh).encloses_volume());
+    assert!(MeshCollider::new(sphere(0.5, 12, 24)).encloses_volume());
+    let floor = TriMesh::patch(
+        [-1.0, -1.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [0.0, 2.0, 0.0],
+        8,
+        "floor",
+    )
+    .expect("a floor");
+    assert!(!MeshCollider::new(floor).encloses_volume());
 }
 
 #[test]
@@ -152,6 +180,9 @@ fn flipped_winding_flips_the_answer() {
         let (a, b) = (outward.lumen_winding(&p), inward.lumen_winding(&p));
         assert!((a + b).abs() < 1e-3, "{p:?}: {a} and {b}");
         let inside = p[0].abs() < 0.5;
-        assert!((b - if inside { 1.0 } else { 0.0 }).abs() < 0.02, "{p:?}: {b}");
+        assert!(
+            (b - if inside { 1.0 } else { 0.0 }).abs() < 0.05,
+            "{p:?}: {b}"
+        );
     }
 }

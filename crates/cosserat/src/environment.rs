@@ -33,6 +33,9 @@ pub struct Environment {
     pub margin: f64,
     /// Present when the mesh is a generated vessel.
     pub vessel: Option<VesselGeometry>,
+    /// Whether a run stops as diverged when a rod's point is found outside the lumen
+    /// ([`Environment::outside`]); checked after every call to `Simulation::run`.
+    pub stop_outside: bool,
 }
 
 impl Environment {
@@ -45,6 +48,7 @@ impl Environment {
             },
             margin: 1e-4,
             vessel,
+            stop_outside: true,
         }
     }
 
@@ -123,11 +127,16 @@ impl Environment {
         }
     }
 
-    /// Points of `points` whose centre lies outside the lumen (behind the nearest wall),
-    /// searching up to `reach` metres for the wall. For a generated vessel, the part of a wire
-    /// that has not yet passed the entry point is not counted: it has not been inserted. Nor is a
-    /// point whose nearest feature is the rim of an open end: it left through the opening.
-    pub fn escaped(&self, points: &[[f64; 3]], reach: f64) -> usize {
+    /// Points of `points` whose centre lies outside the lumen, and how deep the deepest is.
+    ///
+    /// Outside is decided by the lumen's winding number (`MeshCollider::lumen_winding`), which
+    /// does not depend on how far the wall is or on which side of it the nearest feature says
+    /// the point is, so a point far behind a wall, past a seam or through a flipped patch is
+    /// counted. For a generated vessel, the part of a wire that has not yet passed the entry
+    /// point is not counted: it has not been inserted. Nor is a point whose nearest feature is
+    /// the rim of an open end: it left through the opening. `radius` is the rod's: a point's
+    /// depth is its distance behind the wall plus its radius (the penetration of its sphere).
+    pub fn outside(&self, points: &[[f64; 3]], radius: f64) -> Outside {
         let inserted = |p: &[f64; 3]| {
             self.vessel.as_ref().is_none_or(|v| {
                 (0..3)
@@ -136,15 +145,46 @@ impl Environment {
                     > 0.0
             })
         };
-        points
-            .iter()
-            .filter(|p| {
-                inserted(p)
-                    && self
-                        .collider
-                        .nearest(p, reach)
-                        .is_some_and(|n| n.signed_distance < 0.0 && !n.at_opening)
-            })
-            .count()
+        let (lo, hi) = self.collider.mesh().bounds();
+        // Far enough to reach the wall from anywhere near the mesh.
+        let reach = 2.0 * (hi - lo).norm() + 1.0;
+        // A sheet (a floor, a wall) encloses nothing: the side of its nearest feature decides.
+        let lumen = self.collider.encloses_volume();
+        let mut out = Outside::default();
+        for (i, p) in points.iter().enumerate() {
+            if !inserted(p) || (lumen && self.collider.lumen_winding(p) >= 0.5) {
+                continue;
+            }
+            let Some(nearest) = self.collider.nearest(p, reach) else {
+                continue;
+            };
+            if nearest.at_opening || (!lumen && nearest.signed_distance >= 0.0) {
+                continue;
+            }
+            let depth = nearest.distance + radius;
+            out.count += 1;
+            if depth > out.deepest {
+                out.deepest = depth;
+                out.deepest_point = Some(i);
+            }
+        }
+        out
     }
+
+    /// How many points of `points` are outside the lumen ([`Self::outside`]).
+    pub fn escaped(&self, points: &[[f64; 3]], radius: f64) -> usize {
+        self.outside(points, radius).count
+    }
+}
+
+/// Points of a rod outside the lumen ([`Environment::outside`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Outside {
+    /// How many.
+    pub count: usize,
+    /// The depth of the deepest: distance behind the wall plus the rod's radius [m] (0 when
+    /// none is outside).
+    pub deepest: f64,
+    /// Index of the deepest point.
+    pub deepest_point: Option<usize>,
 }

@@ -129,6 +129,9 @@ pub struct EnvironmentSection {
     pub friction: Option<FrictionSection>,
     /// Speculative contact margin [m] (default 1e-4).
     pub margin: Option<f64>,
+    /// Stop the run as diverged when a point of a rod is found outside the lumen (default
+    /// true); false reports it and goes on.
+    pub stop_outside: Option<bool>,
 }
 
 /// `environment.mesh`.
@@ -888,6 +891,9 @@ impl Checker<'_> {
         }
         if let Some(m) = e.margin {
             env.margin = self.non_negative("environment.margin", m)?;
+        }
+        if let Some(stop) = e.stop_outside {
+            env.stop_outside = stop;
         }
         Ok(env)
     }

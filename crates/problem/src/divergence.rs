@@ -16,6 +16,9 @@ pub enum DivergedQuantity {
     /// The stiff solver's step ended with this residual (a strain, or a bend–twist angle per
     /// element), far above its tolerance (`StiffSettings::halve_above`), also in halves.
     Unconverged(f64),
+    /// A point is outside the lumen of the mesh it collides with, this deep behind the wall
+    /// (distance plus the rod's radius) [m]: the contacts did not hold it.
+    OutsideLumen(f64),
 }
 
 /// A rod that diverged: which one, where, when, and what.
@@ -45,6 +48,9 @@ impl std::fmt::Display for Divergence {
             DivergedQuantity::Unconverged(r) => {
                 format!("the stiff solver's step ended at residual {r:.3e}, far from converged")
             }
+            DivergedQuantity::OutsideLumen(depth) => format!(
+                "the point is outside the lumen, {depth:.3e} m behind the wall (set environment.stop_outside = false to go on)"
+            ),
         };
         write!(
             f,
