@@ -29,17 +29,32 @@
 //! The host uploads everything once; afterwards a batch sends only its step range and any
 //! changed end motion, and positions are read back only when asked, into one of two staging
 //! buffers, so the next batch can be submitted before the previous result is read.
+//!
+//! A simulation acquires a device of its own ([`GpuSimulation::new`]) or runs on one the caller
+//! already has ([`GpuSimulation::on_device`]), so that a renderer can share it. The code is laid
+//! out by job: `layout.rs` (the structs uploaded, checked against the WGSL), `plan.rs` (path and
+//! kernel shape), `device.rs`, `sim.rs` (upload and stepping), `readback.rs`, and `variants.rs`
+//! (measurement-only kernel variants, outside the production path).
 
+mod device;
+mod layout;
+mod plan;
+mod readback;
 mod shader;
 mod sim;
 mod stepper;
+mod variants;
 
 pub use cosserat_problem::{
     DivergedQuantity, Divergence, EndCondition, EndKind, Ordering, PointLoad, PrescribedMotion,
     SolverSettings,
 };
-pub use sim::{AdapterSummary, GpuField, GpuSimulation, GpuSnapshot};
+pub use device::AdapterSummary;
+pub use readback::{GpuField, GpuSnapshot};
+pub use sim::GpuSimulation;
 pub use stepper::GpuStepper;
+#[doc(hidden)]
+pub use variants::KernelVariant;
 
 use cosserat_model::{RodParams, RodState};
 
@@ -120,83 +135,6 @@ impl Default for GpuOptions {
             max_threads: 256,
             max_steps_per_dispatch: 10_000,
             spin_wait_us: 2_000,
-        }
-    }
-}
-
-/// Kernel variants the benchmark compares (see `examples/gpu_bench.rs`); not part of the stable
-/// API. [`KernelVariant::default`] is what [`GpuSimulation::new`] uses.
-#[doc(hidden)]
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct KernelVariant {
-    /// Unroll the per-thread loops at composition time, so that a thread's points live in
-    /// registers (default). `false` emits WGSL loops over dynamically indexed private arrays.
-    pub unroll: bool,
-    /// Allow the subgroup layout for short rods (one rod per subgroup, no workgroup barriers)
-    /// where the adapter has `SUBGROUP` and a fixed subgroup size (default).
-    pub subgroups: bool,
-    /// Fewest rods for which the subgroup layout is used (default 256): it has more points per
-    /// invocation and so more latency per step than the workgroup layout, which wins while the
-    /// rods leave the GPU idle; with many rods its fuller subgroups give more throughput.
-    pub subgroup_min_rods: u32,
-    /// Compute the constraint impulse with one `inverseSqrt` instead of the CPU's `sqrt` and
-    /// division (a measurement variant; default off).
-    pub rsqrt: bool,
-    /// Read rest lengths and inverse masses from storage in every constraint sweep instead of
-    /// keeping them in registers for the dispatch (a measurement variant; default off).
-    pub sweep_loads: bool,
-    /// Rods per workgroup in the subgroup layout (default 4: 128 invocations on NVIDIA).
-    pub rods_per_workgroup: u32,
-    /// Most points per invocation for which the subgroup layout is used (default 8).
-    pub subgroup_points_per_thread: u32,
-    /// Threads per workgroup of the multi-workgroup path (default 128, capped by
-    /// [`GpuOptions::max_threads`]): smaller windows finish a step sooner, and the halo they
-    /// repeat costs less than the extra latency of wider ones (H200, 1000 elements: 5.5 µs/step
-    /// with 128 threads against 6.4 with 256).
-    pub multi_threads: u32,
-    /// Points per thread of the multi-workgroup windows; 0 picks the fewest (even) that leave
-    /// each window owning at least one halo and 64 points.
-    pub multi_points_per_thread: u32,
-    /// Steps between halo exchanges of the multi-workgroup paths (the dispatch-per-step path
-    /// then runs this many steps per dispatch). The halo grows to cover them,
-    /// `exchange_steps · (2 · iterations + 1) + 3` points, and the grid barrier is paid once
-    /// per exchange. Lowered where the windows would not all be co-resident.
-    pub exchange_steps: u32,
-    /// Multi-workgroup path: each workgroup waits only for its two neighbours' flags instead of
-    /// a grid-wide arrival counter.
-    pub neighbour_sync: bool,
-    /// Multi-workgroup path: exchange halos as vec4s through a `@coherent` buffer where the
-    /// adapter has `MEMORY_DECORATION_COHERENT`, instead of single words through atomics.
-    pub coherent_exchange: bool,
-    /// Multi-workgroup windows of one subgroup (threads = the adapter's subgroup size) whose
-    /// threads exchange their boundary points by subgroup shuffles instead of workgroup memory.
-    pub shuffle_windows: bool,
-    /// Keep the per-point and per-element parameters in registers for the whole dispatch
-    /// instead of reading them from storage in every step.
-    pub register_constants: bool,
-    /// Constraint impulse from one `inverseSqrt` with the per-constraint factors
-    /// `w / (w_a + w_b) / h` kept in registers (fewer dependent operations per sweep).
-    pub fast_impulse: bool,
-}
-
-impl Default for KernelVariant {
-    fn default() -> Self {
-        Self {
-            unroll: true,
-            subgroups: true,
-            subgroup_min_rods: 256,
-            rsqrt: false,
-            sweep_loads: false,
-            rods_per_workgroup: 4,
-            subgroup_points_per_thread: 8,
-            multi_threads: 128,
-            multi_points_per_thread: 0,
-            exchange_steps: 3,
-            neighbour_sync: true,
-            coherent_exchange: true,
-            shuffle_windows: false,
-            register_constants: true,
-            fast_impulse: true,
         }
     }
 }

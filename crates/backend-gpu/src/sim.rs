@@ -1,179 +1,45 @@
-//! [`GpuSimulation`]: device setup, upload, kernel-path selection, batched stepping and
-//! double-buffered readback.
+//! [`GpuSimulation`]: upload and batched stepping.
 //!
-//! Everything the kernels read is uploaded once in [`GpuSimulation::new`]. A batch
-//! ([`GpuSimulation::step`]) then writes only a 32-byte parameter block (its first step index)
-//! and, when the caller changed them, the prescribed end motions; positions travel back only
-//! when asked ([`GpuSimulation::request_positions`] / [`GpuSimulation::read_positions`]),
-//! through one of two staging buffers so that a haptic loop can submit the next batch before it
-//! reads the previous result.
+//! Everything the kernels read is uploaded once, when the simulation is built on a device
+//! ([`GpuSimulation::new`] acquires one, [`GpuSimulation::on_device`] takes the caller's). A
+//! batch ([`GpuSimulation::step`]) then writes only the parameter block (its first step index),
+//! the chunk table when the batch's shape changes, and, when the caller changed them, the
+//! prescribed end motions. What the kernel reads is laid out in `layout.rs`, which kernel runs
+//! is decided in `plan.rs`, the device comes from `device.rs`, and everything read back goes
+//! through `readback.rs`.
 
-use crate::shader::KernelConfig;
-use crate::{
-    DivergedQuantity, Divergence, GpuError, GpuOptions, GpuRodInput, KernelPath, KernelVariant,
-    PrescribedMotion, SolverSettings,
-};
-use bytemuck::{Pod, Zeroable};
-use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use crate::device::{AdapterSummary, Gpu};
+use crate::layout::{ChunkG, DriveG, ParamsU, SlotG, TABLE_CAPACITY};
+use crate::plan::{Plan, Tuning};
+use crate::readback::Readback;
+use crate::{GpuError, GpuOptions, GpuRodInput, KernelPath, PrescribedMotion, SolverSettings};
+use std::time::Duration;
 
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct ParamsU {
-    gravity: [f32; 4],
-    lo2: f32,
-    hi2: f32,
-    base_step: u32,
-    num_items: u32,
-    epoch0: u32,
-    pad: [u32; 3],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-struct SlotG {
-    a: [f32; 4],
-    b: [f32; 4],
-    c: [f32; 4],
-    d: [f32; 4],
-    e: [f32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-struct ItemG {
-    rod: u32,
-    base: u32,
-    n: u32,
-    flags: u32,
-    w0: u32,
-    w1: u32,
-    o0: u32,
-    o1: u32,
-    left: u32,
-    right: u32,
-    drag: f32,
-    pad: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-struct DriveG {
-    v: [f32; 4],
-    w: [f32; 4],
-    /// Steps `[window[0], window[1])` of the motion; `window[2]`: the step `origin` is before.
-    window: [u32; 4],
-    /// Position of the held point before step `window[2]` (see [`EndTrack`]).
-    origin: [f32; 4],
-}
+/// Bytes of one chunk-table entry, the size of the table's binding.
+const CHUNK_BYTES: u64 = std::mem::size_of::<ChunkG>() as u64;
 
 /// The path of a held end point, tracked in `f64` on the host: its position before step
 /// `reference`. The kernel places the point at `origin + (steps moved) h v` rather than
 /// integrating it in `f32`, and a new motion starts from the tracked position, so rounding does
 /// not accumulate over a long push (the CPU backend's `HeldPath` does the same).
 #[derive(Clone, Copy, Debug, Default)]
-struct EndTrack {
+pub(crate) struct EndTrack {
     origin: [f64; 3],
     reference: u64,
 }
 
-const NONE: u32 = u32::MAX;
-/// Dispatches one submission can address in the chunk table.
-const TABLE_CAPACITY: u32 = 1024;
-/// Loop iterations lavapipe runs per invocation before it silently stops all loops (GPU.md),
-/// with a margin.
-const SOFTWARE_LOOP_BUDGET: u32 = 40_000;
-
-/// What the backend learned about its adapter.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AdapterSummary {
-    /// Adapter name as the driver reports it (e.g. "NVIDIA H100 80GB HBM3", "llvmpipe (…)").
-    pub name: String,
-    /// Driver name and version info.
-    pub driver: String,
-    /// PCI vendor id.
-    pub vendor: u32,
-    /// Whether this is a software (CPU) adapter such as lavapipe.
-    pub software: bool,
-    /// Whether GPU timestamps can be recorded.
-    pub timestamps: bool,
-    /// Workgroups known to be co-resident, when known.
-    pub co_resident_workgroups: Option<u32>,
-    /// Largest workgroup memory in bytes.
-    pub max_workgroup_storage: u32,
-    /// The subgroup size, when the adapter has subgroup operations and one fixed size (the
-    /// subgroup layout for short rods needs both).
-    pub subgroup_size: Option<u32>,
-    /// Whether storage buffers can be declared `@coherent` (the multi-workgroup halo exchange
-    /// then moves vec4s through one instead of single words through atomics).
-    pub coherent: bool,
-}
-
-/// The plan a simulation runs: path, kernel shape and the work items (one per workgroup).
-#[derive(Clone, Debug)]
-struct Plan {
-    path: KernelPath,
-    cfg: KernelConfig,
-    items: Vec<ItemG>,
-    /// Workgroups per dispatch (the items, or fewer with several rods per workgroup).
-    workgroups: u32,
-    steps_per_dispatch: u32,
-}
-
-struct StateBuffers {
-    pos: wgpu::Buffer,
-    vel: wgpu::Buffer,
-    frm: wgpu::Buffer,
-    omg: wgpu::Buffer,
-}
-
-/// A device buffer a blocking read copies from.
-#[derive(Clone, Copy, Debug)]
-enum Part {
-    Positions,
-    Velocities,
-    Frames,
-    AngularVelocities,
-    Status,
-}
-
-struct Pending {
-    staging: usize,
-    submission: wgpu::SubmissionIndex,
-    /// Set by the map callback.
-    mapped: Arc<AtomicBool>,
-}
-
-/// A field of a rod's state on the device, for [`GpuSimulation::write_rod_field`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum GpuField {
-    /// Centreline points.
-    Positions,
-    /// Point velocities.
-    Velocities,
-    /// Frames as `[x, y, z, w]`.
-    Frames,
-    /// Frame angular velocities (body coordinates).
-    AngularVelocities,
-}
-
-/// The state of a [`GpuSimulation`] at one step ([`GpuSimulation::snapshot`]).
-#[derive(Clone, Debug)]
-pub struct GpuSnapshot {
-    state: Vec<u8>,
-    steps: u64,
-    drives: Vec<DriveG>,
-    tracks: Vec<EndTrack>,
+/// One copy of the rods' state on the device (the dispatch-per-step path has two).
+pub(crate) struct StateBuffers {
+    pub(crate) pos: wgpu::Buffer,
+    pub(crate) vel: wgpu::Buffer,
+    pub(crate) frm: wgpu::Buffer,
+    pub(crate) omg: wgpu::Buffer,
 }
 
 /// Rods stepped on the GPU. See the crate docs for the kernel paths.
 pub struct GpuSimulation {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    adapter: AdapterSummary,
-    plan: Plan,
+    pub(crate) gpu: Gpu,
+    pub(crate) plan: Plan,
     pipeline: wgpu::ComputePipeline,
     bind_groups: Vec<wgpu::BindGroup>,
     params_buf: wgpu::Buffer,
@@ -184,33 +50,26 @@ pub struct GpuSimulation {
     table_exchanges: u32,
     /// Halo exchanges since the grid's synchronisation words were cleared.
     epochs: u32,
-    states: Vec<StateBuffers>,
-    current: usize,
-    status_buf: wgpu::Buffer,
+    pub(crate) states: Vec<StateBuffers>,
+    /// The state buffers holding the current state.
+    pub(crate) current: usize,
+    pub(crate) status_buf: wgpu::Buffer,
     sync_buf: Option<wgpu::Buffer>,
     drives_buf: wgpu::Buffer,
-    drives: Vec<DriveG>,
+    pub(crate) drives: Vec<DriveG>,
     /// One per entry of `drives`.
-    tracks: Vec<EndTrack>,
-    drives_dirty: bool,
-    rods: Vec<(u32, u32)>,
-    slots: u64,
-    staging: [wgpu::Buffer; 2],
-    /// Staging buffer of blocking reads ([`Self::check`], [`Self::read_state`]), made on first
-    /// use and kept.
-    read_staging: Option<wgpu::Buffer>,
-    pending: VecDeque<Pending>,
+    pub(crate) tracks: Vec<EndTrack>,
+    pub(crate) drives_dirty: bool,
+    /// First slot and elements of each rod.
+    pub(crate) rods: Vec<(u32, u32)>,
+    /// Slots of all rods together.
+    pub(crate) slots: u64,
+    pub(crate) readback: Readback,
     settings: SolverSettings<f32>,
-    steps: u64,
-    query: Option<(wgpu::QuerySet, wgpu::Buffer)>,
-    gpu_time_pending: Vec<wgpu::Buffer>,
-    timestamp_period_ns: f64,
-    error: Arc<Mutex<Option<String>>>,
-    spin_wait: Duration,
-}
-
-fn round_up(x: u32, m: u32) -> u32 {
-    x.div_ceil(m) * m
+    pub(crate) steps: u64,
+    pub(crate) query: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    pub(crate) gpu_time_pending: Vec<wgpu::Buffer>,
+    pub(crate) timestamp_period_ns: f64,
 }
 
 /// First step index `s` with `s * dt >= t`, matching the CPU's `time = steps as f64 * dt`.
@@ -253,24 +112,8 @@ fn drive_of(m: Option<&PrescribedMotion<f32>>, dt: f64) -> DriveG {
     }
 }
 
-fn known_co_residency(info: &wgpu::AdapterInfo) -> Option<u32> {
-    // One workgroup per SM is far below what was measured co-resident (8 per SM of 256 threads
-    // on the H100, GPU.md) and leaves room for the kernel's registers and workgroup memory.
-    let name = info.name.to_ascii_uppercase();
-    if info.vendor != 0x10de {
-        return None;
-    }
-    if name.contains("H100") && name.contains("PCIE") {
-        Some(114)
-    } else if name.contains("H100") || name.contains("H200") || name.contains("GH200") {
-        Some(132)
-    } else {
-        None
-    }
-}
-
 impl GpuSimulation {
-    /// Uploads `rods` and prepares the kernel.
+    /// Acquires a device and uploads `rods` to it ([`Self::on_device`] on a device of its own).
     ///
     /// The path is `options.path`, or with [`KernelPath::Auto`]: one workgroup per rod when the
     /// longest rod fits with at most four points per thread (or, from 256 rods on, one subgroup
@@ -287,117 +130,96 @@ impl GpuSimulation {
         settings: &SolverSettings<f32>,
         options: GpuOptions,
     ) -> Result<Self, GpuError> {
-        Self::with_variant(rods, settings, options, KernelVariant::default())
+        validate(&rods, settings)?;
+        let gpu = Gpu::acquire(&options)?;
+        Self::planned(gpu, rods, settings, options)
     }
 
-    /// [`Self::new`] with a kernel variant; for the benchmark's side-by-side measurements.
-    #[doc(hidden)]
-    pub fn with_variant(
+    /// Uploads `rods` to a device the caller already has, e.g. a renderer's, which can then
+    /// draw from the same device; otherwise as [`Self::new`].
+    ///
+    /// The adapter is the one the device was created from ([`wgpu::Device::adapter_info`]); the
+    /// kernel uses the features and limits the device was created with. [`Self::new`] asks for
+    /// the adapter's full limits ([`wgpu::Adapter::limits`]) and, where the adapter has them,
+    /// [`wgpu::Features::SUBGROUP`] and [`wgpu::Features::MEMORY_DECORATION_COHERENT`] (and
+    /// [`wgpu::Features::TIMESTAMP_QUERY`] with [`GpuOptions::timestamps`]); a device created
+    /// the same way runs the same kernel, bit for bit. Without the optional features the
+    /// layouts that need them are not chosen; with lower limits building can fail with
+    /// [`GpuError::Wgpu`] (wgpu's default limits allow 8 storage buffers per shader stage, and
+    /// the kernel binds 8 to 13).
+    ///
+    /// The device's uncaptured-error handler stays its owner's: errors while building are
+    /// returned, but a validation error in a later batch reaches that handler instead of the
+    /// next read.
+    pub fn on_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
         rods: Vec<GpuRodInput>,
         settings: &SolverSettings<f32>,
         options: GpuOptions,
-        variant: KernelVariant,
     ) -> Result<Self, GpuError> {
         validate(&rods, settings)?;
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let features = adapter.features();
-        let limits = adapter.limits();
-        let want_ts = options.timestamps && features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        let has_subgroups = features.contains(wgpu::Features::SUBGROUP);
-        let has_coherent = features.contains(wgpu::Features::MEMORY_DECORATION_COHERENT);
-        let mut required_features = wgpu::Features::empty();
-        if want_ts {
-            required_features |= wgpu::Features::TIMESTAMP_QUERY;
-        }
-        if has_subgroups {
-            required_features |= wgpu::Features::SUBGROUP;
-        }
-        if has_coherent {
-            required_features |= wgpu::Features::MEMORY_DECORATION_COHERENT;
-        }
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("cosserat-backend-gpu"),
-            required_features,
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(format!("adapter `{}` gave no device: {e}", info.name)))?;
-        let error = Arc::new(Mutex::new(None::<String>));
-        {
-            let error = error.clone();
-            device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-                let mut slot = error.lock().unwrap_or_else(|p| p.into_inner());
-                slot.get_or_insert_with(|| e.to_string());
-            }));
-        }
-        let software = info.device_type == wgpu::DeviceType::Cpu
-            || info.name.to_ascii_lowercase().contains("llvmpipe");
-        let adapter_summary = AdapterSummary {
-            name: info.name.clone(),
-            driver: format!("{} {}", info.driver, info.driver_info)
-                .trim()
-                .to_string(),
-            vendor: info.vendor,
-            software,
-            timestamps: want_ts,
-            co_resident_workgroups: options.co_resident_workgroups.or(if software {
-                None
-            } else {
-                known_co_residency(&info)
-            }),
-            max_workgroup_storage: limits.max_compute_workgroup_storage_size,
-            // The layout puts one rod on SG consecutive invocations and relies on them forming
-            // one subgroup, so the size must be fixed (NVIDIA: 32, lavapipe: 8).
-            subgroup_size: (has_subgroups
-                && info.subgroup_min_size == info.subgroup_max_size
-                && info.subgroup_min_size >= 4)
-                .then_some(info.subgroup_min_size),
-            coherent: has_coherent,
-        };
-
-        let plan = make_plan(
-            &rods,
-            settings,
-            &options,
-            &variant,
-            &adapter_summary,
-            &limits,
-        )?;
-        let spin_wait = Duration::from_micros(options.spin_wait_us as u64);
-        Self::build(
-            device,
-            queue,
-            adapter_summary,
-            plan,
+        Self::planned(
+            Gpu::shared(device, queue, &options),
             rods,
             settings,
-            want_ts,
-            error,
-            &limits,
-            spin_wait,
+            options,
         )
     }
 
-    #[allow(clippy::too_many_lines)]
-    fn build(
-        device: wgpu::Device,
-        queue: wgpu::Queue,
-        adapter: AdapterSummary,
+    /// Plans with the production tuning and builds.
+    fn planned(
+        gpu: Gpu,
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: GpuOptions,
+    ) -> Result<Self, GpuError> {
+        let plan = Plan::new(
+            &rods,
+            settings,
+            &options,
+            &Tuning::PRODUCTION,
+            &gpu.adapter,
+            &gpu.limits,
+        )?;
+        Self::build(gpu, plan, rods, settings, &options)
+    }
+
+    /// Uploads `rods` to `gpu` and prepares `plan`'s kernel: the construction [`Self::new`],
+    /// [`Self::on_device`] and the benchmark's variants share.
+    pub(crate) fn build(
+        gpu: Gpu,
         plan: Plan,
         rods: Vec<GpuRodInput>,
         settings: &SolverSettings<f32>,
-        want_ts: bool,
-        error: Arc<Mutex<Option<String>>>,
-        limits: &wgpu::Limits,
-        spin_wait: Duration,
+        options: &GpuOptions,
     ) -> Result<Self, GpuError> {
+        // A shared device keeps its owner's uncaptured-error handler, so errors of the
+        // construction are caught here, for every device alike.
+        let creation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let built = Self::upload(gpu, plan, rods, settings, options);
+        let memory = pollster::block_on(memory.pop());
+        let creation = pollster::block_on(creation.pop());
+        if let Some(e) = memory.or(creation) {
+            return Err(GpuError::Wgpu(format!("building the simulation: {e}")));
+        }
+        let sim = built?;
+        sim.gpu.errors.take()?;
+        Ok(sim)
+    }
+
+    #[allow(clippy::too_many_lines)]
+    fn upload(
+        gpu: Gpu,
+        plan: Plan,
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: &GpuOptions,
+    ) -> Result<Self, GpuError> {
+        let device = &gpu.device;
+        let limits = &gpu.limits;
+        let want_ts = gpu.adapter.timestamps;
         use wgpu::util::DeviceExt;
         let dt = settings.dt as f64;
         // Slots: rod r occupies slots base..base+n+1 (point i, element i, node i in slot i).
@@ -495,7 +317,7 @@ impl GpuSimulation {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let table_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(16);
+        let table_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(CHUNK_BYTES);
         let table_buf = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("chunk table"),
             size: table_stride * TABLE_CAPACITY as u64,
@@ -642,7 +464,7 @@ impl GpuSimulation {
                     resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                         buffer: &table_buf,
                         offset: 0,
-                        size: wgpu::BufferSize::new(16),
+                        size: wgpu::BufferSize::new(CHUNK_BYTES),
                     }),
                 },
                 wgpu::BindGroupEntry {
@@ -728,16 +550,12 @@ impl GpuSimulation {
             vec![make_bg(&states[0], None)]
         };
 
-        let staging_size = 16 * slots_n as u64 + 16 * n_items as u64;
-        let mk_staging = |label| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: staging_size,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
-        let staging = [mk_staging("readback 0"), mk_staging("readback 1")];
+        let readback = Readback::new(
+            device,
+            slots_n as u64,
+            n_items as u64,
+            Duration::from_micros(options.spin_wait_us as u64),
+        );
         let query = want_ts.then(|| {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("pass time"),
@@ -752,14 +570,9 @@ impl GpuSimulation {
             });
             (set, resolve)
         });
-        let timestamp_period_ns = queue.get_timestamp_period() as f64;
-        if let Some(e) = error.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            return Err(GpuError::Wgpu(e));
-        }
+        let timestamp_period_ns = gpu.queue.get_timestamp_period() as f64;
         Ok(Self {
-            device,
-            queue,
-            adapter,
+            gpu,
             plan,
             pipeline,
             bind_groups,
@@ -778,23 +591,19 @@ impl GpuSimulation {
             tracks,
             drives_dirty: false,
             rods: rod_layout,
+            readback,
             slots: slots_n as u64,
-            staging,
-            read_staging: None,
-            pending: VecDeque::new(),
             settings: *settings,
             steps: 0,
             query,
             gpu_time_pending: Vec::new(),
             timestamp_period_ns,
-            error,
-            spin_wait,
         })
     }
 
     /// The adapter in use.
     pub fn adapter(&self) -> &AdapterSummary {
-        &self.adapter
+        &self.gpu.adapter
     }
 
     /// The kernel path in use (never [`KernelPath::Auto`]).
@@ -805,32 +614,7 @@ impl GpuSimulation {
     /// A one-line description of the kernel: path, threads, points per thread, workgroups, halo,
     /// steps per dispatch and the compiled-in terms.
     pub fn kernel_description(&self) -> String {
-        let c = &self.plan.cfg;
-        let layout = if c.flags.contains(&"SUBGROUP") {
-            format!(
-                " ({} rods/workgroup, one per subgroup of {})",
-                c.threads / c.group,
-                c.group
-            )
-        } else {
-            String::new()
-        };
-        format!(
-            "{} kernel: {} workgroups x {} threads{layout} x {} points/thread{}, halo {}{}, <= {} steps/dispatch, terms [{}]",
-            self.plan.path,
-            self.plan.workgroups,
-            c.threads,
-            c.per_thread,
-            if c.unroll { "" } else { " (loops)" },
-            c.halo,
-            if c.exchange_steps > 1 {
-                format!(" (exchange every {} steps)", c.exchange_steps)
-            } else {
-                String::new()
-            },
-            self.plan.steps_per_dispatch,
-            c.flags.join(", ")
-        )
+        self.plan.describe()
     }
 
     /// Steps submitted so far.
@@ -888,6 +672,19 @@ impl GpuSimulation {
         self.drives_dirty = true;
     }
 
+    /// Starts the path of held end `i` (an index into `drives`) again from `p`, where the end was
+    /// just put, keeping its motion.
+    pub(crate) fn restart_end_path(&mut self, i: usize, p: [f32; 3]) {
+        self.tracks[i] = EndTrack {
+            origin: p.map(f64::from),
+            reference: self.steps,
+        };
+        let d = &mut self.drives[i];
+        d.window[2] = self.steps as u32;
+        d.origin = [p[0], p[1], p[2], 0.0];
+        self.drives_dirty = true;
+    }
+
     /// Drives end `end` of rod `rod` with a constant velocity and angular velocity (world frame)
     /// from the next batch on, until changed: the per-batch input of a haptic loop.
     pub fn set_end_velocity(
@@ -917,13 +714,6 @@ impl GpuSimulation {
         Ok(())
     }
 
-    fn take_wgpu_error(&self) -> Result<(), GpuError> {
-        match self.error.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            Some(e) => Err(GpuError::Wgpu(e)),
-            None => Ok(()),
-        }
-    }
-
     /// Submits `k` time-steps and returns without waiting for them.
     ///
     /// Divergence and grid timeouts are detected by the kernel, which stops the affected rod;
@@ -944,7 +734,7 @@ impl GpuSimulation {
     }
 
     fn submit_steps(&mut self, k: u32, readback: bool) -> Result<(), GpuError> {
-        self.take_wgpu_error()?;
+        self.gpu.errors.take()?;
         if readback {
             self.readback_slot()?;
         }
@@ -957,7 +747,8 @@ impl GpuSimulation {
             ));
         }
         if self.drives_dirty {
-            self.queue
+            self.gpu
+                .queue
                 .write_buffer(&self.drives_buf, 0, bytemuck::cast_slice(&self.drives));
             self.drives_dirty = false;
         }
@@ -981,12 +772,17 @@ impl GpuSimulation {
                     let off = d * spd;
                     let count = spd.min(this - off);
                     let at = (self.table_stride * d as u64) as usize;
-                    table[at..at + 4].copy_from_slice(&off.to_le_bytes());
-                    table[at + 4..at + 8].copy_from_slice(&count.to_le_bytes());
-                    table[at + 8..at + 12].copy_from_slice(&exchanges.to_le_bytes());
+                    let entry = ChunkG {
+                        offset: off,
+                        count,
+                        sync_base: exchanges,
+                        pad1: 0,
+                    };
+                    table[at..at + CHUNK_BYTES as usize]
+                        .copy_from_slice(bytemuck::bytes_of(&entry));
                     exchanges += (count - 1) / xs;
                 }
-                self.queue.write_buffer(&self.table_buf, 0, &table);
+                self.gpu.queue.write_buffer(&self.table_buf, 0, &table);
                 self.table_key = Some((this, spd));
                 self.table_exchanges = exchanges;
             }
@@ -1007,12 +803,16 @@ impl GpuSimulation {
                 base_step: self.steps as u32,
                 num_items: self.plan.items.len() as u32,
                 epoch0: self.epochs,
-                pad: [0; 3],
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
             };
             self.epochs += self.table_exchanges;
-            self.queue
+            self.gpu
+                .queue
                 .write_buffer(&self.params_buf, 0, bytemuck::bytes_of(&params));
             let mut enc = self
+                .gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("steps"),
@@ -1049,7 +849,7 @@ impl GpuSimulation {
             }
             if let Some((set, resolve)) = &self.query {
                 enc.resolve_query_set(set, 0..2, resolve, 0);
-                let read = self.device.create_buffer(&wgpu::BufferDescriptor {
+                let read = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("timestamps readback"),
                     size: 16,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -1062,434 +862,23 @@ impl GpuSimulation {
             if readback && last {
                 let slot = self.readback_slot()?;
                 self.encode_readback(&mut enc, slot);
-                let submission = self.queue.submit([enc.finish()]);
+                let submission = self.gpu.queue.submit([enc.finish()]);
                 self.map_readback(slot, submission);
             } else {
-                self.queue.submit([enc.finish()]);
+                self.gpu.queue.submit([enc.finish()]);
             }
             self.steps += this as u64;
             remaining -= this as u64;
         }
         Ok(())
     }
-
-    /// Starts copying the current positions (and the divergence status) into a staging buffer
-    /// without waiting. At most two requests may be outstanding; [`Self::read_positions`]
-    /// returns the oldest.
-    pub fn request_positions(&mut self) -> Result<(), GpuError> {
-        let slot = self.readback_slot()?;
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("readback"),
-            });
-        self.encode_readback(&mut enc, slot);
-        let submission = self.queue.submit([enc.finish()]);
-        self.map_readback(slot, submission);
-        Ok(())
-    }
-
-    /// The staging buffer the next position request uses.
-    fn readback_slot(&self) -> Result<usize, GpuError> {
-        if self.pending.len() >= 2 {
-            return Err(GpuError::InvalidInput(
-                "two position reads are already pending; read one first".into(),
-            ));
-        }
-        Ok(match self.pending.front() {
-            Some(p) => 1 - p.staging,
-            None => 0,
-        })
-    }
-
-    fn encode_readback(&self, enc: &mut wgpu::CommandEncoder, slot: usize) {
-        let staging = &self.staging[slot];
-        let pos_bytes = 16 * self.slots;
-        enc.copy_buffer_to_buffer(&self.states[self.current].pos, 0, staging, 0, pos_bytes);
-        enc.copy_buffer_to_buffer(
-            &self.status_buf,
-            0,
-            staging,
-            pos_bytes,
-            16 * self.plan.items.len() as u64,
-        );
-    }
-
-    fn map_readback(&mut self, slot: usize, submission: wgpu::SubmissionIndex) {
-        let mapped = Arc::new(AtomicBool::new(false));
-        let flag = mapped.clone();
-        self.staging[slot].map_async(wgpu::MapMode::Read, .., move |_| {
-            flag.store(true, AtomicOrdering::Release);
-        });
-        self.pending.push_back(Pending {
-            staging: slot,
-            submission,
-            mapped,
-        });
-    }
-
-    /// Waits until `mapped` is set by its map callback: first by polling the device in a busy
-    /// loop for up to [`GpuOptions::spin_wait_us`], then blocking on `submission`.
-    fn wait_mapped(
-        &self,
-        submission: wgpu::SubmissionIndex,
-        mapped: &AtomicBool,
-    ) -> Result<(), GpuError> {
-        if !self.spin_wait.is_zero() {
-            let start = Instant::now();
-            loop {
-                self.device
-                    .poll(wgpu::PollType::Poll)
-                    .map_err(|e| GpuError::Wgpu(format!("polling the GPU: {e}")))?;
-                if mapped.load(AtomicOrdering::Acquire) {
-                    return self.take_wgpu_error();
-                }
-                if start.elapsed() >= self.spin_wait {
-                    break;
-                }
-                std::hint::spin_loop();
-            }
-        }
-        self.wait(submission)
-    }
-
-    fn wait(&self, submission: wgpu::SubmissionIndex) -> Result<(), GpuError> {
-        self.device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(submission),
-                timeout: Some(Duration::from_secs(120)),
-            })
-            .map_err(|e| GpuError::Wgpu(format!("waiting for the GPU: {e}")))?;
-        self.take_wgpu_error()
-    }
-
-    /// Positions of every rod (`n + 1` points each) as of the oldest pending
-    /// [`Self::request_positions`], or as of now when none is pending (blocking).
-    ///
-    /// Fails with [`GpuError::Diverged`] naming rod, element and step if a rod diverged, and with
-    /// [`GpuError::GridTimeout`] if a grid barrier timed out.
-    pub fn read_positions(&mut self) -> Result<Vec<Vec<[f32; 3]>>, GpuError> {
-        if self.pending.is_empty() {
-            self.request_positions()?;
-        }
-        let Some(p) = self.pending.pop_front() else {
-            unreachable!("a request was just made")
-        };
-        self.wait_mapped(p.submission, &p.mapped)?;
-        let staging = &self.staging[p.staging];
-        let (positions, status) = {
-            let view = staging
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Wgpu(format!("mapping the readback: {e}")))?;
-            let floats: &[f32] = bytemuck::cast_slice(&view[..(16 * self.slots) as usize]);
-            let status: Vec<u32> =
-                bytemuck::cast_slice(&view[(16 * self.slots) as usize..]).to_vec();
-            let positions = self
-                .rods
-                .iter()
-                .map(|&(base, n)| {
-                    (0..=n as usize)
-                        .map(|i| {
-                            let o = 4 * (base as usize + i);
-                            [floats[o], floats[o + 1], floats[o + 2]]
-                        })
-                        .collect()
-                })
-                .collect();
-            (positions, status)
-        };
-        staging.unmap();
-        self.status_error(&status)?;
-        Ok(positions)
-    }
-
-    fn status_error(&self, status: &[u32]) -> Result<(), GpuError> {
-        let mut first: Option<Divergence> = None;
-        for (i, w) in status.chunks_exact(4).enumerate() {
-            if w[0] & 0x100 != 0 {
-                return Err(GpuError::GridTimeout);
-            }
-            let code = w[0] & 0xff;
-            if code == 0 {
-                continue;
-            }
-            let value = f32::from_bits(w[3]) as f64;
-            let quantity = match code {
-                1 => DivergedQuantity::NonFiniteFrame,
-                2 => DivergedQuantity::NonFinitePosition,
-                _ => DivergedQuantity::Strain((value.sqrt() - 1.0).abs()),
-            };
-            let d = Divergence {
-                rod: self.plan.items[i].rod as usize,
-                element: w[1] as usize,
-                step: w[2] as u64,
-                quantity,
-            };
-            if first.is_none_or(|f| (d.step, d.rod, d.element) < (f.step, f.rod, f.element)) {
-                first = Some(d);
-            }
-        }
-        match first {
-            Some(d) => Err(GpuError::Diverged(d)),
-            None => Ok(()),
-        }
-    }
-
-    /// Waits for all submitted work and reports divergence or a grid timeout, if any.
-    pub fn check(&mut self) -> Result<(), GpuError> {
-        let size = 16 * self.plan.items.len() as u64;
-        let status = self.read_buffers(&[(Part::Status, size)])?;
-        self.status_error(bytemuck::cast_slice(&status))
-    }
-
-    /// Copies `parts` (each from offset 0) one after another into the read staging buffer in one
-    /// submission, waits for it, and returns the bytes: one round trip whatever the number of
-    /// parts.
-    fn read_buffers(&mut self, parts: &[(Part, u64)]) -> Result<Vec<u8>, GpuError> {
-        let total: u64 = parts.iter().map(|p| p.1).sum();
-        if self.read_staging.as_ref().is_none_or(|b| b.size() < total) {
-            self.read_staging = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("read"),
-                size: total,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }));
-        }
-        let Some(staging) = self.read_staging.as_ref() else {
-            unreachable!("made above")
-        };
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("read"),
-            });
-        let st = &self.states[self.current];
-        let mut offset = 0;
-        for &(part, size) in parts {
-            let source = match part {
-                Part::Positions => &st.pos,
-                Part::Velocities => &st.vel,
-                Part::Frames => &st.frm,
-                Part::AngularVelocities => &st.omg,
-                Part::Status => &self.status_buf,
-            };
-            enc.copy_buffer_to_buffer(source, 0, staging, offset, size);
-            offset += size;
-        }
-        let submission = self.queue.submit([enc.finish()]);
-        let mapped = Arc::new(AtomicBool::new(false));
-        let flag = mapped.clone();
-        staging.map_async(wgpu::MapMode::Read, ..total, move |_| {
-            flag.store(true, AtomicOrdering::Release);
-        });
-        self.wait_mapped(submission, &mapped)?;
-        let bytes = staging
-            .get_mapped_range(..total)
-            .map_err(|e| GpuError::Wgpu(format!("mapping a readback: {e}")))?
-            .to_vec();
-        staging.unmap();
-        Ok(bytes)
-    }
-
-    /// The full state of every rod (blocking, one round trip). Fails like
-    /// [`Self::read_positions`].
-    pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
-        use cosserat_model::{Quat, RodState, Vec3};
-        let bytes = 16 * self.slots;
-        let status_bytes = 16 * self.plan.items.len() as u64;
-        let all = self.read_buffers(&[
-            (Part::Positions, bytes),
-            (Part::Velocities, bytes),
-            (Part::Frames, bytes),
-            (Part::AngularVelocities, bytes),
-            (Part::Status, status_bytes),
-        ])?;
-        let b = bytes as usize;
-        self.status_error(bytemuck::cast_slice(&all[4 * b..]))?;
-        let floats: &[f32] = bytemuck::cast_slice(&all[..4 * b]);
-        let quarter = b / 4;
-        let (p, v, q, w) = (
-            &floats[..quarter],
-            &floats[quarter..2 * quarter],
-            &floats[2 * quarter..3 * quarter],
-            &floats[3 * quarter..],
-        );
-        let v3 = |a: &[f32], i: usize| Vec3::new(a[4 * i], a[4 * i + 1], a[4 * i + 2]);
-        Ok(self
-            .rods
-            .iter()
-            .map(|&(base, n)| {
-                let (b, n) = (base as usize, n as usize);
-                RodState {
-                    positions: (0..=n).map(|i| v3(p, b + i)).collect(),
-                    velocities: (0..=n).map(|i| v3(v, b + i)).collect(),
-                    frames: (0..n)
-                        .map(|i| {
-                            let o = 4 * (b + i);
-                            Quat::new(q[o + 3], q[o], q[o + 1], q[o + 2])
-                        })
-                        .collect(),
-                    angular_velocities: (0..n).map(|i| v3(w, b + i)).collect(),
-                }
-            })
-            .collect())
-    }
-
-    /// The whole device state (points, frames, their velocities, the status words) and the
-    /// host's bookkeeping of held ends, for [`Self::restore`] (blocking, one round trip).
-    pub fn snapshot(&mut self) -> Result<GpuSnapshot, GpuError> {
-        self.ensure_idle()?;
-        let bytes = 16 * self.slots;
-        let status_bytes = 16 * self.plan.items.len() as u64;
-        let state = self.read_buffers(&[
-            (Part::Positions, bytes),
-            (Part::Velocities, bytes),
-            (Part::Frames, bytes),
-            (Part::AngularVelocities, bytes),
-            (Part::Status, status_bytes),
-        ])?;
-        Ok(GpuSnapshot {
-            state,
-            steps: self.steps,
-            drives: self.drives.clone(),
-            tracks: self.tracks.clone(),
-        })
-    }
-
-    /// Returns to a snapshot of this simulation: the next steps are, bit for bit, those that
-    /// followed it.
-    pub fn restore(&mut self, snapshot: &GpuSnapshot) -> Result<(), GpuError> {
-        self.ensure_idle()?;
-        let bytes = (16 * self.slots) as usize;
-        let status_bytes = 16 * self.plan.items.len();
-        if snapshot.state.len() != 4 * bytes + status_bytes
-            || snapshot.drives.len() != self.drives.len()
-        {
-            return Err(GpuError::InvalidInput(
-                "the snapshot was taken of other rods".into(),
-            ));
-        }
-        let st = &self.states[self.current];
-        for (k, buf) in [&st.pos, &st.vel, &st.frm, &st.omg].into_iter().enumerate() {
-            self.queue
-                .write_buffer(buf, 0, &snapshot.state[k * bytes..(k + 1) * bytes]);
-        }
-        self.queue
-            .write_buffer(&self.status_buf, 0, &snapshot.state[4 * bytes..]);
-        self.steps = snapshot.steps;
-        self.drives.clone_from(&snapshot.drives);
-        self.tracks.clone_from(&snapshot.tracks);
-        self.drives_dirty = true;
-        self.queue.submit([]);
-        self.take_wgpu_error()
-    }
-
-    /// Overwrites one field of rod `rod` (`xyz` of each of its points or frames; frames as
-    /// `[x, y, z, w]`), keeping whatever else the device stores beside them.
-    pub fn write_rod_field(
-        &mut self,
-        rod: usize,
-        field: GpuField,
-        values: &[[f32; 4]],
-    ) -> Result<(), GpuError> {
-        self.ensure_idle()?;
-        let Some(&(base, n)) = self.rods.get(rod) else {
-            return Err(GpuError::InvalidInput(format!("no rod {rod}")));
-        };
-        let (base, n) = (base as usize, n as usize);
-        let (part, count, width) = match field {
-            GpuField::Positions => (Part::Positions, n + 1, 3),
-            GpuField::Velocities => (Part::Velocities, n + 1, 3),
-            GpuField::Frames => (Part::Frames, n, 4),
-            GpuField::AngularVelocities => (Part::AngularVelocities, n, 3),
-        };
-        if values.len() != count {
-            return Err(GpuError::InvalidInput(format!(
-                "rod {rod}: expected {count} entries, got {}",
-                values.len()
-            )));
-        }
-        let bytes = self.read_buffers(&[(part, 16 * self.slots)])?;
-        let mut words: Vec<[f32; 4]> = bytemuck::cast_slice(&bytes).to_vec();
-        for (w, v) in words[base..base + count].iter_mut().zip(values) {
-            w[..width].copy_from_slice(&v[..width]);
-        }
-        let st = &self.states[self.current];
-        let buf = match part {
-            Part::Positions => &st.pos,
-            Part::Velocities => &st.vel,
-            Part::Frames => &st.frm,
-            _ => &st.omg,
-        };
-        self.queue.write_buffer(
-            buf,
-            16 * base as u64,
-            bytemuck::cast_slice(&words[base..base + count]),
-        );
-        if field == GpuField::Positions {
-            // A held end starts its path again from where it was put.
-            for end in 0..2 {
-                let i = 2 * rod + end;
-                let p = words[base + if end == 0 { 0 } else { n }];
-                self.tracks[i] = EndTrack {
-                    origin: [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])],
-                    reference: self.steps,
-                };
-                let mut d = self.drives[i];
-                d.window[2] = self.steps as u32;
-                d.origin = [p[0], p[1], p[2], 0.0];
-                self.drives[i] = d;
-            }
-            self.drives_dirty = true;
-        }
-        self.queue.submit([]);
-        self.take_wgpu_error()
-    }
-
-    /// Refuses to change the state while a position readback is in flight.
-    fn ensure_idle(&self) -> Result<(), GpuError> {
-        if self.pending.is_empty() {
-            Ok(())
-        } else {
-            Err(GpuError::InvalidInput(
-                "read the requested positions before changing or saving the state".into(),
-            ))
-        }
-    }
-
-    /// GPU time in seconds of all batches submitted since the last call, from timestamp queries
-    /// (blocking); `None` when timestamps were not requested or the adapter lacks them.
-    pub fn take_gpu_time(&mut self) -> Result<Option<f64>, GpuError> {
-        if self.query.is_none() {
-            return Ok(None);
-        }
-        let pending = std::mem::take(&mut self.gpu_time_pending);
-        for b in &pending {
-            b.map_async(wgpu::MapMode::Read, .., |_| {});
-        }
-        self.device
-            .poll(wgpu::PollType::Wait {
-                submission_index: None,
-                timeout: Some(Duration::from_secs(120)),
-            })
-            .map_err(|e| GpuError::Wgpu(format!("waiting for the GPU: {e}")))?;
-        let mut total = 0.0;
-        for b in &pending {
-            {
-                let view = b
-                    .get_mapped_range(..)
-                    .map_err(|e| GpuError::Wgpu(format!("mapping timestamps: {e}")))?;
-                let t: &[u64] = bytemuck::cast_slice(&view);
-                total += t[1].saturating_sub(t[0]) as f64 * self.timestamp_period_ns * 1e-9;
-            }
-            b.unmap();
-        }
-        self.take_wgpu_error()?;
-        Ok(Some(total))
-    }
 }
 
-fn validate(rods: &[GpuRodInput], settings: &SolverSettings<f32>) -> Result<(), GpuError> {
+/// Rejects scenes the kernel cannot run, before anything is uploaded.
+pub(crate) fn validate(
+    rods: &[GpuRodInput],
+    settings: &SolverSettings<f32>,
+) -> Result<(), GpuError> {
     if rods.is_empty() {
         return Err(GpuError::InvalidInput("no rods".into()));
     }
@@ -1543,328 +932,6 @@ fn validate(rods: &[GpuRodInput], settings: &SolverSettings<f32>) -> Result<(), 
         }
     }
     Ok(())
-}
-
-fn make_plan(
-    rods: &[GpuRodInput],
-    settings: &SolverSettings<f32>,
-    options: &GpuOptions,
-    variant: &KernelVariant,
-    adapter: &AdapterSummary,
-    limits: &wgpu::Limits,
-) -> Result<Plan, GpuError> {
-    let extensible = settings.extensible;
-    let mut flags: Vec<&'static str> = Vec::new();
-    if extensible {
-        flags.push("EXTENSIBLE");
-        if rods
-            .iter()
-            .any(|r| r.params.stretch_damping.iter().any(|&c| c > 0.0))
-        {
-            flags.push("STRETCH_DAMP");
-        }
-    }
-    let bend_damp = rods
-        .iter()
-        .any(|r| r.params.bend_damping.iter().any(|&c| c > 0.0));
-    if bend_damp {
-        flags.push("BEND_DAMP");
-    }
-    if rods.iter().any(|r| r.params.drag != 0.0) {
-        flags.push("DRAG");
-    }
-    if rods.iter().any(|r| !r.loads.is_empty()) {
-        flags.push("LOADS");
-    }
-    let iterations = if extensible {
-        0
-    } else {
-        settings.iterations as u32
-    };
-    // Workgroup memory per thread: r, q (2 vec4 each), ω with bend damping, 4 for velocities.
-    let needs_v = !extensible || flags.contains(&"STRETCH_DAMP");
-    let per_thread_bytes = 16 * (4 + if bend_damp { 2 } else { 0 } + if needs_v { 4 } else { 0 });
-    let storage_cap = limits.max_compute_workgroup_storage_size.saturating_sub(64);
-    let mut max_threads = options
-        .max_threads
-        .min(limits.max_compute_invocations_per_workgroup)
-        .min(limits.max_compute_workgroup_size_x)
-        .min(1024);
-    while max_threads > 32 && max_threads * per_thread_bytes > storage_cap {
-        max_threads -= 32;
-    }
-    let max_threads = (max_threads / 32 * 32).max(32);
-    let points = rods
-        .iter()
-        .map(|r| r.state.elements() as u32 + 1)
-        .max()
-        .unwrap_or(2);
-    let single_threads = max_threads.min(round_up(points.div_ceil(2), 32));
-    let single_ept = round_up(points.div_ceil(single_threads), 2).max(2);
-    // The subgroup layout: every rod on one subgroup, a few rods per workgroup, no barriers.
-    let subgroup = adapter
-        .subgroup_size
-        .filter(|_| variant.subgroups && rods.len() as u32 >= variant.subgroup_min_rods)
-        .map(|sg| (sg, round_up(points.div_ceil(sg), 2).max(2)))
-        .filter(|&(_, ept)| ept <= variant.subgroup_points_per_thread.max(2));
-    // Windows of the two multi-workgroup paths. Information travels `2 · iterations + 1` points
-    // per step (forces 1, each half-sweep 1), so a window whose halo is wider than that times
-    // the steps between exchanges computes its owned points exactly as the whole rod would.
-    let reach = 2 * iterations + 1;
-    let halo_for = |xs: u32| round_up(xs * reach + 3, 2);
-    // Shuffle windows are one subgroup wide (NVIDIA 32, lavapipe 8).
-    let shuffle_sg = adapter
-        .subgroup_size
-        .filter(|&sg| variant.shuffle_windows && sg <= max_threads);
-    let multi_threads = match shuffle_sg {
-        Some(sg) => sg,
-        None => (max_threads.min(variant.multi_threads) / 32 * 32).max(32),
-    };
-    // (points per thread, halo, owned points per window) for `xs` steps between exchanges.
-    let multi_shape = |xs: u32| -> (u32, u32, u32) {
-        let halo = halo_for(xs);
-        let ept = if variant.multi_points_per_thread > 0 {
-            round_up(variant.multi_points_per_thread, 2)
-        } else {
-            (1..=8)
-                .map(|k| 2 * k)
-                .find(|&e| multi_threads * e >= 2 * halo + halo.max(64))
-                .unwrap_or(16)
-        };
-        let chunk = (multi_threads * ept).saturating_sub(2 * halo) / 2 * 2;
-        (ept, halo, chunk)
-    };
-    let windows_for = |chunk: u32| -> u32 {
-        rods.iter()
-            .map(|r| (r.state.elements() as u32 + 1).div_ceil(chunk.max(1)))
-            .sum()
-    };
-    let co = adapter.co_resident_workgroups;
-    // Steps between exchanges: as asked, fewer where the windows would own nothing or (grid)
-    // would not all be co-resident.
-    let want_xs = variant.exchange_steps.max(1);
-    let xs_fitting = |need_co: bool| -> Option<u32> {
-        (1..=want_xs).rev().find(|&xs| {
-            // Each halo comes from the direct neighbour, so a window owns at least one halo.
-            let (_, halo, chunk) = multi_shape(xs);
-            chunk >= halo.max(2) && (!need_co || co.is_some_and(|c| windows_for(chunk) <= c))
-        })
-    };
-    let xs_grid = xs_fitting(true);
-    let xs_perstep = xs_fitting(false).unwrap_or(1);
-
-    let multi_items = |chunk: u32, halo: u32| -> Vec<ItemG> {
-        let mut items = Vec::new();
-        let mut base = 0u32;
-        for (r, rod) in rods.iter().enumerate() {
-            let n = rod.state.elements() as u32;
-            let flags = item_flags(rod);
-            let first = items.len() as u32;
-            let count = (n + 1).div_ceil(chunk);
-            for c in 0..count {
-                let o0 = c * chunk;
-                let o1 = ((c + 1) * chunk).min(n + 1);
-                items.push(ItemG {
-                    rod: r as u32,
-                    base,
-                    n,
-                    flags,
-                    w0: o0.saturating_sub(halo),
-                    w1: (o1 + halo).min(n + 1),
-                    o0,
-                    o1,
-                    left: if c > 0 { first + c - 1 } else { NONE },
-                    right: if c + 1 < count { first + c + 1 } else { NONE },
-                    drag: rod.params.drag,
-                    pad: 0,
-                });
-            }
-            base += n + 1;
-        }
-        items
-    };
-    let grid_ok = match (co, xs_grid) {
-        (None, _) => Err(format!(
-            "co-residency of workgroups cannot be established on `{}`",
-            adapter.name
-        )),
-        (Some(c), None) => {
-            let (_, _, chunk) = multi_shape(1);
-            Err(format!(
-                "{} workgroups needed, at most {c} known to be co-resident",
-                windows_for(chunk)
-            ))
-        }
-        (Some(_), Some(_)) => Ok(()),
-    };
-    let path = match options.path {
-        KernelPath::Auto => {
-            // One workgroup while each thread holds at most two points (up to 512 elements
-            // with 256 threads); beyond that, windows over several co-resident workgroups
-            // where the adapter allows them (H200, 1000 elements: 5.5 µs/step against 6.6 for
-            // one workgroup with four points per thread).
-            if single_ept <= 2 || subgroup.is_some() {
-                KernelPath::SingleWorkgroup
-            } else if grid_ok.is_ok() {
-                KernelPath::MultiWorkgroup
-            } else if single_ept <= 16 {
-                KernelPath::SingleWorkgroup
-            } else {
-                KernelPath::DispatchPerStep
-            }
-        }
-        p => p,
-    };
-    if path == KernelPath::SingleWorkgroup && single_ept > 64 {
-        return Err(GpuError::PathUnavailable {
-            path,
-            reason: format!(
-                "a rod of {points} points needs {single_ept} points per thread in one workgroup (at most 64)"
-            ),
-        });
-    }
-    if path == KernelPath::MultiWorkgroup
-        && let Err(reason) = grid_ok
-    {
-        return Err(GpuError::PathUnavailable { path, reason });
-    }
-    let mut group = 1;
-    let mut workgroups = None;
-    let mut xs_used = 1;
-    let (threads, ept, items, halo_used) = match path {
-        KernelPath::SingleWorkgroup => {
-            let mut base = 0u32;
-            let items = rods
-                .iter()
-                .enumerate()
-                .map(|(r, rod)| {
-                    let n = rod.state.elements() as u32;
-                    let it = ItemG {
-                        rod: r as u32,
-                        base,
-                        n,
-                        flags: item_flags(rod),
-                        w0: 0,
-                        w1: n + 1,
-                        o0: 0,
-                        o1: n + 1,
-                        left: NONE,
-                        right: NONE,
-                        drag: rod.params.drag,
-                        pad: 0,
-                    };
-                    base += n + 1;
-                    it
-                })
-                .collect::<Vec<_>>();
-            match subgroup {
-                Some((sg, ept)) => {
-                    let cap = limits.max_compute_invocations_per_workgroup.min(1024) / sg;
-                    let per_wg = variant.rods_per_workgroup.clamp(1, cap.max(1));
-                    flags.push("SUBGROUP");
-                    group = sg;
-                    workgroups = Some((items.len() as u32).div_ceil(per_wg));
-                    (sg * per_wg, ept, items, 0)
-                }
-                None => (single_threads, single_ept, items, 0),
-            }
-        }
-        _ => {
-            let xs = if path == KernelPath::MultiWorkgroup {
-                xs_grid.unwrap_or(1)
-            } else {
-                xs_perstep
-            };
-            let (ept, halo, chunk) = multi_shape(xs);
-            if chunk < halo.max(2) {
-                return Err(GpuError::PathUnavailable {
-                    path,
-                    reason: format!(
-                        "windows of {multi_threads} threads x {ept} points leave nothing inside a halo of {halo}"
-                    ),
-                });
-            }
-            xs_used = xs;
-            (multi_threads, ept, multi_items(chunk, halo), halo)
-        }
-    };
-    if path == KernelPath::MultiWorkgroup {
-        flags.push("GRID");
-        if variant.neighbour_sync {
-            flags.push("NBR_SYNC");
-        }
-        if variant.coherent_exchange && adapter.coherent {
-            flags.push("COHERENT");
-        }
-    }
-    if path == KernelPath::DispatchPerStep {
-        flags.push("PERSTEP");
-    }
-    if flags.contains(&"SUBGROUP")
-        || (path != KernelPath::SingleWorkgroup && shuffle_sg == Some(threads))
-    {
-        flags.push("SHFL");
-    }
-    if variant.sweep_loads && !extensible {
-        flags.push("SWEEP_LOADS");
-    }
-    if variant.rsqrt && !extensible {
-        flags.push("RSQRT");
-    }
-    if variant.fast_impulse && !extensible && !variant.sweep_loads {
-        flags.push("FAST");
-    }
-    if variant.register_constants {
-        flags.push("REGC");
-    }
-    let cfg = KernelConfig {
-        threads,
-        per_thread: ept,
-        iterations,
-        halo: halo_used,
-        exchange_steps: xs_used,
-        spin_cap: options.spin_cap.max(1),
-        group,
-        unroll: variant.unroll,
-        flags,
-    };
-    // Loop iterations per step and invocation, generously counted, for software adapters.
-    let loops_per_step = 8 * ept
-        + 16
-        + iterations * (ept + 6)
-        + if path == KernelPath::MultiWorkgroup {
-            4 * ept + 64
-        } else {
-            0
-        };
-    let mut spd = options.max_steps_per_dispatch.max(1);
-    if adapter.software {
-        spd = spd.min((SOFTWARE_LOOP_BUDGET / loops_per_step).max(1));
-    }
-    Ok(Plan {
-        path,
-        cfg,
-        workgroups: workgroups.unwrap_or(items.len() as u32),
-        items,
-        steps_per_dispatch: spd,
-    })
-}
-
-fn item_flags(rod: &GpuRodInput) -> u32 {
-    let mut f = 0;
-    if rod.ends[0].holds_point() {
-        f |= 1;
-    }
-    if rod.ends[0].holds_frame() {
-        f |= 2;
-    }
-    if rod.ends[1].holds_point() {
-        f |= 4;
-    }
-    if rod.ends[1].holds_frame() {
-        f |= 8;
-    }
-    f
 }
 
 #[cfg(test)]

@@ -58,10 +58,35 @@ impl GpuStepper {
         settings: &SolverSettings<f32>,
         options: GpuOptions,
     ) -> Result<Self, GpuError> {
+        Self::around(rods, settings, |rods| {
+            GpuSimulation::new(rods, settings, options)
+        })
+    }
+
+    /// Uploads `rods` to a device the caller already has (see [`GpuSimulation::on_device`]).
+    pub fn on_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: GpuOptions,
+    ) -> Result<Self, GpuError> {
+        Self::around(rods, settings, |rods| {
+            GpuSimulation::on_device(device, queue, rods, settings, options)
+        })
+    }
+
+    /// The stepper around the simulation `make` builds from `rods`, with the host-side copy of
+    /// their state.
+    fn around(
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        make: impl FnOnce(Vec<GpuRodInput>) -> Result<GpuSimulation, GpuError>,
+    ) -> Result<Self, GpuError> {
         let states = rods.iter().map(|r| r.state.clone()).collect();
         let params = rods.iter().map(|r| r.params.clone()).collect();
         let ends = rods.iter().map(|r| r.ends).collect();
-        let sim = GpuSimulation::new(rods, settings, options)?;
+        let sim = make(rods)?;
         Ok(Self {
             sim,
             states,

@@ -1,0 +1,341 @@
+//! The structs the host uploads and the kernel reads, byte for byte.
+//!
+//! Each is `#[repr(C)]` and [`Pod`], so that a slice of them is the buffer's contents, and each
+//! has a WGSL twin in `shaders/rod_step.wgsl`. Rust and WGSL must agree on every member's name,
+//! offset and scalar type and on the struct's size; nothing but a test can see when they do not,
+//! because the GPU reads whatever bytes it is given. So the structs are declared through
+//! [`gpu_struct!`], which also records each field's name, offset, size and scalar type as the
+//! compiler laid it out ([`GpuLayout`]), and a test (below) parses the composed kernel with naga
+//! and compares every recorded layout with the WGSL struct of the same name: a field renamed,
+//! retyped, added or moved on either side fails it. Nothing here is mirrored by hand.
+
+use bytemuck::{Pod, Zeroable};
+
+/// `left` / `right` of an [`ItemG`] without a neighbour (the kernel's `0xffffffff`).
+pub(crate) const NONE: u32 = u32::MAX;
+/// Dispatches one submission can address in the chunk table (one [`ChunkG`] per dispatch).
+pub(crate) const TABLE_CAPACITY: u32 = 1024;
+
+/// The layout of one shared struct as the Rust compiler made it.
+#[cfg(test)]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GpuLayout {
+    /// The name of its WGSL twin.
+    pub(crate) wgsl: &'static str,
+    /// `size_of` of the Rust struct.
+    pub(crate) size: usize,
+    /// Its fields in declaration order.
+    pub(crate) fields: &'static [FieldLayout],
+}
+
+/// One field of a [`GpuLayout`].
+#[cfg(test)]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FieldLayout {
+    pub(crate) name: &'static str,
+    pub(crate) offset: usize,
+    pub(crate) size: usize,
+    /// `"f32"` or `"u32"`: the scalar of the field or of its array elements.
+    pub(crate) scalar: &'static str,
+}
+
+/// The scalar a field is made of, to compare with the WGSL member's.
+#[cfg(test)]
+pub(crate) trait Scalar {
+    /// `"f32"` or `"u32"`.
+    const NAME: &'static str;
+}
+
+#[cfg(test)]
+impl Scalar for f32 {
+    const NAME: &'static str = "f32";
+}
+
+#[cfg(test)]
+impl Scalar for u32 {
+    const NAME: &'static str = "u32";
+}
+
+#[cfg(test)]
+impl<T: Scalar, const N: usize> Scalar for [T; N] {
+    const NAME: &'static str = T::NAME;
+}
+
+/// Declares a `#[repr(C)]` [`Pod`] struct shared with the kernel and records its layout in an
+/// associated `LAYOUT` constant (test builds only), from the struct itself (`offset_of!`, `size_of`), so the list
+/// the layout test checks cannot drift from the struct.
+macro_rules! gpu_struct {
+    (
+        $(#[$meta:meta])*
+        struct $name:ident as $wgsl:literal {
+            $($(#[$fmeta:meta])* $field:ident: $ty:ty,)*
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(C)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+        pub(crate) struct $name {
+            $($(#[$fmeta])* pub(crate) $field: $ty,)*
+        }
+
+        #[cfg(test)]
+        impl $name {
+            /// This struct's layout, for the layout test.
+            pub(crate) const LAYOUT: GpuLayout = GpuLayout {
+                wgsl: $wgsl,
+                size: std::mem::size_of::<$name>(),
+                fields: &[$(FieldLayout {
+                    name: stringify!($field),
+                    offset: std::mem::offset_of!($name, $field),
+                    size: std::mem::size_of::<$ty>(),
+                    scalar: <$ty as Scalar>::NAME,
+                },)*],
+            };
+        }
+    };
+}
+
+gpu_struct! {
+    /// The per-submission parameter block (`params`, binding 0): the only data a batch writes
+    /// besides changed end motions.
+    struct ParamsU as "Params" {
+        /// xyz gravity, w the time step h.
+        gravity: [f32; 4],
+        /// Allowed band of squared length ratios `(l/l0)²`.
+        lo2: f32,
+        hi2: f32,
+        /// Index of the submission's first step.
+        base_step: u32,
+        /// Work items per dispatch.
+        num_items: u32,
+        /// Multi-workgroup path: halo exchanges since the synchronisation words were cleared.
+        epoch0: u32,
+        pad0: u32,
+        pad1: u32,
+        pad2: u32,
+    }
+}
+
+gpu_struct! {
+    /// One dispatch's entry of the chunk table (`chunk`, binding 1, at a dynamic offset).
+    struct ChunkG as "Chunk" {
+        /// First step of the dispatch relative to `ParamsU::base_step`.
+        offset: u32,
+        /// Steps of the dispatch.
+        count: u32,
+        /// Multi-workgroup path: halo exchanges of the submission's earlier dispatches.
+        sync_base: u32,
+        pad1: u32,
+    }
+}
+
+gpu_struct! {
+    /// Per-point, per-element and per-node parameters (`slots`, binding 2); slot `i` of a rod
+    /// holds its point `i`, element `i` and node `i`.
+    struct SlotG as "Slot" {
+        /// l0 (element), inverse mass (point), mass (point), Kp (element).
+        a: [f32; 4],
+        /// Inertia (element), Ks (element).
+        b: [f32; 4],
+        /// Inverse inertia (element), stretch damping (element).
+        c: [f32; 4],
+        /// Rest Darboux vector (node), node length (node).
+        d: [f32; 4],
+        /// Bend/twist stiffness (node), bend damping (node).
+        e: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// One work item (`items`, binding 3): the window of a rod one workgroup (or subgroup)
+    /// steps and the part of it the item owns.
+    struct ItemG as "Item" {
+        rod: u32,
+        /// Slot of the rod's point 0.
+        base: u32,
+        /// Elements of the rod.
+        n: u32,
+        /// Bit 0: end 0 holds its point, bit 1 its frame; bits 2 and 3 the same for end 1.
+        flags: u32,
+        /// Window `[w0, w1)` and owned range `[o0, o1)` of point indices.
+        w0: u32,
+        w1: u32,
+        o0: u32,
+        o1: u32,
+        /// Neighbouring items of the same rod (multi-workgroup paths), or [`NONE`].
+        left: u32,
+        right: u32,
+        drag: f32,
+        pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// A held end's prescribed motion (`drives`, binding 4): velocity `v` and angular velocity
+    /// `w` (world frame) during steps `[window[0], window[1])`.
+    struct DriveG as "Drive" {
+        v: [f32; 4],
+        w: [f32; 4],
+        /// Steps `[window[0], window[1])` of the motion; `window[2]`: the step `origin` is before.
+        window: [u32; 4],
+        /// Position of the held point before step `window[2]` (see `sim::EndTrack`).
+        origin: [f32; 4],
+    }
+}
+
+/// Every struct the host uploads, for the layout test.
+#[cfg(test)]
+pub(crate) const SHARED: [GpuLayout; 5] = [
+    ParamsU::LAYOUT,
+    ChunkG::LAYOUT,
+    SlotG::LAYOUT,
+    ItemG::LAYOUT,
+    DriveG::LAYOUT,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shader::KernelConfig;
+
+    /// A member of a WGSL struct as naga laid it out.
+    #[derive(Debug, PartialEq)]
+    struct Member {
+        name: String,
+        offset: usize,
+        size: usize,
+        scalar: String,
+    }
+
+    fn scalar_name(module: &naga::Module, ty: naga::Handle<naga::Type>) -> String {
+        use naga::TypeInner as T;
+        let scalar = match &module.types[ty].inner {
+            T::Scalar(s) | T::Vector { scalar: s, .. } | T::Atomic(s) => *s,
+            T::Array { base, .. } => return scalar_name(module, *base),
+            other => return format!("{other:?}"),
+        };
+        match (scalar.kind, scalar.width) {
+            (naga::ScalarKind::Float, 4) => "f32".into(),
+            (naga::ScalarKind::Uint, 4) => "u32".into(),
+            (kind, width) => format!("{kind:?}{}", 8 * width),
+        }
+    }
+
+    /// The members and size of struct `name` in `module`, as naga lays them out.
+    fn wgsl_struct(module: &naga::Module, name: &str) -> Option<(Vec<Member>, usize)> {
+        let gctx = module.to_ctx();
+        module.types.iter().find_map(|(_, ty)| {
+            let naga::TypeInner::Struct { members, span } = &ty.inner else {
+                return None;
+            };
+            (ty.name.as_deref() == Some(name)).then(|| {
+                let members = members
+                    .iter()
+                    .map(|m| Member {
+                        name: m.name.clone().unwrap_or_default(),
+                        offset: m.offset as usize,
+                        size: module.types[m.ty].inner.size(gctx) as usize,
+                        scalar: scalar_name(module, m.ty),
+                    })
+                    .collect();
+                (members, *span as usize)
+            })
+        })
+    }
+
+    fn rust_struct(layout: &GpuLayout) -> (Vec<Member>, usize) {
+        let members = layout
+            .fields
+            .iter()
+            .map(|f| Member {
+                name: f.name.into(),
+                offset: f.offset,
+                size: f.size,
+                scalar: f.scalar.into(),
+            })
+            .collect();
+        (members, layout.size)
+    }
+
+    /// Every struct the host uploads has a WGSL twin of the same member names, offsets, sizes
+    /// and scalar types, and the same size, in the kernel as composed for every path (the
+    /// declarations sit outside the `//#if` blocks, but a flag must not be able to change them
+    /// unnoticed).
+    #[test]
+    fn uploaded_structs_match_their_wgsl_twins() {
+        // One kernel of each path and layout, with every scene term somewhere.
+        for (group, flags) in [
+            (1, vec![]),
+            (
+                1,
+                vec![
+                    "EXTENSIBLE",
+                    "STRETCH_DAMP",
+                    "BEND_DAMP",
+                    "DRAG",
+                    "LOADS",
+                    "REGC",
+                ],
+            ),
+            (
+                1,
+                vec!["GRID", "NBR_SYNC", "COHERENT", "BEND_DAMP", "FAST", "REGC"],
+            ),
+            (1, vec!["PERSTEP", "LOADS", "FAST", "REGC"]),
+            (32, vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC"]),
+        ] {
+            let cfg = KernelConfig {
+                threads: 64,
+                per_thread: 2,
+                iterations: 10,
+                halo: 24,
+                exchange_steps: 3,
+                spin_cap: 1024,
+                group,
+                unroll: true,
+                flags: flags.clone(),
+            };
+            let src = cfg.source();
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("{flags:?}: {}", e.emit_to_string(&src)));
+            for layout in &SHARED {
+                let Some(wgsl) = wgsl_struct(&module, layout.wgsl) else {
+                    panic!("{flags:?}: no struct `{}` in the kernel", layout.wgsl);
+                };
+                assert_eq!(
+                    rust_struct(layout),
+                    wgsl,
+                    "{flags:?}: the Rust layout of `{}` (left) differs from the WGSL one (right)",
+                    layout.wgsl
+                );
+            }
+        }
+    }
+
+    /// The comparison sees a difference: a struct checked against the wrong WGSL twin, or one
+    /// field moved, fails it.
+    #[test]
+    fn the_layout_check_tells_structs_apart() {
+        let src = KernelConfig {
+            threads: 64,
+            per_thread: 2,
+            iterations: 10,
+            halo: 0,
+            exchange_steps: 1,
+            spin_cap: 1,
+            group: 1,
+            unroll: true,
+            flags: vec![],
+        }
+        .source();
+        let module = naga::front::wgsl::parse_str(&src).expect("the kernel parses");
+        let chunk = wgsl_struct(&module, "Chunk").expect("Chunk");
+        assert_ne!(rust_struct(&ParamsU::LAYOUT), chunk);
+        assert_eq!(rust_struct(&ChunkG::LAYOUT), chunk);
+        // ChunkG with its first two fields' names swapped, as a reordered declaration would.
+        let (mut moved, size) = rust_struct(&ChunkG::LAYOUT);
+        let first = moved[0].name.clone();
+        moved[0].name = std::mem::replace(&mut moved[1].name, first);
+        assert_ne!((moved, size), chunk);
+    }
+}
