@@ -35,6 +35,29 @@ enum Command {
     /// Estimate a scene's discretisation error: run it again with half the step (or twice the
     /// elements), and again, and compare the runs along the way (Richardson, Roache's GCI).
     Converge(ConvergeArgs),
+    /// Work with mesh files.
+    #[command(subcommand)]
+    Mesh(MeshCommand),
+}
+
+#[derive(Subcommand)]
+enum MeshCommand {
+    /// Load an OBJ or STL mesh as a scene would, repair its orientation, and report what was
+    /// found and changed: dropped and welded triangles, flipped patches, loose pieces,
+    /// openings, seams, the lumen's volume and extent.
+    Inspect(InspectArgs),
+}
+
+#[derive(clap::Args)]
+struct InspectArgs {
+    /// The mesh (OBJ or STL).
+    file: PathBuf,
+    /// Multiply coordinates by this (0.001 for millimetres), as a scene's `scale`.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Print one JSON object instead of a summary.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Which scene, how long, on which backend: what `run` and `converge` share.
@@ -99,6 +122,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Run(args)) => run(&args),
         Some(Command::Converge(args)) => converge(&args),
+        Some(Command::Mesh(MeshCommand::Inspect(args))) => inspect(&args),
         None => demo(),
     };
     match result {
@@ -108,6 +132,83 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// `cosserat mesh inspect`: the mesh as a scene would load it.
+fn inspect(args: &InspectArgs) -> Result<ExitCode, String> {
+    use cosserat::cosserat_collide::{MeshCollider, load_mesh};
+    let name = args.file.display().to_string();
+    let (mut mesh, report) = load_mesh(&args.file, args.scale).map_err(|e| e.to_string())?;
+    let repair = mesh.repair_orientation();
+    let notes = cosserat::environment::intake_notes(&name, &report, &repair);
+    let (lo, hi) = mesh.bounds();
+    let vertices = mesh.vertices().len();
+    let triangles = mesh.triangles().len();
+    let encloses = MeshCollider::new(mesh).encloses_volume();
+    if args.json {
+        let v = serde_json::json!({
+            "file": name,
+            "scale": args.scale,
+            "vertices": vertices,
+            "triangles": triangles,
+            "input_triangles": report.input_triangles,
+            "degenerate_dropped": report.degenerate_dropped,
+            "duplicates_dropped": report.duplicates_dropped,
+            "welded_vertices": report.welded_vertices,
+            "boundary_edges": report.boundary_edges,
+            "misoriented_edges_before": repair.misoriented_before,
+            "misoriented_edges_after": repair.misoriented_after,
+            "flipped_triangles": repair.flipped,
+            "pieces": repair.pieces,
+            "non_manifold_edges": repair.non_manifold_edges,
+            "openings": repair.openings,
+            "lumen_volume": repair.lumen_volume,
+            "encloses_volume": encloses,
+            "bounds": [[lo.x, lo.y, lo.z], [hi.x, hi.y, hi.z]],
+            "notes": notes,
+        });
+        println!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!("mesh       {name} (scale {})", args.scale);
+    println!(
+        "size       {vertices} vertices, {triangles} triangles ({} in the file; {} zero-area and {} duplicate dropped, {} vertices welded)",
+        report.input_triangles,
+        report.degenerate_dropped,
+        report.duplicates_dropped,
+        report.welded_vertices
+    );
+    println!(
+        "extent     [{:.4}, {:.4}, {:.4}] to [{:.4}, {:.4}, {:.4}]",
+        lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+    );
+    println!(
+        "winding    {} edges against each other before the repair, {} after; {} triangles turned",
+        repair.misoriented_before, repair.misoriented_after, repair.flipped
+    );
+    println!(
+        "pieces     {} ({} loose besides the largest); sizes {:?}",
+        repair.pieces.len(),
+        repair.fragments(),
+        &repair.pieces[..repair.pieces.len().min(8)]
+    );
+    println!(
+        "openings   {} ({} boundary edges); {} edges shared by more than two triangles",
+        repair.openings, report.boundary_edges, repair.non_manifold_edges
+    );
+    println!(
+        "lumen      {:.4e} (units³, openings closed); {}",
+        repair.lumen_volume,
+        if encloses {
+            "encloses a volume: points are inside or outside by the winding number"
+        } else {
+            "encloses no volume (a sheet): the side of the nearest wall decides"
+        }
+    );
+    for n in &notes {
+        eprintln!("warning: {n}");
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn parse_backend(name: &str) -> Result<Backend, String> {

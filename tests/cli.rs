@@ -238,6 +238,30 @@ start = { kind = "clamped" }
     assert!(c.max_penetration > 0.03, "{c:?}");
 }
 
+/// `cosserat mesh inspect` reports the shipped phantom as loaded and repaired.
+#[test]
+fn mesh_inspect_reports_the_phantom() {
+    let v = run_json(&[
+        "mesh",
+        "inspect",
+        "data/meshes/phantom.obj",
+        "--scale",
+        "0.001",
+        "--json",
+    ]);
+    assert_eq!(v["triangles"], 6392, "{v}");
+    assert_eq!(v["misoriented_edges_after"], 0, "{v}");
+    assert_eq!(v["encloses_volume"], true, "{v}");
+    assert!(v["lumen_volume"].as_f64().unwrap() > 0.0, "{v}");
+    assert!(v["openings"].as_u64().unwrap() >= 1, "{v}");
+    let out = cosserat()
+        .args(["mesh", "inspect", "no/such/mesh.obj"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no/such/mesh.obj"));
+}
+
 /// A run of no steps is refused, whether asked for by steps or by a duration shorter than
 /// half a step.
 #[test]

@@ -260,6 +260,12 @@ impl TriMesh {
             .sum()
     }
 
+    /// Replaces the triangles by the same triangles wound otherwise (the repair's result).
+    pub(crate) fn set_triangles_same_vertices(&mut self, triangles: Vec<[u32; 3]>) {
+        debug_assert_eq!(triangles.len(), self.triangles.len());
+        self.triangles = triangles;
+    }
+
     /// Reverses the winding of every triangle (flips all normals).
     pub fn flip_winding(&mut self) {
         for t in &mut self.triangles {

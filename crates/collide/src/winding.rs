@@ -106,19 +106,7 @@ impl WindingNumber {
                 })
                 .collect(),
         };
-        let tet = |a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>| a.dot(&b.cross(c)) / 6.0;
-        out.volume = (0..mesh.triangles().len())
-            .map(|t| {
-                let [a, b, c] = mesh.triangle(t);
-                tet(&a, &b, &c)
-            })
-            .sum::<f64>()
-            + out
-                .caps
-                .iter()
-                .flat_map(|c| &c.triangles)
-                .map(|[a, b, c]| tet(a, b, c))
-                .sum::<f64>();
+        out.volume = closed_volume(mesh.vertices(), mesh.triangles());
         let mut area = vec![0.0; n];
         // Children come after their parents in the node array, so a reverse sweep sees both
         // children of a node before the node.
@@ -258,9 +246,17 @@ fn box_centre(node: &crate::bvh::BvhNode) -> Vector3<f64> {
 /// where several loops touch is left to whichever loop reaches it first, which only changes
 /// how the fan is split, not the surface it closes.
 fn caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
+    caps_of(mesh.vertices(), mesh.triangles())
+}
+
+/// [`caps`] of the triangles `triangles` of `vertices` (a part of a mesh).
+pub(crate) fn caps_of(
+    vertices: &[Vector3<f64>],
+    triangles: &[[u32; 3]],
+) -> Vec<Vec<[Vector3<f64>; 3]>> {
     use std::collections::HashMap;
     let mut count: HashMap<(u32, u32), u32> = HashMap::new();
-    for t in mesh.triangles() {
+    for t in triangles {
         for k in 0..3 {
             let (u, v) = (t[k], t[(k + 1) % 3]);
             *count.entry((u.min(v), u.max(v))).or_insert(0) += 1;
@@ -268,7 +264,7 @@ fn caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
     }
     // Boundary edges in their triangle's direction, keyed by their start.
     let mut next: HashMap<u32, Vec<u32>> = HashMap::new();
-    for t in mesh.triangles() {
+    for t in triangles {
         for k in 0..3 {
             let (u, v) = (t[k], t[(k + 1) % 3]);
             if count[&(u.min(v), u.max(v))] == 1 {
@@ -276,7 +272,7 @@ fn caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
             }
         }
     }
-    let vertex = |i: u32| mesh.vertices()[i as usize];
+    let vertex = |i: u32| vertices[i as usize];
     let mut starts: Vec<u32> = next.keys().copied().collect();
     starts.sort_unstable();
     let mut out = Vec::new();
@@ -303,4 +299,23 @@ fn caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
         );
     }
     out
+}
+
+/// The signed volume enclosed by `triangles` with their openings closed ([`caps_of`]):
+/// positive when the triangles' normals point out of it.
+pub(crate) fn closed_volume(vertices: &[Vector3<f64>], triangles: &[[u32; 3]]) -> f64 {
+    let tet = |a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>| a.dot(&b.cross(c)) / 6.0;
+    let walls: f64 = triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| vertices[i as usize]);
+            tet(&a, &b, &c)
+        })
+        .sum();
+    let caps: f64 = caps_of(vertices, triangles)
+        .iter()
+        .flatten()
+        .map(|[a, b, c]| tet(a, b, c))
+        .sum();
+    walls + caps
 }

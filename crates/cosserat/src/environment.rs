@@ -6,7 +6,9 @@
 
 use cosserat_backend_cpu::MeshContactSettings;
 use cosserat_collide::vessel::Centreline;
-use cosserat_collide::{MeshCollider, MeshError, TriMesh, Vessel, VesselParams};
+use cosserat_collide::{
+    MeshCollider, MeshError, MeshReport, OrientationRepair, TriMesh, Vessel, VesselParams,
+};
 use cosserat_constraints::Friction;
 use std::path::Path;
 use std::sync::Arc;
@@ -33,6 +35,9 @@ pub struct Environment {
     pub margin: f64,
     /// Present when the mesh is a generated vessel.
     pub vessel: Option<VesselGeometry>,
+    /// What loading and repairing the mesh found that a user should know (dropped or welded
+    /// triangles, flipped patches, loose fragments); the simulation reports them as warnings.
+    pub intake: Vec<String>,
     /// Whether a run stops as diverged when a rod's point is found outside the lumen
     /// ([`Environment::outside`]); checked after every call to `Simulation::run`.
     pub stop_outside: bool,
@@ -48,6 +53,7 @@ impl Environment {
             },
             margin: 1e-4,
             vessel,
+            intake: Vec::new(),
             stop_outside: true,
         }
     }
@@ -77,14 +83,16 @@ impl Environment {
         scale: f64,
         entry: Option<([f64; 3], [f64; 3])>,
     ) -> Result<Self, MeshError> {
-        let (mut mesh, _report) = cosserat_collide::load_mesh(path, scale)?;
-        mesh.orient_into_lumen();
+        let (mut mesh, report) = cosserat_collide::load_mesh(path, scale)?;
+        let repair = mesh.repair_orientation();
         let vessel = entry.map(|(point, dir)| VesselGeometry {
             entry_point: point,
             entry_direction: nalgebra::Vector3::from(dir).normalize().into(),
             trunk: None,
         });
-        Ok(Self::with_mesh(mesh, vessel))
+        let mut env = Self::with_mesh(mesh, vessel);
+        env.intake = intake_notes(&path.display().to_string(), &report, &repair);
+        Ok(env)
     }
 
     /// A square floor of side `size` through `point`, facing `normal`.
@@ -187,4 +195,42 @@ pub struct Outside {
     pub deepest: f64,
     /// Index of the deepest point.
     pub deepest_point: Option<usize>,
+}
+
+/// What loading (`report`) and repairing (`repair`) the mesh `name` changed or found, as
+/// sentences for warnings; empty for a clean mesh.
+pub fn intake_notes(name: &str, report: &MeshReport, repair: &OrientationRepair) -> Vec<String> {
+    let mut notes = Vec::new();
+    if report.degenerate_dropped > 0 || report.duplicates_dropped > 0 {
+        notes.push(format!(
+            "{name}: dropped {} zero-area and {} duplicate triangles of {}",
+            report.degenerate_dropped, report.duplicates_dropped, report.input_triangles
+        ));
+    }
+    if repair.flipped > 0 && repair.misoriented_before > 0 {
+        notes.push(format!(
+            "{name}: {} edges joined triangles wound against each other; {} triangles were turned so that the wall is wound one way and faces the lumen",
+            repair.misoriented_before, repair.flipped
+        ));
+    }
+    if repair.misoriented_after > 0 {
+        notes.push(format!(
+            "{name}: {} edges still join triangles wound against each other (a piece that cannot be oriented): contacts there may push the wrong way",
+            repair.misoriented_after
+        ));
+    }
+    if repair.fragments() > 0 {
+        notes.push(format!(
+            "{name}: {} loose pieces besides the main one ({} triangles in all)",
+            repair.fragments(),
+            repair.pieces[1..].iter().sum::<usize>()
+        ));
+    }
+    if repair.non_manifold_edges > 0 {
+        notes.push(format!(
+            "{name}: {} edges are shared by more than two triangles (seams or overlapping pieces)",
+            repair.non_manifold_edges
+        ));
+    }
+    notes
 }

@@ -29,6 +29,7 @@ pub mod sim;
 pub use cosserat_backend_cpu::{
     self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion,
 };
+pub use cosserat_collide;
 pub use cosserat_constraints;
 pub use cosserat_model::{self, Material};
 pub use environment::Environment;

@@ -525,6 +525,9 @@ impl SimulationBuilder {
                 ));
             }
         }
+        if let Some(env) = &self.environment {
+            warnings.extend(env.intake.iter().cloned());
+        }
         let needs = self.needs();
         let stepper = match self.backend {
             Backend::Gpu => gpu_stepper(&self, needs)?,
