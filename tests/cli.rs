@@ -238,6 +238,38 @@ start = { kind = "clamped" }
     assert!(c.max_penetration > 0.03, "{c:?}");
 }
 
+/// An entry that does not lead into the lumen is reported when the scene is built: here the
+/// phantom insertion's entry is moved half a metre away from the phantom.
+#[test]
+fn an_entry_far_from_the_vessel_is_reported() {
+    let far = run_json(&[
+        "run",
+        "scenes/phantom-insertion.toml",
+        "--elements",
+        "16",
+        "--steps",
+        "1",
+        "--json",
+        "--set",
+        "environment.mesh.entry.point=[500.0, 0.42, -0.32]",
+    ]);
+    let warnings = far["warnings"].to_string();
+    assert!(
+        warnings.contains("does not lead into the lumen"),
+        "{warnings}"
+    );
+    let fine = run_json(&[
+        "run",
+        "scenes/phantom-insertion.toml",
+        "--elements",
+        "16",
+        "--steps",
+        "1",
+        "--json",
+    ]);
+    assert!(!fine["warnings"].to_string().contains("lumen"), "{fine}");
+}
+
 /// `cosserat mesh inspect` reports the shipped phantom as loaded and repaired.
 #[test]
 fn mesh_inspect_reports_the_phantom() {

@@ -179,6 +179,31 @@ impl Environment {
         out
     }
 
+    /// Whether the entry (where a wire is pushed in) leads into the lumen: a millimetre past it
+    /// along the entry direction must be inside. `None` when it does, or when there is no entry
+    /// or no lumen to be inside (a sheet); otherwise a sentence saying where the entry is and how
+    /// far the nearest wall is.
+    pub fn entry_problem(&self) -> Option<String> {
+        let v = self.vessel.as_ref()?;
+        if !self.collider.encloses_volume() {
+            return None;
+        }
+        let past: [f64; 3] =
+            std::array::from_fn(|k| v.entry_point[k] + 1e-3 * v.entry_direction[k]);
+        if self.collider.lumen_winding(&past) >= 0.5 {
+            return None;
+        }
+        let (lo, hi) = self.collider.mesh().bounds();
+        let wall = self
+            .collider
+            .nearest(&v.entry_point, 2.0 * (hi - lo).norm() + 1.0)
+            .map_or(f64::NAN, |n| n.distance);
+        Some(format!(
+            "the entry point {:?} does not lead into the lumen: 1 mm past it along the entry direction {:?} is outside the vessel, and the nearest wall is {wall:.3e} m from it; a wire pushed in there starts outside (check the entry's point, direction and the mesh's scale)",
+            v.entry_point, v.entry_direction
+        ))
+    }
+
     /// How many points of `points` are outside the lumen ([`Self::outside`]).
     pub fn escaped(&self, points: &[[f64; 3]], radius: f64) -> usize {
         self.outside(points, radius).count

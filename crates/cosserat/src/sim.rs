@@ -527,6 +527,7 @@ impl SimulationBuilder {
         }
         if let Some(env) = &self.environment {
             warnings.extend(env.intake.iter().cloned());
+            warnings.extend(env.entry_problem());
         }
         let needs = self.needs();
         let stepper = match self.backend {
