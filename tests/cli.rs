@@ -270,6 +270,42 @@ fn an_entry_far_from_the_vessel_is_reported() {
     assert!(!fine["warnings"].to_string().contains("lumen"), "{fine}");
 }
 
+/// A simulation far larger than the machine's memory is refused with the numbers before it is
+/// built (the kernel would otherwise kill it without a word).
+#[test]
+fn a_simulation_too_large_for_the_memory_is_refused() {
+    let Some(available) = cosserat::sim::available_memory() else {
+        return;
+    };
+    // The scenes' largest rod (10⁷ elements) with the stiff scheme in f64, about 44 GB: more
+    // than this machine (24 GiB) has; a larger machine cannot be made to refuse it.
+    let elements: u64 = 10_000_000;
+    if elements * 3500 < available {
+        eprintln!("note: {available} bytes available, more than the largest scene needs");
+        return;
+    }
+    let started = std::time::Instant::now();
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--steps", "1", "--elements"])
+        .arg(elements.to_string())
+        .args([
+            "--set",
+            "solver.scheme=\"stiff\"",
+            "--set",
+            "solver.dt=1e-3",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("GiB available") && err.contains("stiff"),
+        "{err}"
+    );
+    assert!(started.elapsed().as_secs_f64() < 120.0);
+}
+
 /// `cosserat mesh inspect` reports the shipped phantom as loaded and repaired.
 #[test]
 fn mesh_inspect_reports_the_phantom() {
