@@ -286,7 +286,7 @@ fn step_for(
             let due = sim.steps() - checked_at >= check_every || sim.steps() >= steps;
             if due {
                 checked_at = sim.steps();
-                sim.check_lumen()
+                sim.check_lumen().map(|_| ())
             } else {
                 Ok(())
             }

@@ -19,6 +19,9 @@
 //!   nitinol wire bound in a catheter at 1 kHz in five steps per tick),
 //!   tick-time percentiles against the loop's period, into `docs/benchmarks/haptic.md` (exits
 //!   non-zero when a loop's 99th percentile is over its period on this machine).
+//! - `cargo xtask torture` — every instrument preset pushed and twisted through hard vessels
+//!   (bowed and narrowing, the phantom, the phantom with flipped patches and a fragment), each
+//!   frame checked by the inside test, into `docs/benchmarks/torture.md`.
 //! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
 //!   into `docs/benchmarks/gpu-local.{md,json}` (`--quick`: two sizes, for software adapters). On
 //!   a GPU host without a Rust toolchain, build the example here and run it there
@@ -35,6 +38,7 @@ mod haptic;
 mod literature;
 mod pareto;
 mod stability_map;
+mod torture;
 mod validate;
 
 use std::process::ExitCode;
@@ -101,7 +105,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]\n       cargo xtask torture".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -128,6 +132,16 @@ fn run() -> Result<bool, String> {
                 bench::gpu(args.flag("quick"))
             } else {
                 bench_criterion()
+            }
+        }
+        "torture" => {
+            args.reject_unknown(&[])?;
+            match torture::run() {
+                Ok(()) => Ok(true),
+                Err(e) => {
+                    eprintln!("{e}");
+                    Ok(false)
+                }
             }
         }
         "help" | "--help" | "-h" => {

@@ -61,10 +61,16 @@ impl Environment {
     /// The procedural vessel tree of `cosserat_collide::vessel` with about `triangles` triangles (the
     /// default, 26 000, matches the paper's phantom).
     pub fn vessel(triangles: usize) -> Result<Self, MeshError> {
-        let v: Vessel = cosserat_collide::vessel::generate(&VesselParams {
+        Self::vessel_with(&VesselParams {
             target_triangles: triangles,
             ..VesselParams::default()
-        })?;
+        })
+    }
+
+    /// A procedural vessel tree of any shape (`cosserat_collide::vessel::VesselParams`: trunk
+    /// length, radii, bow, branches).
+    pub fn vessel_with(params: &VesselParams) -> Result<Self, MeshError> {
+        let v: Vessel = cosserat_collide::vessel::generate(params)?;
         let geometry = VesselGeometry {
             entry_point: v.entry_point,
             entry_direction: v.entry_direction,

@@ -5,7 +5,7 @@
 //! read results. It picks the precision (`f32` or `f64`) and the backend at run time, so a
 //! scene file or a command-line flag can choose them.
 
-use crate::environment::Environment;
+use crate::environment::{Environment, Outside};
 pub use cosserat_backend_cpu::{BindingSpec, RodContactSpec};
 use cosserat_backend_cpu::{CpuRod, CpuStepper, Guide};
 pub use cosserat_constraints::BindingVariant;
@@ -836,18 +836,20 @@ impl Simulation {
     /// The inside test of the rods' points against the environment's lumen
     /// ([`Environment::outside`]): counts the points outside, at any depth, keeps the most and
     /// the deepest for [`Simulation::contact_report`], and returns the deepest as a divergence
-    /// unless the environment says to go on (`environment.stop_outside = false`).
+    /// unless the environment says to go on (`environment.stop_outside = false`). Returns what
+    /// it found now, all rods together (the deepest point is the first rod's with any outside).
     ///
     /// It is not run by [`Simulation::run`]: it costs about 3 µs per point on the generated
     /// 26 000-triangle vessel (`cargo bench -p cosserat-collide --bench detect -- winding`),
     /// more than a haptic tick can spare for every point. The `cosserat` command runs it every
     /// few thousand steps and after the last; a program calls it as often as it can afford.
-    pub fn check_lumen(&mut self) -> Result<(), StepError> {
+    pub fn check_lumen(&mut self) -> Result<Outside, StepError> {
         let Some(env) = self.environment.as_ref() else {
-            return Ok(());
+            return Ok(Outside::default());
         };
         let mut first = None;
         let mut count = 0;
+        let mut deepest: f64 = 0.0;
         for rod in 0..self.stepper.rod_count() {
             if !self.collides[rod] {
                 continue;
@@ -863,6 +865,7 @@ impl Simulation {
             }
             let out = env.outside(&self.scratch, self.radii[rod]);
             count += out.count;
+            deepest = deepest.max(out.deepest);
             self.outside.1 = self.outside.1.max(out.deepest);
             if let (None, Some(point)) = (first, out.deepest_point) {
                 first = Some((rod, point, out.deepest));
@@ -878,7 +881,11 @@ impl Simulation {
                     quantity: cosserat_problem::DivergedQuantity::OutsideLumen(depth),
                 }))
             }
-            _ => Ok(()),
+            _ => Ok(Outside {
+                count,
+                deepest,
+                deepest_point: first.map(|(_, point, _)| point),
+            }),
         }
     }
 
