@@ -72,6 +72,11 @@ struct Outcome {
     /// the deepest penetration they saw (limited to their reach).
     contact_escaped: usize,
     contact_depth: f64,
+    /// The stiff solver's iterations and factorisations per step, and the points in contact at
+    /// the end: where the step's time goes.
+    iterations: f64,
+    factorisations: f64,
+    contacts: usize,
     us_per_step: f64,
     stopped: Option<String>,
 }
@@ -166,6 +171,9 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         deepest: 0.0,
         contact_escaped: 0,
         contact_depth: 0.0,
+        iterations: 0.0,
+        factorisations: 0.0,
+        contacts: 0,
         us_per_step: 0.0,
         stopped: None,
     };
@@ -198,7 +206,12 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         if let Some(st) = sim.stepper().collision_stats(rod) {
             out.contact_escaped = out.contact_escaped.max(st.escaped_points);
             out.contact_depth = out.contact_depth.max(st.max_penetration);
+            out.contacts += st.contacts;
         }
+    }
+    if let Some(st) = sim.stiff_summary() {
+        out.iterations = st.iterations_per_step();
+        out.factorisations = st.factorisations_per_step();
     }
     out.us_per_step = wall * 1e6 / sim.steps().max(1) as f64;
     Ok(out)
@@ -246,7 +259,7 @@ pub(crate) fn run() -> Result<(), String> {
     let mut table = String::new();
     let _ = writeln!(
         table,
-        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [mm] | µs/step | stopped |\n|---|---|---|---|---|---|---|---|---|---|"
+        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [mm] | contacts at the end | iterations / factorisations per step | µs/step | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut clean = true;
     for vessel in &vessels {
@@ -256,7 +269,7 @@ pub(crate) fn run() -> Result<(), String> {
                 Ok(o) => {
                     clean &= o.most_outside == 0 && o.contact_escaped == 0 && o.stopped.is_none();
                     format!(
-                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.1} | {} |",
+                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {} | {:.2} / {:.2} | {:.1} | {} |",
                         vessel.label,
                         instrument.label,
                         instrument.dt,
@@ -265,6 +278,9 @@ pub(crate) fn run() -> Result<(), String> {
                         o.deepest * 1e3,
                         o.contact_escaped,
                         o.contact_depth * 1e3,
+                        o.contacts,
+                        o.iterations,
+                        o.factorisations,
                         o.us_per_step,
                         o.stopped.as_deref().unwrap_or("no")
                     )
@@ -272,7 +288,7 @@ pub(crate) fn run() -> Result<(), String> {
                 Err(e) => {
                     clean = false;
                     format!(
-                        "| {} | {} | {:e} s | — | — | — | — | — | — | could not run: {e} |",
+                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | could not run: {e} |",
                         vessel.label, instrument.label, instrument.dt
                     )
                 }
