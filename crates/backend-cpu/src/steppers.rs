@@ -12,8 +12,8 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::ends::cast_vec;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_finite, check_len, check_rod, read_state_field,
-    read_state_frames,
+    check_condition, check_end, check_rod, check_write, read_state_field, read_state_frames,
+    unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
@@ -211,15 +211,9 @@ pub struct BoundStiff<T: Real> {
 impl<T: Real> Scheme<T> for BoundStiff<T> {
     const NAME: &'static str = "cpu stiff bound";
 
+    /// The stiff scheme's, and bindings.
     fn capabilities() -> Capabilities {
-        Capabilities::of(&[
-            Capability::MeshContact,
-            Capability::Guide,
-            Capability::Bindings,
-            Capability::StiffScheme,
-            Capability::Reactions,
-            Capability::DoublePrecision,
-        ])
+        <Stiff as Scheme<T>>::capabilities().with(Capability::Bindings)
     }
 
     fn advance(
@@ -499,19 +493,12 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
         values: &[[f64; 3]],
     ) -> Result<(), ControlError> {
         let r = self.rod_mut(rod)?;
-        check_len(field, r.elements(), values.len())?;
-        check_finite(field.name(), values)?;
+        check_write(field, r.elements(), values)?;
         let s = &mut r.state;
         let target = match field {
             StateField::Positions => &mut s.positions,
             StateField::Velocities => &mut s.velocities,
-            StateField::AngularVelocities => &mut s.angular_velocities,
-            StateField::Director(_) => {
-                return Err(ControlError::Value {
-                    field: "directors",
-                    why: "directors are written as frames (write_frames)".into(),
-                });
-            }
+            _ => &mut s.angular_velocities,
         };
         target.iter_mut().zip(values).for_each(|(t, v)| *t = in3(v));
         Ok(())
@@ -519,27 +506,9 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
 
     fn write_frames(&mut self, rod: usize, values: &[[f64; 4]]) -> Result<(), ControlError> {
         let r = self.rod_mut(rod)?;
-        if values.len() != r.elements() {
-            return Err(ControlError::Length {
-                field: "frames",
-                expected: r.elements(),
-                got: values.len(),
-            });
-        }
-        check_finite("frames", values)?;
-        if let Some(i) = values
-            .iter()
-            .position(|q| q.iter().map(|x| x * x).sum::<f64>() < 1e-12)
-        {
-            return Err(ControlError::Value {
-                field: "frames",
-                why: format!("frame {i} is zero, not a rotation"),
-            });
-        }
-        for (t, q) in r.state.frames.iter_mut().zip(values) {
-            let q = Quat::new(q[0], q[1], q[2], q[3]);
-            let q = q / q.norm();
-            *t = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
+        let frames = unit_frames(r.elements(), values)?;
+        for (t, q) in r.state.frames.iter_mut().zip(frames) {
+            *t = Quat::new(T::lit(q[0]), T::lit(q[1]), T::lit(q[2]), T::lit(q[3]));
         }
         Ok(())
     }

@@ -5,8 +5,8 @@ use cosserat_model::energy::{Energies, ForceModel, energies};
 use cosserat_model::{RodParams, RodState, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_finite, check_len, check_rod, read_state_field,
-    read_state_frames,
+    check_condition, check_end, check_rod, check_write, read_state_field, read_state_frames,
+    unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Clock, CollisionStats, ContactSample, ControlError, CouplingStats, Divergence,
@@ -189,18 +189,11 @@ impl Stepper for GpuStepper {
         values: &[[f64; 3]],
     ) -> Result<(), ControlError> {
         let n = self.elements_of(rod)?;
-        check_len(field, n, values.len())?;
-        check_finite(field.name(), values)?;
+        check_write(field, n, values)?;
         let gpu = match field {
             StateField::Positions => GpuField::Positions,
             StateField::Velocities => GpuField::Velocities,
-            StateField::AngularVelocities => GpuField::AngularVelocities,
-            StateField::Director(_) => {
-                return Err(ControlError::Value {
-                    field: "directors",
-                    why: "directors are written as frames (write_frames)".into(),
-                });
-            }
+            _ => GpuField::AngularVelocities,
         };
         let words: Vec<[f32; 4]> = values
             .iter()
@@ -223,26 +216,9 @@ impl Stepper for GpuStepper {
 
     fn write_frames(&mut self, rod: usize, values: &[[f64; 4]]) -> Result<(), ControlError> {
         let n = self.elements_of(rod)?;
-        if values.len() != n {
-            return Err(ControlError::Length {
-                field: "frames",
-                expected: n,
-                got: values.len(),
-            });
-        }
-        check_finite("frames", values)?;
-        let mut words = Vec::with_capacity(n);
-        for (i, q) in values.iter().enumerate() {
-            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if !(norm > 1e-6) {
-                return Err(ControlError::Value {
-                    field: "frames",
-                    why: format!("frame {i} is zero, not a rotation"),
-                });
-            }
-            let q = q.map(|x| (x / norm) as f32);
-            words.push([q[1], q[2], q[3], q[0]]);
-        }
+        let words: Vec<[f32; 4]> = unit_frames(n, values)?
+            .map(|q| [q[1] as f32, q[2] as f32, q[3] as f32, q[0] as f32])
+            .collect();
         self.sim
             .write_rod_field(rod, GpuField::Frames, &words)
             .map_err(to_control)?;

@@ -471,3 +471,49 @@ pub fn read_state_frames<T: cosserat_model::Real>(
     }
     Ok(())
 }
+
+/// Checks values to write into a field of a rod of `elements` elements: the length, finite
+/// values, and a field that can be written (directors are written as frames).
+pub fn check_write(
+    field: StateField,
+    elements: usize,
+    values: &[[f64; 3]],
+) -> Result<(), ControlError> {
+    if let StateField::Director(_) = field {
+        return Err(ControlError::Value {
+            field: "directors",
+            why: "directors are written as frames (write_frames)".into(),
+        });
+    }
+    check_len(field, elements, values.len())?;
+    check_finite(field.name(), values)
+}
+
+/// Checks frames to write into a rod of `elements` elements and returns them as unit
+/// quaternions `[w, x, y, z]`: one per element, finite, none zero.
+pub fn unit_frames(
+    elements: usize,
+    values: &[[f64; 4]],
+) -> Result<impl Iterator<Item = [f64; 4]> + '_, ControlError> {
+    if values.len() != elements {
+        return Err(ControlError::Length {
+            field: "frames",
+            expected: elements,
+            got: values.len(),
+        });
+    }
+    check_finite("frames", values)?;
+    if let Some(i) = values
+        .iter()
+        .position(|q| q.iter().map(|x| x * x).sum::<f64>() < 1e-12)
+    {
+        return Err(ControlError::Value {
+            field: "frames",
+            why: format!("frame {i} is zero, not a rotation"),
+        });
+    }
+    Ok(values.iter().map(|q| {
+        let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+        q.map(|x| x / n)
+    }))
+}
