@@ -15,8 +15,8 @@
 
 use cosserat::cosserat_constraints::BindingVariant;
 use cosserat::{
-    Backend, EndCondition, EndKind, Material, RodBuilder, RodContactSpec, RodHandle, Simulation,
-    SimulationBuilder, StateField, StiffSettings,
+    Backend, EndCondition, EndKind, Environment, Material, RodBuilder, RodContactSpec, RodHandle,
+    Simulation, SimulationBuilder, StateField, StiffSettings,
 };
 
 const STIFF_DT: f64 = 1e-3;
@@ -443,5 +443,68 @@ fn a_free_rod_falls_as_the_integrator_says_on_every_stepper() {
                 );
             }
         }
+    }
+}
+
+/// Contact forces, from every stepper that has mesh contact: a rod lying on a floor pushes on
+/// it with its weight, so the forces the floor reports sum to `m g`, however each stepper
+/// splits them among the points.
+#[test]
+fn a_rod_on_a_floor_reports_contact_forces_that_carry_its_weight() {
+    let m = material();
+    let (length, radius) = (0.3, 5e-3);
+    let weight = m.density * std::f64::consts::PI * radius * radius * length * 9.81;
+    let lying = || {
+        RodBuilder::straight([-0.15, 0.0, radius], [1.0, 0.0, 0.0], length, 10, m)
+            .damping(0.0, 0.0, 1.0)
+    };
+    let floor = || Environment::plane([0.0; 3], [0.0, 0.0, 1.0], 2.0).expect("a floor");
+    let stiff = || {
+        SimulationBuilder::new()
+            .dt(STIFF_DT)
+            .double_precision(true)
+            .stiff_solver(Some(StiffSettings::default()))
+    };
+    let explicit = || SimulationBuilder::new().dt(EXPLICIT_DT);
+    let cases = [
+        ("cpu explicit f32", explicit(), 300),
+        ("cpu explicit f64", explicit().double_precision(true), 300),
+        ("cpu stiff", stiff(), 30),
+    ];
+    let mut contacts = Vec::new();
+    for (name, b, steps) in cases {
+        let mut sim = b
+            .gravity([0.0, 0.0, -9.81])
+            .environment(floor())
+            .with_rod(lying())
+            .build()
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.run(steps).unwrap_or_else(|e| panic!("{name}: {e}"));
+        sim.contacts(RodHandle(0), &mut contacts)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(contacts.len() >= 2, "{name}: {} contacts", contacts.len());
+        let up: f64 = contacts.iter().map(|c| c.force[2]).sum();
+        assert!(
+            (up - weight).abs() < 0.02 * weight,
+            "{name}: the floor carries {up} N, the rod weighs {weight} N"
+        );
+        for c in &contacts {
+            assert!(
+                (c.normal[2] - 1.0).abs() < 1e-9,
+                "{name}: normal {:?}",
+                c.normal
+            );
+        }
+    }
+    // The GPU has no mesh contact: the scene is refused, listing it.
+    if cfg!(feature = "gpu") {
+        let err = explicit()
+            .backend(Backend::Gpu)
+            .environment(floor())
+            .with_rod(lying())
+            .build()
+            .err()
+            .expect("refused");
+        assert!(err.to_string().contains("mesh contact"), "{err}");
     }
 }

@@ -61,9 +61,10 @@ pub trait Scheme<T: Real>: Clone + Send + Sync + 'static {
         true
     }
 
-    /// Contacts of rod `rod` at the last step, if this scheme reports them.
-    fn reports_contacts(&self) -> bool {
-        true
+    /// The mesh's forces on rod `rod`'s points at the last step, when this scheme keeps them
+    /// itself (the stiff schemes); `None`: they are the rod's explicit contact set.
+    fn contact_forces(&self, _rod: usize, _out: &mut Vec<ContactSample>) -> Option<()> {
+        None
     }
 }
 
@@ -193,8 +194,18 @@ impl<T: Real> Scheme<T> for Stiff {
         Some(summarise(&self.settings, &self.scratch, steps))
     }
 
-    fn reports_contacts(&self) -> bool {
-        false
+    fn contact_forces(&self, rod: usize, out: &mut Vec<ContactSample>) -> Option<()> {
+        out.extend(
+            self.scratch
+                .get(rod)?
+                .contact_forces()
+                .map(|(point, normal, force)| ContactSample {
+                    point,
+                    normal,
+                    force,
+                }),
+        );
+        Some(())
     }
 }
 
@@ -242,15 +253,15 @@ impl<T: Real> Scheme<T> for BoundStiff<T> {
         Some(summarise(&self.stiff.settings, &self.stiff.scratch, steps))
     }
 
+    fn contact_forces(&self, rod: usize, out: &mut Vec<ContactSample>) -> Option<()> {
+        <Stiff as Scheme<T>>::contact_forces(&self.stiff, rod, out)
+    }
+
     fn coupling_stats(&self) -> Option<CouplingStats> {
         Some(self.bindings.stats())
     }
 
     fn allows_kind_changes(&self) -> bool {
-        false
-    }
-
-    fn reports_contacts(&self) -> bool {
         false
     }
 }
@@ -576,27 +587,28 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
     fn contacts(&self, rod: usize, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {
         let r = self.rod(rod)?;
         out.clear();
+        if self.scheme.contact_forces(rod, out).is_some() {
+            return Ok(());
+        }
         let Some(set) = r.contacts() else {
             return Ok(());
         };
-        if !self.scheme.reports_contacts() {
-            return Err(ControlError::Unsupported {
-                stepper: S::NAME,
-                what: "report contact forces yet".into(),
-            });
-        }
         let h = self.settings.dt.to_f64();
         for ((c, pn), pt) in set
             .contacts()
             .zip(set.normal_impulses())
             .zip(set.tangent_impulses())
         {
+            // The set keeps its impulses as velocity changes: times the point's mass, over the
+            // step, they are the force.
+            let point = c.point as usize;
             let normal: Vec3<f64> = cast_vec(&c.normal);
-            let impulse = normal * pn.to_f64() + cast_vec::<T, f64>(&pt);
+            let dv = normal * pn.to_f64() + cast_vec::<T, f64>(&pt);
+            let mass = r.params.masses[point].to_f64();
             out.push(ContactSample {
-                point: c.point as usize,
+                point,
                 normal: normal.into(),
-                force: (impulse / h).into(),
+                force: (dv * (mass / h)).into(),
             });
         }
         Ok(())

@@ -115,6 +115,9 @@ pub(crate) struct StiffContacts {
     skip: Vec<bool>,
     /// Largest penetration of the last detection after a solve.
     depth_after_solve: f64,
+    /// The wall's force on each point it held in the last accepted step: point, unit normal
+    /// into the lumen, force [N] (normal and friction).
+    forces: Vec<(usize, Vec3<f64>, Vec3<f64>)>,
     pub(crate) stats: CollisionStats,
 }
 
@@ -132,8 +135,28 @@ impl StiffContacts {
             queried_at: Vec::new(),
             skip: Vec::new(),
             depth_after_solve: 0.0,
+            forces: Vec::new(),
             stats: CollisionStats::default(),
         }
+    }
+
+    /// Records the wall's force on every point it held in the step just accepted: the pin's
+    /// impulse `M (x − x̃) − Jᵀ λ` ([`pin_impulse`], with the step's multipliers `lambda`) over
+    /// the implicit step `h`, squared (XPBD's impulses are forces times the step squared).
+    pub(crate) fn record_forces(&mut self, w: &Work, k: &Consts, lambda: &V3s, h: f64) {
+        self.forces.clear();
+        for p in &w.pinned {
+            if p.line || p.point == usize::MAX {
+                continue;
+            }
+            let g = pin_impulse(w, k, lambda, p.point);
+            self.forces.push((p.point, p.normal, g / (h * h)));
+        }
+    }
+
+    /// The forces [`Self::record_forces`] recorded.
+    pub(crate) fn forces(&self) -> &[(usize, Vec3<f64>, Vec3<f64>)] {
+        &self.forces
     }
 
     /// Forgets the contacts of earlier steps and the statistics (see `StiffScratch::prepare`).
