@@ -508,3 +508,38 @@ fn a_rod_on_a_floor_reports_contact_forces_that_carry_its_weight() {
         assert!(err.to_string().contains("mesh contact"), "{err}");
     }
 }
+
+/// A force at a held end beyond the rod's bound stops the run as diverged, naming the rod and
+/// the end, instead of being reported as a result. The default bound (a thousand times `E A`)
+/// is met only by steps that blew up; here the bound is set to a tenth of `E A` so that a
+/// static load shows the mechanism: a load above it stops the run, one below is held.
+#[test]
+fn a_reaction_beyond_the_rod_s_bound_stops_the_run() {
+    let m = material();
+    let ea = m.stretch_stiffness();
+    let pulled = |load: f64| {
+        SimulationBuilder::new()
+            .dt(STIFF_DT)
+            .double_precision(true)
+            .stiff_solver(Some(StiffSettings::default()))
+            .gravity([0.0; 3])
+            .reaction_limit(0.1)
+            .with_rod(wire(0.0).load(10, [load, 0.0, 0.0]))
+            .build()
+            .expect("builds")
+    };
+    let mut sim = pulled(0.3 * ea);
+    let err = sim
+        .run(200)
+        .expect_err("a reaction of 0.3 E A is beyond 0.1 E A");
+    let d = err.divergence().expect("a divergence");
+    assert_eq!((d.rod, d.element), (0, 0), "{err}");
+    assert!(err.to_string().contains("held end"), "{err}");
+    let mut sim = pulled(0.05 * ea);
+    sim.run(200).expect("0.05 E A is within the bound");
+    let f = sim
+        .end_reaction(RodHandle(0), 0)
+        .expect("a clamp")
+        .force_norm();
+    assert!((f - 0.05 * ea).abs() < 0.005 * ea, "{f} N");
+}

@@ -289,6 +289,8 @@ pub struct SimulationBuilder {
     direct_constraints: bool,
     /// Cut-off of the low-pass filter on end reactions [Hz]; `None`: the backend's default.
     reaction_cutoff_hz: Option<f64>,
+    /// The largest force at a held end, as a multiple of the rod's `E A`.
+    reaction_limit: f64,
 }
 
 impl Default for SimulationBuilder {
@@ -313,7 +315,18 @@ impl SimulationBuilder {
             divergence_speed: 1e3,
             check_stability: true,
             direct_constraints: false,
+            reaction_limit: 1000.0,
         }
+    }
+
+    /// The largest force a held end may take before the run is stopped as diverged, as a
+    /// multiple of the rod's `E A` (default 1000). `E A` would stretch a real rod to twice its
+    /// length; an inextensible rod driven hard can see forces above it for a step (a hand
+    /// jerked at 100 m/s), but a thousand times it only comes from a step that blew up (the
+    /// reactions of 1e20 N seen in real anatomy).
+    pub fn reaction_limit(mut self, multiple_of_ea: f64) -> Self {
+        self.reaction_limit = multiple_of_ea;
+        self
     }
 
     /// Solves the inextensibility constraints exactly with the direct solver
@@ -574,6 +587,11 @@ impl SimulationBuilder {
                 .map(|(i, r)| r.name.clone().unwrap_or_else(|| format!("rod{i}")))
                 .collect(),
             radii: self.rods.iter().map(|r| r.spec.material.radius).collect(),
+            reaction_bounds: self
+                .rods
+                .iter()
+                .map(|r| self.reaction_limit * r.spec.material.stretch_stiffness())
+                .collect(),
             backend: self.backend,
             max_strain: 0.0,
             extensible: s.extensible,
@@ -789,6 +807,9 @@ pub struct Simulation {
     scratch: Vec<[f64; 3]>,
     /// Which rods collide with the environment.
     collides: Vec<bool>,
+    /// Per rod, the largest force a held end may take [N]
+    /// ([`SimulationBuilder::reaction_limit`] times `E A`). Beyond it the step has blown up.
+    reaction_bounds: Vec<f64>,
     /// Most points found outside the lumen after any call to [`Simulation::run`], and the
     /// deepest of them [m].
     outside: (usize, f64),
@@ -830,7 +851,32 @@ impl Simulation {
         self.max_strain = self.max_strain.max(worst);
         self.stepper
             .check_speed(self.divergence_speed)
-            .map_err(StepError::Diverged)
+            .map_err(StepError::Diverged)?;
+        self.check_reactions()
+    }
+
+    /// The force at every held end against its rod's bound (a multiple of `E A`): a reaction of
+    /// 1e20 N is a step that blew up, not a result. Two reads per rod; nothing where reactions are not
+    /// computed.
+    fn check_reactions(&self) -> Result<(), StepError> {
+        for (rod, &bound) in self.reaction_bounds.iter().enumerate() {
+            for end in 0..2 {
+                let Some(r) = self.stepper.end_reaction(rod, end) else {
+                    continue;
+                };
+                let force = r.force_norm();
+                if !(force <= bound) {
+                    let n = self.stepper.elements(rod).unwrap_or(0);
+                    return Err(StepError::Diverged(cosserat_problem::Divergence {
+                        rod,
+                        element: if end == 0 { 0 } else { n },
+                        step: self.steps(),
+                        quantity: cosserat_problem::DivergedQuantity::Reaction(force, bound),
+                    }));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The inside test of the rods' points against the environment's lumen

@@ -19,6 +19,9 @@ pub enum DivergedQuantity {
     /// A point is outside the lumen of the mesh it collides with, this deep behind the wall
     /// (distance plus the rod's radius) [m]: the contacts did not hold it.
     OutsideLumen(f64),
+    /// The force at a held end [N] is beyond the bound given second [N] (a multiple of the rod's
+    /// `E A`, `SimulationBuilder::reaction_limit` in the facade).
+    Reaction(f64, f64),
 }
 
 /// A rod that diverged: which one, where, when, and what.
@@ -48,6 +51,9 @@ impl std::fmt::Display for Divergence {
             DivergedQuantity::Unconverged(r) => {
                 format!("the stiff solver's step ended at residual {r:.3e}, far from converged")
             }
+            DivergedQuantity::Reaction(force, bound) => format!(
+                "the force at the held end, {force:.3e} N, is beyond the bound of {bound:.3e} N (a multiple of the rod's E A)"
+            ),
             DivergedQuantity::OutsideLumen(depth) => format!(
                 "the point is outside the lumen, {depth:.3e} m behind the wall (set environment.stop_outside = false to go on)"
             ),
