@@ -283,6 +283,7 @@ fn loads_and_releases_act_where_the_stepper_can_do_them() {
                 );
             }
             Err(e) => {
+                // The GPU reads loads only when its kernels were built with some.
                 assert!(name.starts_with("gpu"), "{name}: {e}");
                 assert!(e.to_string().contains("loads"), "{name}: {e}");
             }
@@ -542,4 +543,46 @@ fn a_reaction_beyond_the_rod_s_bound_stops_the_run() {
         .expect("a clamp")
         .force_norm();
     assert!((f - 0.05 * ea).abs() < 0.005 * ea, "{f} N");
+}
+
+/// On the GPU, loads change at run time when the kernels were built with loads (here a zero one
+/// on the tip): a tip load set after the start pulls the tip down as far as on the CPU.
+#[test]
+fn the_gpu_takes_new_loads_when_built_with_loads() {
+    let build = |backend: Backend| {
+        SimulationBuilder::new()
+            .dt(EXPLICIT_DT)
+            .backend(backend)
+            .with_rod(wire(0.0).load(10, [0.0; 3]))
+            .build()
+    };
+    let mut gpu = match build(Backend::Gpu) {
+        Ok(sim) => sim,
+        Err(e) if e.to_string().contains("adapter") || cfg!(not(feature = "gpu")) => {
+            assert!(!gpu_required(), "{e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let mut cpu = build(Backend::Cpu).expect("builds");
+    let h = RodHandle(0);
+    for sim in [&mut gpu, &mut cpu] {
+        sim.run(100).expect("runs");
+        sim.set_loads(h, &[(10, [0.0, 0.0, -0.5])])
+            .expect("new loads");
+        sim.run(400).expect("runs");
+    }
+    let (g, c) = (gpu.positions(h)[10], cpu.positions(h)[10]);
+    assert!(
+        c[2] < -1e-3,
+        "the load pulled the CPU tip down only to {c:?}"
+    );
+    assert!(
+        (g[2] - c[2]).abs() < 0.01 * c[2].abs(),
+        "gpu {g:?}, cpu {c:?}"
+    );
+    assert!(
+        gpu.set_loads(h, &[(11, [0.0; 3])]).is_err(),
+        "a point the rod lacks"
+    );
 }

@@ -12,7 +12,9 @@ use crate::device::{AdapterSummary, Gpu};
 use crate::layout::{ChunkG, DriveG, ParamsU, SlotG, TABLE_CAPACITY};
 use crate::plan::{Plan, Tuning};
 use crate::readback::Readback;
-use crate::{GpuError, GpuOptions, GpuRodInput, KernelPath, PrescribedMotion, SolverSettings};
+use crate::{
+    GpuError, GpuOptions, GpuRodInput, KernelPath, PointLoad, PrescribedMotion, SolverSettings,
+};
 use std::time::Duration;
 
 /// Bytes of one chunk-table entry, the size of the table's binding.
@@ -38,6 +40,8 @@ pub(crate) struct StateBuffers {
 
 /// Rods stepped on the GPU. See the crate docs for the kernel paths.
 pub struct GpuSimulation {
+    /// The point loads, one `vec4` per slot, when the kernel was built with loads.
+    loads_buf: Option<wgpu::Buffer>,
     pub(crate) gpu: Gpu,
     pub(crate) plan: Plan,
     pipeline: wgpu::ComputePipeline,
@@ -343,7 +347,7 @@ impl GpuSimulation {
             init(
                 "loads",
                 bytemuck::cast_slice(&loads),
-                wgpu::BufferUsages::STORAGE,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             )
         });
         let make_state = |tag: &str| StateBuffers {
@@ -572,6 +576,7 @@ impl GpuSimulation {
         });
         let timestamp_period_ns = gpu.queue.get_timestamp_period() as f64;
         Ok(Self {
+            loads_buf,
             gpu,
             plan,
             pipeline,
@@ -630,6 +635,37 @@ impl GpuSimulation {
     /// Number of rods.
     pub fn rods(&self) -> usize {
         self.rods.len()
+    }
+
+    /// Replaces the point loads of rod `rod` from the next batch on. The kernel reads loads
+    /// only when it was built with some (a rod had a load when the simulation was made, even
+    /// a zero one); otherwise this is refused.
+    pub fn set_loads(&mut self, rod: usize, loads: &[PointLoad<f32>]) -> Result<(), GpuError> {
+        let Some(&(base, n)) = self.rods.get(rod) else {
+            return Err(GpuError::InvalidInput(format!("no rod {rod}")));
+        };
+        let Some(buf) = self.loads_buf.as_ref() else {
+            return Err(GpuError::InvalidInput(
+                "the kernels were built without loads: give a rod a load (a zero one will do) when the simulation is made".into(),
+            ));
+        };
+        let n = n as usize;
+        let mut words = vec![[0f32; 4]; n + 1];
+        for load in loads {
+            let Some(w) = words.get_mut(load.point) else {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {rod}: load on point {}, but the rod has points 0..={n}",
+                    load.point
+                )));
+            };
+            w[0] += load.force.x;
+            w[1] += load.force.y;
+            w[2] += load.force.z;
+        }
+        self.gpu
+            .queue
+            .write_buffer(buf, 16 * u64::from(base), bytemuck::cast_slice(&words));
+        Ok(())
     }
 
     /// Replaces the prescribed motion of end `end` (0 or 1) of rod `rod` from the next batch on.

@@ -261,13 +261,21 @@ impl Stepper for GpuStepper {
         Ok(())
     }
 
-    fn set_loads(&mut self, _rod: usize, _loads: &[PointLoad<f64>]) -> Result<(), ControlError> {
-        Err(ControlError::Unsupported {
-            stepper: NAME,
-            what:
-                "change loads while running: its kernels are built with the loads they were given"
-                    .into(),
-        })
+    fn set_loads(&mut self, rod: usize, loads: &[PointLoad<f64>]) -> Result<(), ControlError> {
+        check_rod(rod, self.states.len())?;
+        if loads.iter().any(|l| !l.force.iter().all(|x| x.is_finite())) {
+            return Err(ControlError::Value {
+                field: "load",
+                why: "forces must be finite".into(),
+            });
+        }
+        let loads: Vec<PointLoad<f32>> = loads.iter().map(PointLoad::cast).collect();
+        self.sim
+            .set_loads(rod, &loads)
+            .map_err(|e| ControlError::Unsupported {
+                stepper: NAME,
+                what: format!("change these loads: {e}"),
+            })
     }
 
     fn end_reaction(&self, _rod: usize, _end: usize) -> Option<EndReaction> {
