@@ -68,6 +68,16 @@ pub trait Scheme<T: Real>: Clone + Send + Sync + 'static {
     }
 }
 
+/// What every CPU scheme can do: mesh contact, the guide, reactions at held ends, `f64`.
+fn cpu_base() -> Capabilities {
+    Capabilities::of(&[
+        Capability::MeshContact,
+        Capability::Guide,
+        Capability::Reactions,
+        Capability::DoublePrecision,
+    ])
+}
+
 /// The paper's explicit scheme, each rod on its own (serially or spread over rayon's pool).
 #[derive(Clone, Debug, Default)]
 pub struct Explicit;
@@ -76,13 +86,7 @@ impl<T: Real> Scheme<T> for Explicit {
     const NAME: &'static str = "cpu explicit";
 
     fn capabilities() -> Capabilities {
-        Capabilities::of(&[
-            Capability::MeshContact,
-            Capability::Guide,
-            Capability::DirectConstraints,
-            Capability::Reactions,
-            Capability::DoublePrecision,
-        ])
+        cpu_base().with(Capability::DirectConstraints)
     }
 
     fn advance(
@@ -107,14 +111,9 @@ impl<T: Real> Scheme<T> for Coupled<T> {
     const NAME: &'static str = "cpu coupled";
 
     fn capabilities() -> Capabilities {
-        Capabilities::of(&[
-            Capability::MeshContact,
-            Capability::Guide,
-            Capability::Bindings,
-            Capability::RodContact,
-            Capability::Reactions,
-            Capability::DoublePrecision,
-        ])
+        cpu_base()
+            .with(Capability::Bindings)
+            .with(Capability::RodContact)
     }
 
     fn advance(
@@ -159,13 +158,7 @@ impl<T: Real> Scheme<T> for Stiff {
     const NAME: &'static str = "cpu stiff";
 
     fn capabilities() -> Capabilities {
-        Capabilities::of(&[
-            Capability::MeshContact,
-            Capability::Guide,
-            Capability::StiffScheme,
-            Capability::Reactions,
-            Capability::DoublePrecision,
-        ])
+        cpu_base().with(Capability::StiffScheme)
     }
 
     fn advance(

@@ -322,20 +322,26 @@ impl GpuSimulation {
         Ok(bytes)
     }
 
-    /// The full state of every rod (blocking, one round trip). Fails like
-    /// [`Self::read_positions`].
-    pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
-        use cosserat_model::{Quat, RodState, Vec3};
+    /// Positions, velocities, frames, angular velocities (each `16 · slots` bytes) and the
+    /// status words, one after another, in one round trip.
+    fn read_whole_state(&mut self) -> Result<Vec<u8>, GpuError> {
         let bytes = 16 * self.slots;
         let status_bytes = 16 * self.plan.items.len() as u64;
-        let all = self.read_buffers(&[
+        self.read_buffers(&[
             (Part::Positions, bytes),
             (Part::Velocities, bytes),
             (Part::Frames, bytes),
             (Part::AngularVelocities, bytes),
             (Part::Status, status_bytes),
-        ])?;
-        let b = bytes as usize;
+        ])
+    }
+
+    /// The full state of every rod (blocking, one round trip). Fails like
+    /// [`Self::read_positions`].
+    pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
+        use cosserat_model::{Quat, RodState, Vec3};
+        let all = self.read_whole_state()?;
+        let b = (16 * self.slots) as usize;
         self.status_error(bytemuck::cast_slice(&all[4 * b..]))?;
         let floats: &[f32] = bytemuck::cast_slice(&all[..4 * b]);
         let quarter = b / 4;
@@ -370,15 +376,7 @@ impl GpuSimulation {
     /// host's bookkeeping of held ends, for [`Self::restore`] (blocking, one round trip).
     pub fn snapshot(&mut self) -> Result<GpuSnapshot, GpuError> {
         self.ensure_idle()?;
-        let bytes = 16 * self.slots;
-        let status_bytes = 16 * self.plan.items.len() as u64;
-        let state = self.read_buffers(&[
-            (Part::Positions, bytes),
-            (Part::Velocities, bytes),
-            (Part::Frames, bytes),
-            (Part::AngularVelocities, bytes),
-            (Part::Status, status_bytes),
-        ])?;
+        let state = self.read_whole_state()?;
         Ok(GpuSnapshot {
             state,
             steps: self.steps,

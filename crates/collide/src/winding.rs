@@ -213,11 +213,6 @@ impl WindingNumber {
         self.volume.abs() > 1e-6 * d * d * d
     }
 
-    /// Openings closed for the test ([`crate::winding`]).
-    pub fn openings(&self) -> usize {
-        self.caps.len()
-    }
-
     /// The exact winding number (every triangle's solid angle, no far field), for checking.
     pub fn exact_outward(mesh: &TriMesh, p: &[f64; 3]) -> f64 {
         let p = Vector3::from(*p);

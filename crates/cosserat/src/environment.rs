@@ -209,11 +209,6 @@ impl Environment {
             v.entry_point, v.entry_direction
         ))
     }
-
-    /// How many points of `points` are outside the lumen ([`Self::outside`]).
-    pub fn escaped(&self, points: &[[f64; 3]], radius: f64) -> usize {
-        self.outside(points, radius).count
-    }
 }
 
 /// Points of a rod outside the lumen ([`Environment::outside`]).
