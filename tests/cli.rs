@@ -238,36 +238,37 @@ start = { kind = "clamped" }
     assert!(c.max_penetration > 0.03, "{c:?}");
 }
 
-/// An entry that does not lead into the lumen is reported when the scene is built: here the
-/// phantom insertion's entry is moved half a metre away from the phantom.
+/// An entry far from the vessel, or one that does not lead into the lumen, is reported when the
+/// scene is built: here the phantom insertion's entry is moved half a metre away from the
+/// phantom, then turned away from it.
 #[test]
 fn an_entry_far_from_the_vessel_is_reported() {
-    let far = run_json(&[
-        "run",
-        "scenes/phantom-insertion.toml",
-        "--elements",
-        "16",
-        "--steps",
-        "1",
-        "--json",
-        "--set",
-        "environment.mesh.entry.point=[500.0, 0.42, -0.32]",
-    ]);
-    let warnings = far["warnings"].to_string();
+    let run = |point: &str, direction: &str| {
+        run_json(&[
+            "run",
+            "scenes/phantom-insertion.toml",
+            "--elements",
+            "16",
+            "--steps",
+            "1",
+            "--json",
+            "--set",
+            &format!("environment.mesh.entry.point={point}"),
+            "--set",
+            &format!("environment.mesh.entry.direction={direction}"),
+        ])["warnings"]
+            .to_string()
+    };
+    let far = run("[500.0, 0.42, -0.32]", "[-1.0, 0.0, 0.0]");
+    assert!(far.contains("4.99"), "{far}");
     assert!(
-        warnings.contains("does not lead into the lumen"),
-        "{warnings}"
+        far.contains("from where its axis reaches the lumen"),
+        "{far}"
     );
-    let fine = run_json(&[
-        "run",
-        "scenes/phantom-insertion.toml",
-        "--elements",
-        "16",
-        "--steps",
-        "1",
-        "--json",
-    ]);
-    assert!(!fine["warnings"].to_string().contains("lumen"), "{fine}");
+    let away = run("[500.0, 0.42, -0.32]", "[1.0, 0.0, 0.0]");
+    assert!(away.contains("does not lead into the lumen"), "{away}");
+    let fine = run("[1.0, 0.42, -0.32]", "[-1.0, 0.0, 0.0]");
+    assert!(!fine.contains("lumen"), "{fine}");
 }
 
 /// A simulation far larger than the machine's memory is refused with the numbers before it is

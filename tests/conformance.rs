@@ -586,3 +586,89 @@ fn the_gpu_takes_new_loads_when_built_with_loads() {
         "a point the rod lacks"
     );
 }
+
+/// Energy from nowhere stops the run: the explicit scheme far beyond its stable step (the
+/// stability check, the speed and strain limits off) gains energy that no load or end explains,
+/// and the energy watch stops it, naming the growth. At its stable step the same rod runs on,
+/// as every case of this suite does with the watch on (its default).
+#[test]
+fn energy_from_nowhere_stops_the_run() {
+    let build = |dt: f64| {
+        SimulationBuilder::new()
+            .dt(dt)
+            .double_precision(true)
+            .check_stability(false)
+            .divergence_speed(f64::INFINITY)
+            .divergence_strain(1e6)
+            .with_rod(wire(0.0))
+            .build()
+            .expect("builds")
+    };
+    // In batches of 64 steps, as a program or the command calls `run`: the watch looks after
+    // each call.
+    let mut unstable = build(40.0 * EXPLICIT_DT);
+    let err = (0..300)
+        .find_map(|_| unstable.run(64).err())
+        .expect("forty times the stable step blows up");
+    assert!(err.to_string().contains("total energy grew"), "{err}");
+    let mut stable = build(EXPLICIT_DT);
+    for _ in 0..300 {
+        stable.run(64).expect("the stable step runs on");
+    }
+}
+
+/// Contacts cannot tunnel: a rod thrown at a floor so fast that one step carries it far through
+/// (100 m/s: 10 cm in a stiff step of 1 ms, twenty times its radius; 0.4 mm of its 5 mm radius
+/// in an explicit step, four times at 40 m/s over 10 steps) ends every step on the floor's side,
+/// caught by the swept test where its sphere never saw the wall.
+#[test]
+fn a_rod_thrown_through_a_floor_is_caught_on_its_side() {
+    let m = material();
+    let radius = 5e-3;
+    let thrown = |builder: SimulationBuilder, speed: f64| {
+        let mut sim = builder
+            .gravity([0.0; 3])
+            .environment(Environment::plane([0.0; 3], [0.0, 0.0, 1.0], 2.0).expect("a floor"))
+            .with_rod(
+                RodBuilder::straight([-0.15, 0.0, 0.02], [1.0, 0.0, 0.0], 0.3, 10, m)
+                    .damping(0.0, 0.0, 1.0),
+            )
+            .build()
+            .expect("builds");
+        sim.write(
+            RodHandle(0),
+            StateField::Velocities,
+            &[[0.0, 0.0, -speed]; 11],
+        )
+        .expect("writes");
+        sim
+    };
+    let stiff = SimulationBuilder::new()
+        .dt(STIFF_DT)
+        .double_precision(true)
+        .stiff_solver(Some(StiffSettings::default()));
+    let explicit = SimulationBuilder::new()
+        .dt(EXPLICIT_DT)
+        .double_precision(true)
+        .divergence_speed(1e3);
+    for (name, builder, speed, steps) in [
+        ("stiff", stiff, 100.0, 3),
+        ("explicit", explicit, 40.0, 100),
+    ] {
+        let mut sim = thrown(builder, speed);
+        for step in 0..steps {
+            sim.run(1).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let lowest = sim
+                .positions(RodHandle(0))
+                .iter()
+                .map(|p| p[2])
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                lowest > 0.5 * radius,
+                "{name}: step {step}: the lowest point is at {lowest} m"
+            );
+        }
+        let c = sim.contact_report().expect("a rod with a mesh");
+        assert!(c.escaped_points == 0, "{name}: {c:?}");
+    }
+}

@@ -105,7 +105,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]\n       cargo xtask torture".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]\n       cargo xtask torture [--only TEXT]".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -136,7 +136,7 @@ fn run() -> Result<bool, String> {
         }
         "torture" => {
             args.reject_unknown(&[])?;
-            match torture::run() {
+            match torture::run(args.option("only")) {
                 Ok(()) => Ok(true),
                 Err(e) => {
                     eprintln!("{e}");

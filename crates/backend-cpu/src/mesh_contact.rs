@@ -24,7 +24,7 @@
 //! exactly those of the tree query. The skin is half the query radius: a wire sliding at
 //! 0.2 m/s with steps of a few microseconds remakes its lists every few hundred steps.
 
-use cosserat_collide::{Contact, MeshCollider};
+use cosserat_collide::{Contact, Crossing, MeshCollider};
 use cosserat_constraints::{ContactSet, Friction, PointContact};
 use cosserat_model::{Real, Vec3};
 use std::sync::Arc;
@@ -49,6 +49,22 @@ pub const CLEARANCE_LOOKAHEAD: f64 = 2e-3;
 /// The skin of a point's near list as a fraction of the query radius (see the module docs).
 const NEAR_SKIN: f64 = 0.5;
 
+/// A point is swept (tested for walls crossed over the step) when it moves more than this
+/// fraction of its query radius: one that moves less ends within reach of any wall it could
+/// have crossed, which its sphere query then sees.
+const SWEEP_FRACTION: f64 = 0.5;
+
+/// How the points move over the step, for the swept test (see the module docs).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Motion<'a, T> {
+    /// The points are queried where they end the step; they started it at these positions
+    /// (coordinate by coordinate), in the lumen.
+    From([&'a [T]; 3]),
+    /// The points are queried where they start the step; they will move with these velocities
+    /// for this step [s].
+    Velocity([&'a [T]; 3], f64),
+}
+
 /// Per-rod collision state: settings, scratch and statistics.
 #[derive(Clone, Debug)]
 pub(crate) struct RodMeshContact<T: Real> {
@@ -67,6 +83,8 @@ pub(crate) struct RodMeshContact<T: Real> {
     anchor: Vec<[f64; 3]>,
     has_near: Vec<bool>,
     found: Vec<Contact>,
+    /// Scratch: the points whose motion crossed into the wall, and where.
+    swept: Vec<(u32, Crossing)>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -87,25 +105,34 @@ impl<T: Real> RodMeshContact<T> {
             anchor: Vec::new(),
             has_near: Vec::new(),
             found: Vec::new(),
+            swept: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
     }
 
     /// Detects contacts of the points `(x, y, z)` as spheres of `radius`.
-    pub(crate) fn detect(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
-        self.detect_except(x, y, z, radius, &[]);
+    /// With a `motion`, points that moved far over the step are also swept (see the module
+    /// docs).
+    pub(crate) fn detect(&mut self, x: &[T], y: &[T], z: &[T], radius: f64, motion: Motion<T>) {
+        self.detect_except(x, y, z, radius, &[], motion);
     }
 
     /// [`detect`](Self::detect), leaving out the points `i` with `skip[i]` (those past the end
     /// of `skip` are detected): they are not queried and get no contact.
-    pub(crate) fn detect_except(&mut self, x: &[T], y: &[T], z: &[T], radius: f64, skip: &[bool]) {
+    pub(crate) fn detect_except(
+        &mut self,
+        x: &[T],
+        y: &[T],
+        z: &[T],
+        radius: f64,
+        skip: &[bool],
+        motion: Motion<T>,
+    ) {
         let t0 = std::time::Instant::now();
         let margin = self.settings.margin;
         let reach = radius + margin;
-        let collider = &self.settings.collider;
         let skin = NEAR_SKIN * reach;
-        let root = &collider.bvh().nodes()[0];
         let n = x.len().min(y.len()).min(z.len());
         if self.clear2.len() != n {
             self.clear2 = vec![-1.0; n];
@@ -128,12 +155,18 @@ impl<T: Real> RodMeshContact<T> {
         }
         self.found.clear();
         self.contacts.clear();
+        self.sweep(x, y, z, reach, skip, motion);
+        let collider = &self.settings.collider;
+        let root = &collider.bvh().nodes()[0];
         let mut escaped = 0;
         let distance = |a: &[f64; 3], b: &[f64; 3]| {
             ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
         };
         for k in 0..self.due.len() {
             let i = self.due[k] as usize;
+            if self.swept.iter().any(|&(j, _)| j as usize == i) {
+                continue;
+            }
             let p = [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
             let mut from_anchor = distance(&p, &self.anchor[i]);
             if !self.has_near[i] || from_anchor > skin {
@@ -188,11 +221,72 @@ impl<T: Real> RodMeshContact<T> {
                 gap: T::lit(-penetration),
             });
         }
+        // A point whose motion crossed into the wall is put back on the wall it crossed: its
+        // gap is its distance in front of that triangle's plane less the radius, negative
+        // when it ended behind it.
+        for &(i, c) in &self.swept {
+            let i = i as usize;
+            let p = [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
+            let ahead: f64 = (0..3).map(|k| (p[k] - c.point[k]) * c.normal[k]).sum();
+            let gap = ahead - radius;
+            escaped += usize::from(ahead < 0.0);
+            self.clear2[i] = -1.0;
+            self.stats.max_penetration = self.stats.max_penetration.max(-gap);
+            self.stats.swept_catches += 1;
+            self.contacts.push(PointContact {
+                point: i as u32,
+                normal: Vec3::new(
+                    T::lit(c.normal[0]),
+                    T::lit(c.normal[1]),
+                    T::lit(c.normal[2]),
+                ),
+                gap: T::lit(gap),
+            });
+        }
         self.stats.escaped_points = self.stats.escaped_points.max(escaped);
         self.stats.contacts = self.contacts.len();
         self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
         self.stats.steps += 1;
         self.stats.detection_seconds += t0.elapsed().as_secs_f64();
+    }
+}
+
+impl<T: Real> RodMeshContact<T> {
+    /// Fills `swept` with the points (not skipped) whose motion over the step crosses into the
+    /// wall: those that move more than [`SWEEP_FRACTION`] of `reach`, segment by segment
+    /// against the tree ([`MeshCollider::first_crossing`]). A point that moves less costs one
+    /// squared distance.
+    fn sweep(&mut self, x: &[T], y: &[T], z: &[T], reach: f64, skip: &[bool], motion: Motion<T>) {
+        self.swept.clear();
+        let far2 = (SWEEP_FRACTION * reach).powi(2);
+        let collider = &self.settings.collider;
+        let n = x.len().min(y.len()).min(z.len());
+        let at = |i: usize| [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
+        for i in 0..n {
+            let (a, b) = match motion {
+                Motion::From([sx, sy, sz]) => {
+                    ([sx[i].to_f64(), sy[i].to_f64(), sz[i].to_f64()], at(i))
+                }
+                Motion::Velocity([vx, vy, vz], h) => {
+                    let p = at(i);
+                    (
+                        p,
+                        [
+                            p[0] + h * vx[i].to_f64(),
+                            p[1] + h * vy[i].to_f64(),
+                            p[2] + h * vz[i].to_f64(),
+                        ],
+                    )
+                }
+            };
+            let d2 = (0..3).map(|k| (b[k] - a[k]).powi(2)).sum::<f64>();
+            if d2 <= far2 || skip.get(i).is_some_and(|&s| s) {
+                continue;
+            }
+            if let Some(c) = collider.first_crossing(&a, &b) {
+                self.swept.push((i as u32, c));
+            }
+        }
     }
 }
 
@@ -246,7 +340,8 @@ mod tests {
                         (a, b, c)
                     },
                 );
-            rmc.detect(&x, &y, &z, radius);
+            // Not moving (the sweep is tested on its own).
+            rmc.detect(&x, &y, &z, radius, Motion::From([&x, &y, &z]));
             skipped_some |= rmc.clear2.iter().any(|&c| c > 0.0);
             reused_list |=
                 (0..40).any(|i| rmc.clear2[i] <= 0.0 && rmc.has_near[i] && rmc.anchor[i] != pts[i]);

@@ -1,7 +1,7 @@
 //! The time step (paper Fig. 5, without collisions) and its parallel driver.
 
 use crate::guide::Guide;
-use crate::mesh_contact::{MeshContactSettings, RodMeshContact};
+use crate::mesh_contact::{MeshContactSettings, Motion, RodMeshContact};
 use crate::reaction::Reactions;
 use crate::soa::{self, SoaParams, SoaState};
 use cosserat_constraints::{
@@ -342,11 +342,14 @@ pub(crate) struct BatchConsts<T> {
 impl<T: Real> BatchConsts<T> {
     pub(crate) fn new(rod: &CpuRod<T>, settings: &SolverSettings<T>) -> Self {
         let limit = settings.divergence_strain;
+        // A limit of 1 or more bounds compression by nothing (a length cannot go below zero):
+        // squared unclamped, it would declare every rod diverged.
+        let lo = (T::one() - limit).max(T::zero());
         Self {
             bend_damping: rod.params.bend_damping.iter().any(|&c| c > T::zero()),
             stretch_damping: settings.extensible
                 && rod.params.stretch_damping.iter().any(|&c| c > T::zero()),
-            lo2: (T::one() - limit) * (T::one() - limit),
+            lo2: lo * lo,
             hi2: (T::one() + limit) * (T::one() + limit),
         }
     }
@@ -421,7 +424,15 @@ pub(crate) fn before_constraints<T: Real>(
         guide.constrain(w);
     }
     if let Some(mesh) = rod.mesh.as_mut() {
-        mesh.detect(&w.r.x, &w.r.y, &w.r.z, rod.params.radius.to_f64());
+        // Swept along the step's predicted motion: a wall the point would cross beyond its
+        // sphere's reach becomes a speculative contact.
+        mesh.detect(
+            &w.r.x,
+            &w.r.y,
+            &w.r.z,
+            rod.params.radius.to_f64(),
+            Motion::Velocity([&w.v.x, &w.v.y, &w.v.z], h.to_f64()),
+        );
     }
 }
 

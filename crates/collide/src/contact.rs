@@ -221,11 +221,11 @@ const PLANE_REJECT: f64 = 1.0 + 1e-9;
 
 /// Per-triangle data in leaf order, so a leaf's triangles are contiguous in memory.
 #[derive(Clone, Copy, Debug)]
-struct TriData {
-    a: Vector3<f64>,
-    b: Vector3<f64>,
-    c: Vector3<f64>,
-    n: Vector3<f64>,
+pub(crate) struct TriData {
+    pub(crate) a: Vector3<f64>,
+    pub(crate) b: Vector3<f64>,
+    pub(crate) c: Vector3<f64>,
+    pub(crate) n: Vector3<f64>,
 }
 
 impl TriData {
@@ -264,7 +264,7 @@ pub struct MeshCollider {
     bvh: Bvh,
     /// Far-field data for inside/outside queries ([`MeshCollider::lumen_winding`]).
     winding: crate::winding::WindingNumber,
-    tris: Vec<TriData>,
+    pub(crate) tris: Vec<TriData>,
     /// Angle-weighted vertex pseudo-normals (by mesh vertex).
     vertex_normals: Vec<Vector3<f64>>,
     /// Edge pseudo-normals, 3 per triangle in leaf order (edge k = corner k → k+1).

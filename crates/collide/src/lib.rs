@@ -13,6 +13,10 @@
 //! * [`contact`]: the sphere–triangle narrow phase ([`MeshCollider`]), the paper's per-point
 //!   response (penetration-weighted mean of the face normals), escape detection, and a batch API
 //!   with reusable buffers ([`ContactBuffer`]).
+//! * [`port`]: entry ports ([`open_port`]): where along an entry's axis a wire reaches the
+//!   lumen, and a hole opened in a closed wall for it to pass.
+//! * [`sweep`]: swept point tests ([`MeshCollider::first_crossing`]): the wall a point crossed
+//!   on its way from one place to another, however far it moved.
 //! * [`rods`]: rod–rod and self-collision with bounding spheres over runs of points (the paper's
 //!   Fig. 6) and a segment–segment narrow phase ([`RodCollider`]).
 //! * [`vessel`]: a deterministic procedural vessel tree (~26 000 triangles by default, like the
@@ -41,8 +45,10 @@ pub mod contact;
 pub mod gpu;
 pub mod io;
 pub mod mesh;
+pub mod port;
 pub mod repair;
 pub mod rods;
+pub mod sweep;
 pub mod vessel;
 pub mod winding;
 
@@ -51,7 +57,9 @@ pub use contact::{Contact, ContactBuffer, MeshCollider, Nearest, PointResponse};
 pub use gpu::{GpuMesh, GpuTriangle};
 pub use io::{load_mesh, load_obj, load_stl, parse_obj, parse_stl};
 pub use mesh::{MeshError, MeshReport, TriMesh};
+pub use port::{Port, PortError, open_port};
 pub use repair::OrientationRepair;
 pub use rods::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
+pub use sweep::Crossing;
 pub use vessel::{Vessel, VesselParams};
 pub use winding::WindingNumber;

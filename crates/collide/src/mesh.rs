@@ -105,6 +105,15 @@ pub enum MeshError {
         /// 0-based index (in the input) of a triangle using the edge.
         triangle: usize,
     },
+    /// The entry port could not be placed (its radius is not a length, or opening the wall left
+    /// no valid mesh).
+    #[error("{path}: entry port: {message}")]
+    Port {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
     /// The mesh has more vertices or triangles than fit the `u32` indices of the flat arrays.
     #[error("{path}: too many elements ({count}) for 32-bit indices")]
     TooLarge {

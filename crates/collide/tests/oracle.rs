@@ -11,7 +11,7 @@ use cosserat_collide::vessel::{VesselParams, generate};
 use cosserat_collide::{Bvh, ContactBuffer, MeshCollider, TriMesh};
 use parry3d_f64::bounding_volume::Aabb;
 use parry3d_f64::math::Vector as PV;
-use parry3d_f64::query::PointQuery;
+use parry3d_f64::query::{PointQuery, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh as PMesh, TriMeshFlags};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
@@ -211,5 +211,45 @@ proptest! {
             }
         }
         prop_assert!(inside > 0 && outside > 0, "both sides must be exercised: {} {}", inside, outside);
+    }
+}
+
+proptest! {
+    #![proptest_config(config(12))]
+
+    /// Swept tests: the first wall a segment meets is where parry's ray cast, limited to the
+    /// segment, meets it; and a segment from the lumen crosses into the wall exactly when parry
+    /// finds its end outside the closed vessel.
+    #[test]
+    fn segment_crossings_match_parry_ray_casts(seed in any::<u64>()) {
+        let params = VesselParams { target_triangles: 3000, ..VesselParams::default() };
+        let v = generate(&params).expect("vessel");
+        let c = MeshCollider::new(v.mesh.clone());
+        let pm = to_parry(&v.mesh, TriMeshFlags::empty());
+        let mut rng = StdRng::seed_from_u64(seed);
+        let (mut hits, mut misses) = (0, 0);
+        for _ in 0..60 {
+            let (p, lr) = v.trunk.sample(rng.random_range(0.05..0.95));
+            let a = nalgebra::Vector3::from(p);
+            let dir = nalgebra::Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let b = a + dir * lr * rng.random_range(0.2..3.0);
+            let ours = c.first_intersection(&a.into(), &b.into());
+            let ray = Ray::new(PV::new(a.x, a.y, a.z), PV::new(b.x - a.x, b.y - a.y, b.z - a.z));
+            let theirs = pm.cast_local_ray(&ray, 1.0, false);
+            match (ours, theirs) {
+                (Some(o), Some(t)) => {
+                    prop_assert!((o.fraction - t).abs() < 1e-9, "fraction {} vs parry {}", o.fraction, t);
+                    hits += 1;
+                }
+                (None, None) => misses += 1,
+                (o, t) => prop_assert!(false, "ours {:?}, parry {:?} for {:?} → {:?}", o, t, a, b),
+            }
+            // From the trunk's centreline the first wall met is entered from the lumen side.
+            if let Some(o) = ours {
+                let into = c.first_crossing(&a.into(), &b.into()).expect("a crossing into the wall");
+                prop_assert_eq!(into.triangle, o.triangle);
+            }
+        }
+        prop_assert!(hits > 0 && misses > 0, "both cases must be exercised: {} {}", hits, misses);
     }
 }

@@ -7,7 +7,8 @@
 use cosserat_backend_cpu::MeshContactSettings;
 use cosserat_collide::vessel::Centreline;
 use cosserat_collide::{
-    MeshCollider, MeshError, MeshReport, OrientationRepair, TriMesh, Vessel, VesselParams,
+    MeshCollider, MeshError, MeshReport, OrientationRepair, Port, PortError, TriMesh, Vessel,
+    VesselParams, open_port,
 };
 use cosserat_constraints::Friction;
 use std::path::Path;
@@ -22,7 +23,27 @@ pub struct VesselGeometry {
     pub entry_direction: [f64; 3],
     /// The trunk's centreline (known for generated vessels only).
     pub trunk: Option<Centreline>,
+    /// Where along the entry's axis the wire reaches the lumen, and the hole opened for it in a
+    /// closed wall (`cosserat_collide::port`); `None` when the axis never reaches the lumen
+    /// ([`Environment::entry_problem`] says so).
+    pub port: Option<Port>,
 }
+
+/// Where a wire enters a mesh file's lumen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Entry {
+    /// The entry point [m].
+    pub point: [f64; 3],
+    /// The direction into the lumen (any length).
+    pub direction: [f64; 3],
+    /// The port's radius [m]; `None` takes the opening's radius where the axis enters through
+    /// an open end, half the lumen's where it must pass a wall.
+    pub radius: Option<f64>,
+}
+
+/// An entry whose axis reaches the lumen farther than this from the entry point gets a warning
+/// [m]: the wire travels that far outside any wall.
+const FAR_ENTRY: f64 = 0.02;
 
 /// A static mesh with friction.
 #[derive(Clone, Debug)]
@@ -38,6 +59,8 @@ pub struct Environment {
     /// What loading and repairing the mesh found that a user should know (dropped or welded
     /// triangles, flipped patches, loose fragments); the simulation reports them as warnings.
     pub intake: Vec<String>,
+    /// A warning about the entry, if any ([`Self::entry_problem`]).
+    entry_note: Option<String>,
     /// Whether a run stops as diverged when a rod's point is found outside the lumen
     /// ([`Environment::outside`]); checked after every call to `Simulation::run`.
     pub stop_outside: bool,
@@ -45,8 +68,12 @@ pub struct Environment {
 
 impl Environment {
     fn with_mesh(mesh: TriMesh, vessel: Option<VesselGeometry>) -> Self {
+        Self::with_collider(MeshCollider::new(mesh), vessel)
+    }
+
+    fn with_collider(collider: MeshCollider, vessel: Option<VesselGeometry>) -> Self {
         Self {
-            collider: Arc::new(MeshCollider::new(mesh)),
+            collider: Arc::new(collider),
             friction: Friction {
                 static_coefficient: 0.1,
                 kinetic_coefficient: 0.08,
@@ -54,7 +81,60 @@ impl Environment {
             margin: 1e-4,
             vessel,
             intake: Vec::new(),
+            entry_note: None,
             stop_outside: true,
+        }
+    }
+
+    /// `mesh` entered at `entry` through a port (`cosserat_collide::port`): the wall is opened
+    /// where the entry's axis must pass it. An axis that never reaches the lumen keeps the mesh
+    /// whole and leaves a warning ([`Self::entry_problem`]).
+    fn with_entry(
+        mesh: TriMesh,
+        entry: Entry,
+        trunk: Option<Centreline>,
+    ) -> Result<Self, MeshError> {
+        let name = mesh.name().to_string();
+        let direction: [f64; 3] = nalgebra::Vector3::from(entry.direction).normalize().into();
+        let geometry = |port| VesselGeometry {
+            entry_point: entry.point,
+            entry_direction: direction,
+            trunk: trunk.clone(),
+            port,
+        };
+        match open_port(mesh.clone(), entry.point, direction, entry.radius) {
+            Ok((collider, port)) => {
+                let mut env = Self::with_collider(collider, Some(geometry(Some(port))));
+                if port.opened > 0 {
+                    env.intake.push(format!(
+                        "{name}: the entry port opened {} triangles of the wall within {:.3e} m of the entry's axis, {:.3e} m past the entry point, for the wire to pass",
+                        port.opened, port.radius, port.crossing
+                    ));
+                }
+                if port.crossing > FAR_ENTRY {
+                    env.entry_note = Some(format!(
+                        "the entry point {:?} is {:.3e} m from where its axis reaches the lumen: the wire travels that far along the direction {:?} outside any wall before it enters (check the entry's point and the mesh's scale)",
+                        entry.point, port.crossing, direction
+                    ));
+                }
+                Ok(env)
+            }
+            Err(PortError::NoLumen {
+                reach,
+                nearest_wall,
+            }) => {
+                let mut env = Self::with_mesh(mesh, Some(geometry(None)));
+                env.entry_note = Some(format!(
+                    "the entry point {:?} does not lead into the lumen: its axis along {:?} reaches no lumen within {reach:.3e} m, and the nearest wall is {nearest_wall:.3e} m from it; a wire pushed in there stays outside (check the entry's point, direction and the mesh's scale)",
+                    entry.point, direction
+                ));
+                Ok(env)
+            }
+            Err(PortError::Mesh(e)) => Err(e),
+            Err(e @ PortError::BadRadius(_)) => Err(MeshError::Port {
+                path: name,
+                message: e.to_string(),
+            }),
         }
     }
 
@@ -68,36 +148,31 @@ impl Environment {
     }
 
     /// A procedural vessel tree of any shape (`cosserat_collide::vessel::VesselParams`: trunk
-    /// length, radii, bow, branches).
+    /// length, radii, bow, branches), entered at its inlet through a port of the inlet's radius.
     pub fn vessel_with(params: &VesselParams) -> Result<Self, MeshError> {
         let v: Vessel = cosserat_collide::vessel::generate(params)?;
-        let geometry = VesselGeometry {
-            entry_point: v.entry_point,
-            entry_direction: v.entry_direction,
-            trunk: Some(v.trunk.clone()),
+        let entry = Entry {
+            point: v.entry_point,
+            direction: v.entry_direction,
+            radius: Some(v.trunk.sample(0.0).1),
         };
-        Ok(Self::with_mesh(v.mesh, Some(geometry)))
+        Self::with_entry(v.mesh, entry, Some(v.trunk.clone()))
     }
 
     /// A mesh file (OBJ or STL) with coordinates multiplied by `scale` (0.001 for millimetres),
     /// oriented so that its normals point into the enclosed lumen.
     ///
     /// `entry`, if given, is where and in which direction a wire enters the lumen (for
-    /// insertion scenes).
-    pub fn from_file(
-        path: &Path,
-        scale: f64,
-        entry: Option<([f64; 3], [f64; 3])>,
-    ) -> Result<Self, MeshError> {
+    /// insertion scenes), in metres; a closed mesh is opened there (see [`Entry`]).
+    pub fn from_file(path: &Path, scale: f64, entry: Option<Entry>) -> Result<Self, MeshError> {
         let (mut mesh, report) = cosserat_collide::load_mesh(path, scale)?;
         let repair = mesh.repair_orientation();
-        let vessel = entry.map(|(point, dir)| VesselGeometry {
-            entry_point: point,
-            entry_direction: nalgebra::Vector3::from(dir).normalize().into(),
-            trunk: None,
-        });
-        let mut env = Self::with_mesh(mesh, vessel);
-        env.intake = intake_notes(&path.display().to_string(), &report, &repair);
+        let notes = intake_notes(&path.display().to_string(), &report, &repair);
+        let mut env = match entry {
+            Some(entry) => Self::with_entry(mesh, entry, None)?,
+            None => Self::with_mesh(mesh, None),
+        };
+        env.intake.splice(0..0, notes);
         Ok(env)
     }
 
@@ -151,12 +226,17 @@ impl Environment {
     /// the rim of an open end: it left through the opening. `radius` is the rod's: a point's
     /// depth is its distance behind the wall plus its radius (the penetration of its sphere).
     pub fn outside(&self, points: &[[f64; 3]], radius: f64) -> Outside {
+        // A point not yet past the entry, or in the port's channel before the lumen, is on its
+        // way in.
         let inserted = |p: &[f64; 3]| {
-            self.vessel.as_ref().is_none_or(|v| {
-                (0..3)
-                    .map(|k| (p[k] - v.entry_point[k]) * v.entry_direction[k])
-                    .sum::<f64>()
-                    > 0.0
+            self.vessel.as_ref().is_none_or(|v| match &v.port {
+                Some(port) => !port.holds(p),
+                None => {
+                    (0..3)
+                        .map(|k| (p[k] - v.entry_point[k]) * v.entry_direction[k])
+                        .sum::<f64>()
+                        > 0.0
+                }
             })
         };
         let (lo, hi) = self.collider.mesh().bounds();
@@ -185,29 +265,14 @@ impl Environment {
         out
     }
 
-    /// Whether the entry (where a wire is pushed in) leads into the lumen: a millimetre past it
-    /// along the entry direction must be inside. `None` when it does, or when there is no entry
-    /// or no lumen to be inside (a sheet); otherwise a sentence saying where the entry is and how
-    /// far the nearest wall is.
+    /// A warning about the entry (where a wire is pushed in), if it deserves one: its axis
+    /// never reaches the lumen, or reaches it far ([`FAR_ENTRY`]) from the entry point. `None`
+    /// for a good entry, and when there is no entry or no lumen to enter (a sheet).
     pub fn entry_problem(&self) -> Option<String> {
-        let v = self.vessel.as_ref()?;
         if !self.collider.encloses_volume() {
             return None;
         }
-        let past: [f64; 3] =
-            std::array::from_fn(|k| v.entry_point[k] + 1e-3 * v.entry_direction[k]);
-        if self.collider.lumen_winding(&past) >= 0.5 {
-            return None;
-        }
-        let (lo, hi) = self.collider.mesh().bounds();
-        let wall = self
-            .collider
-            .nearest(&v.entry_point, 2.0 * (hi - lo).norm() + 1.0)
-            .map_or(f64::NAN, |n| n.distance);
-        Some(format!(
-            "the entry point {:?} does not lead into the lumen: 1 mm past it along the entry direction {:?} is outside the vessel, and the nearest wall is {wall:.3e} m from it; a wire pushed in there starts outside (check the entry's point, direction and the mesh's scale)",
-            v.entry_point, v.entry_direction
-        ))
+        self.entry_note.clone()
     }
 }
 

@@ -20,6 +20,7 @@
 //! ```
 
 pub mod convergence;
+pub mod energy_watch;
 pub mod environment;
 pub mod output;
 pub mod report;
@@ -32,7 +33,7 @@ pub use cosserat_backend_cpu::{
 pub use cosserat_collide;
 pub use cosserat_constraints;
 pub use cosserat_model::{self, Material};
-pub use environment::Environment;
+pub use environment::{Entry, Environment};
 pub use sim::{
     Backend, BuildError, Capabilities, Capability, ContactReport, ContactSample, ControlError,
     RodBuilder, RodContactSpec, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot,

@@ -8,7 +8,7 @@
 //! Values can be overridden from the command line before checking (`--set rod.0.elements=1000`),
 //! which is how one scene file serves several resolutions.
 
-use crate::environment::Environment;
+use crate::environment::{Entry, Environment};
 use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
 use cosserat_backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
 use cosserat_model::Material;
@@ -171,6 +171,10 @@ pub struct EntrySection {
     pub point: [f64; 3],
     /// The direction into the lumen.
     pub direction: [f64; 3],
+    /// The entry port's radius (file units): the channel in which a wire on its way in is not
+    /// outside the lumen, and the hole opened in a closed wall. Default: the opening's radius
+    /// where the axis enters through an open end, half the lumen's where it passes a wall.
+    pub radius: Option<f64>,
 }
 
 /// `environment.friction`.
@@ -214,6 +218,9 @@ pub struct SolverSection {
     /// Refuse a time step beyond the estimated stable step of the explicit scheme (default
     /// true).
     pub check_stability: bool,
+    /// Stop a run whose total energy grows beyond the work its loads and driven ends could
+    /// have done (default true; `cosserat::energy_watch`).
+    pub energy_check: bool,
     /// `"explicit"` (the paper's scheme, default) or `"stiff"` (implicit bending and twisting:
     /// stable at haptic time steps for real instruments; `docs/stiff-solver.md`).
     pub scheme: String,
@@ -266,6 +273,7 @@ impl Default for SolverSection {
             divergence_speed: 1e3,
             constraint_solver: "iterative".into(),
             check_stability: true,
+            energy_check: true,
             scheme: "explicit".into(),
             stiff: None,
         }
@@ -628,6 +636,7 @@ impl Checker<'_> {
             .divergence_strain(divergence_strain)
             .divergence_speed(self.positive("solver.divergence_speed", s.divergence_speed)?)
             .check_stability(s.check_stability)
+            .energy_check(s.energy_check)
             .direct_constraints(match s.constraint_solver.as_str() {
                 "iterative" => false,
                 "direct" => true,
@@ -845,7 +854,17 @@ impl Checker<'_> {
                                 "expected a non-zero vector",
                             ));
                         }
-                        Some(([p[0] * scale, p[1] * scale, p[2] * scale], d))
+                        let radius = match e.radius {
+                            None => None,
+                            Some(r) => {
+                                Some(self.positive("environment.mesh.entry.radius", r)? * scale)
+                            }
+                        };
+                        Some(Entry {
+                            point: [p[0] * scale, p[1] * scale, p[2] * scale],
+                            direction: d,
+                            radius,
+                        })
                     }
                 };
                 let full = self

@@ -5,6 +5,7 @@
 //! read results. It picks the precision (`f32` or `f64`) and the backend at run time, so a
 //! scene file or a command-line flag can choose them.
 
+use crate::energy_watch::EnergyWatch;
 use crate::environment::{Environment, Outside};
 pub use cosserat_backend_cpu::{BindingSpec, RodContactSpec};
 use cosserat_backend_cpu::{CpuRod, CpuStepper, Guide};
@@ -291,6 +292,8 @@ pub struct SimulationBuilder {
     reaction_cutoff_hz: Option<f64>,
     /// The largest force at a held end, as a multiple of the rod's `E A`.
     reaction_limit: f64,
+    /// Whether a run whose energy grows beyond the work done on it stops as diverged.
+    energy_check: bool,
 }
 
 impl Default for SimulationBuilder {
@@ -316,6 +319,7 @@ impl SimulationBuilder {
             check_stability: true,
             direct_constraints: false,
             reaction_limit: 1000.0,
+            energy_check: true,
         }
     }
 
@@ -326,6 +330,14 @@ impl SimulationBuilder {
     /// reactions of 1e20 N seen in real anatomy).
     pub fn reaction_limit(mut self, multiple_of_ea: f64) -> Self {
         self.reaction_limit = multiple_of_ea;
+        self
+    }
+
+    /// Whether a run of the explicit scheme whose total energy grows beyond the work its loads
+    /// and driven ends could have done stops as diverged (default: yes; `crate::energy_watch`
+    /// says how it is checked, every 64 steps, and why the stiff scheme is not).
+    pub fn energy_check(mut self, yes: bool) -> Self {
+        self.energy_check = yes;
         self
     }
 
@@ -600,6 +612,31 @@ impl SimulationBuilder {
             warnings,
             scratch: Vec::new(),
             collides: self.rods.iter().map(|r| r.collides).collect(),
+            loads: self.rods.iter().map(|r| r.loads.clone()).collect(),
+            // The stiff scheme is not watched (`crate::energy_watch` says why).
+            energy: EnergyWatch::new(
+                self.energy_check && self.stiff.is_none(),
+                self.rods
+                    .iter()
+                    .map(|r| {
+                        let length: f64 = r
+                            .points
+                            .windows(2)
+                            .map(|w| {
+                                (0..3)
+                                    .map(|k| (w[1][k] - w[0][k]).powi(2))
+                                    .sum::<f64>()
+                                    .sqrt()
+                            })
+                            .sum();
+                        let m = &r.spec.material;
+                        (
+                            m.density * std::f64::consts::PI * m.radius * m.radius * length,
+                            length,
+                        )
+                    })
+                    .collect(),
+            ),
             outside: (0, 0.0),
         })
     }
@@ -813,6 +850,10 @@ pub struct Simulation {
     /// Most points found outside the lumen after any call to [`Simulation::run`], and the
     /// deepest of them [m].
     outside: (usize, f64),
+    /// Per rod, its point loads (for the energy watch's bound on their work).
+    loads: Vec<Vec<(usize, [f64; 3])>>,
+    /// Energy that grows beyond the work done on the rods ([`crate::energy_watch`]).
+    energy: EnergyWatch,
 }
 
 /// Contact measurements of a whole simulation.
@@ -852,7 +893,53 @@ impl Simulation {
         self.stepper
             .check_speed(self.divergence_speed)
             .map_err(StepError::Diverged)?;
-        self.check_reactions()
+        self.check_reactions()?;
+        self.check_energy()
+    }
+
+    /// The energy watch ([`crate::energy_watch`]) after a call to `run`: records the reactions,
+    /// and every 64 steps compares the energy's growth with the work done. Blames the fastest
+    /// point, where the energy went.
+    fn check_energy(&mut self) -> Result<(), StepError> {
+        if !self.energy.enabled {
+            return Ok(());
+        }
+        self.energy.record_reactions(self.stepper.as_ref());
+        let steps = self.steps();
+        let time = self.time();
+        let Err(growth) = self
+            .energy
+            .check(self.stepper.as_ref(), steps, time, &self.loads)
+        else {
+            return Ok(());
+        };
+        let (mut rod, mut element, mut fastest) = (0, 0, -1.0);
+        for r in 0..self.stepper.rod_count() {
+            let n = self.stepper.elements(r).unwrap_or(0);
+            self.scratch.resize(n + 1, [0.0; 3]);
+            if self
+                .stepper
+                .read(r, StateField::Velocities, &mut self.scratch)
+                .is_err()
+            {
+                continue;
+            }
+            for (i, v) in self.scratch.iter().enumerate() {
+                let speed = v.iter().map(|x| x * x).sum::<f64>();
+                if speed > fastest {
+                    (rod, element, fastest) = (r, i, speed);
+                }
+            }
+        }
+        Err(StepError::Diverged(cosserat_problem::Divergence {
+            rod,
+            element,
+            step: steps,
+            quantity: cosserat_problem::DivergedQuantity::EnergyGrowth(
+                growth.growth,
+                growth.allowed,
+            ),
+        }))
     }
 
     /// The force at every held end against its rod's bound (a multiple of `E A`): a reaction of
@@ -967,7 +1054,13 @@ impl Simulation {
         end: usize,
         condition: EndCondition<f64>,
     ) -> Result<(), ControlError> {
-        self.stepper.set_end_condition(h.0, end, condition)
+        let before = self.stepper.end_condition(h.0, end)?.kind;
+        self.stepper.set_end_condition(h.0, end, condition)?;
+        // Holding or releasing an end changes what does work on the rod: watch anew.
+        if condition.kind != before {
+            self.energy.reset();
+        }
+        Ok(())
     }
 
     /// Drives a held end at a constant velocity [m/s] and angular velocity [rad/s] (world frame)
@@ -1062,8 +1155,7 @@ impl Simulation {
         end: usize,
         kind: EndKind,
     ) -> Result<(), ControlError> {
-        self.stepper
-            .set_end_condition(h.0, end, EndCondition { kind, motion: None })
+        self.set_end_condition(h, end, EndCondition { kind, motion: None })
     }
 
     /// Replaces the point loads of a rod: `(point, force [N])` pairs; an empty slice removes
@@ -1073,14 +1165,18 @@ impl Simulation {
         h: RodHandle,
         loads: &[(usize, [f64; 3])],
     ) -> Result<(), ControlError> {
-        let loads: Vec<PointLoad<f64>> = loads
+        let new: Vec<PointLoad<f64>> = loads
             .iter()
             .map(|&(point, f)| PointLoad {
                 point,
                 force: f.into(),
             })
             .collect();
-        self.stepper.set_loads(h.0, &loads)
+        self.stepper.set_loads(h.0, &new)?;
+        if let Some(l) = self.loads.get_mut(h.0) {
+            *l = loads.to_vec();
+        }
+        Ok(())
     }
 
     /// Copies a field of a rod's state into `out` (length [`StateField::len`] of its element
@@ -1106,12 +1202,16 @@ impl Simulation {
         field: StateField,
         values: &[[f64; 3]],
     ) -> Result<(), ControlError> {
-        self.stepper.write(h.0, field, values)
+        self.stepper.write(h.0, field, values)?;
+        self.energy.reset();
+        Ok(())
     }
 
     /// Overwrites a rod's frames (`[w, x, y, z]`).
     pub fn write_frames(&mut self, h: RodHandle, values: &[[f64; 4]]) -> Result<(), ControlError> {
-        self.stepper.write_frames(h.0, values)
+        self.stepper.write_frames(h.0, values)?;
+        self.energy.reset();
+        Ok(())
     }
 
     /// Replaces `out` with a rod's contacts at the last step.
@@ -1132,6 +1232,7 @@ impl Simulation {
     /// that followed the snapshot.
     pub fn restore(&mut self, snapshot: &SimulationSnapshot) -> Result<(), ControlError> {
         self.stepper.restore(&snapshot.inner)?;
+        self.energy.reset();
         self.max_strain = snapshot.max_strain;
         self.outside = snapshot.outside;
         Ok(())

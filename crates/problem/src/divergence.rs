@@ -22,6 +22,9 @@ pub enum DivergedQuantity {
     /// The force at a held end [N] is beyond the bound given second [N] (a multiple of the rod's
     /// `E A`, `SimulationBuilder::reaction_limit` in the facade).
     Reaction(f64, f64),
+    /// The total energy grew by the first amount [J], beyond the second: what the loads and
+    /// driven ends could have done, plus the schemes' wander (`cosserat::energy_watch`).
+    EnergyGrowth(f64, f64),
 }
 
 /// A rod that diverged: which one, where, when, and what.
@@ -53,6 +56,9 @@ impl std::fmt::Display for Divergence {
             }
             DivergedQuantity::Reaction(force, bound) => format!(
                 "the force at the held end, {force:.3e} N, is beyond the bound of {bound:.3e} N (a multiple of the rod's E A)"
+            ),
+            DivergedQuantity::EnergyGrowth(growth, allowed) => format!(
+                "the total energy grew by {growth:.3e} J, beyond the {allowed:.3e} J that the loads and driven ends could have put in (set solver.energy_check = false to go on)"
             ),
             DivergedQuantity::OutsideLumen(depth) => format!(
                 "the point is outside the lumen, {depth:.3e} m behind the wall (set environment.stop_outside = false to go on)"

@@ -39,6 +39,10 @@ pub struct CollisionStats {
     /// Stiff scheme: point queries between the iterations of a step answered from the point's
     /// last query instead of the mesh ([`StiffSettings::reuse_contact_queries`](crate::StiffSettings::reuse_contact_queries)).
     pub reused_queries: u64,
+    /// Points whose motion over a step crossed into the wall beyond the reach of their sphere
+    /// query, caught by the swept test and put back on the wall they crossed (counted per
+    /// detection).
+    pub swept_catches: u64,
 }
 
 /// Measurements of the coupling since the start.

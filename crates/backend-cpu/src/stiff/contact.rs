@@ -45,7 +45,7 @@ use super::lanes::V3s;
 use super::pin::Pinned;
 use super::work::Work;
 use crate::guide::Guide;
-use crate::mesh_contact::{CollisionStats, MeshContactSettings, RodMeshContact};
+use crate::mesh_contact::{CollisionStats, MeshContactSettings, Motion, RodMeshContact};
 use cosserat_constraints::{Friction, PointContact};
 use cosserat_model::Vec3;
 
@@ -113,8 +113,11 @@ pub(crate) struct StiffContacts {
     cached: Vec<Option<(Vec3<f64>, f64)>>,
     queried_at: Vec<Vec3<f64>>,
     skip: Vec<bool>,
-    /// Largest penetration of the last detection after a solve.
+    /// Largest penetration, and number of points whose centre is behind the wall, that the
+    /// last detection after a solve left in place (it puts the others on the wall): what the
+    /// accepted step ends with.
     depth_after_solve: f64,
+    behind_after_solve: usize,
     /// The wall's force on each point it held in the last accepted step: point, unit normal
     /// into the lumen, force [N] (normal and friction).
     forces: Vec<(usize, Vec3<f64>, Vec3<f64>)>,
@@ -135,6 +138,7 @@ impl StiffContacts {
             queried_at: Vec::new(),
             skip: Vec::new(),
             depth_after_solve: 0.0,
+            behind_after_solve: 0,
             forces: Vec::new(),
             stats: CollisionStats::default(),
         }
@@ -213,12 +217,15 @@ impl StiffContacts {
                         && (w.x.get(i) - self.queried_at[i]).norm() < reach
                 });
         }
+        // Swept from where the step began (in the lumen): a point the solve moved across a
+        // wall, beyond its sphere's reach, is caught where it crossed.
         self.mesh.detect_except(
             &w.x.x[..m],
             &w.x.y[..m],
             &w.x.z[..m],
             self.radius,
             &self.skip,
+            Motion::From([&w.x_old.x[..m], &w.x_old.y[..m], &w.x_old.z[..m]]),
         );
         for i in (0..m).filter(|&i| !self.skip[i]) {
             self.cached[i] = None;
@@ -427,15 +434,24 @@ impl StiffContacts {
         let tol = self.tolerance();
         self.found.clear();
         self.found.resize(w.n + 1, false);
+        // The penetrations of free and wall-pinned points left where they are (the others are
+        // put on the wall): what the step ends with if this is its last detection.
         let mut deepest = 0.0_f64;
+        let mut behind = 0;
+        let radius = self.radius;
+        let mut left = |gap: f64| {
+            deepest = deepest.max(-gap);
+            behind += usize::from(gap < -radius);
+        };
         let touching = std::mem::take(&mut self.mesh.contacts);
         for c in touching.contacts() {
             let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
             self.found[i] = true;
+            // Held points (the hand) and guided ones (in the guide, outside the body) are
+            // where their holders put them: not the wall's to answer for.
             if k.inv_mass[i] == 0.0 {
                 continue;
             }
-            deepest = deepest.max(-gap);
             let s = self.slot[i];
             if s != usize::MAX {
                 if w.pinned[s].line {
@@ -446,10 +462,14 @@ impl StiffContacts {
                     w.x.set(i, &(x - normal * gap));
                     w.pinned[s].normal = normal;
                     changed = true;
+                } else {
+                    left(gap);
                 }
             } else if gap < -tol {
                 self.pin(w, i, normal, gap, false);
                 changed = true;
+            } else {
+                left(gap);
             }
         }
         self.mesh.contacts = touching;
@@ -462,6 +482,7 @@ impl StiffContacts {
             changed = true;
         }
         self.depth_after_solve = deepest;
+        self.behind_after_solve = behind;
         changed
     }
 
@@ -481,7 +502,8 @@ impl StiffContacts {
         s.contacts = w.pinned.iter().filter(|p| !p.line).count();
         s.max_contacts = s.max_contacts.max(s.contacts);
         s.steps += 1;
-        s.escaped_points = self.mesh.stats.escaped_points;
+        s.escaped_points = s.escaped_points.max(self.behind_after_solve);
+        s.swept_catches = self.mesh.stats.swept_catches;
         s.detection_seconds = self.mesh.stats.detection_seconds;
     }
 }
