@@ -163,7 +163,8 @@ impl EnergyWatch {
         });
         let n = stepper.elements(rod).unwrap_or(0);
         let mut marks = RodMarks::default();
-        if n == 0 {
+        // A free rod without loads has nothing to mark: no reads.
+        if n == 0 || (held == [false; 2] && loads.is_empty()) {
             return marks;
         }
         self.points.resize(n + 1, [0.0; 3]);
@@ -193,8 +194,8 @@ impl EnergyWatch {
         marks
     }
 
-    /// Checks if `steps` has reached the next check. `loads[rod]` are the point loads. `Err` when the energy grew beyond what the work
-    /// explains.
+    /// Checks if `steps` has reached the next check. `loads[rod]` are the point loads. `Err`
+    /// when the energy grew beyond what the work explains.
     pub(crate) fn check(
         &mut self,
         stepper: &dyn Stepper,
