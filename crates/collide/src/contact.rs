@@ -385,7 +385,7 @@ impl MeshCollider {
     }
 
     /// The pseudo-normal of `feature` of the triangle in leaf-order slot `slot`.
-    fn pseudo_normal(&self, slot: usize, feature: Feature) -> Vector3<f64> {
+    pub(crate) fn pseudo_normal(&self, slot: usize, feature: Feature) -> Vector3<f64> {
         match feature {
             Feature::Face => self.tris[slot].n,
             Feature::Edge(k) => self.edge_normals[slot][k as usize],

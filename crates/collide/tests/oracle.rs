@@ -10,8 +10,10 @@ use std::collections::BTreeMap;
 use cosserat_collide::vessel::{VesselParams, generate};
 use cosserat_collide::{Bvh, ContactBuffer, MeshCollider, TriMesh};
 use parry3d_f64::bounding_volume::Aabb;
+use parry3d_f64::math::Pose;
 use parry3d_f64::math::Vector as PV;
-use parry3d_f64::query::{PointQuery, Ray, RayCast};
+use parry3d_f64::query::{PointQuery, Ray, RayCast, distance};
+use parry3d_f64::shape::Segment;
 use parry3d_f64::shape::{TriMesh as PMesh, TriMeshFlags};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
@@ -251,5 +253,51 @@ proptest! {
             }
         }
         prop_assert!(hits > 0 && misses > 0, "both cases must be exercised: {} {}", hits, misses);
+    }
+}
+
+proptest! {
+    #![proptest_config(config(8))]
+
+    /// The nearest triangle to a rod element and its distance, against parry3d-f64's
+    /// segment–triangle distance taken over every triangle of the vessel: elements from the
+    /// trunk's centreline in random directions, some clear of the wall, some near it, some
+    /// through it.
+    #[test]
+    fn segment_distances_match_parry(seed in any::<u64>()) {
+        let params = VesselParams { target_triangles: 2000, ..VesselParams::default() };
+        let v = generate(&params).expect("vessel");
+        let c = MeshCollider::new(v.mesh.clone());
+        let pm = to_parry(&v.mesh, TriMeshFlags::empty());
+        let mut rng = StdRng::seed_from_u64(seed);
+        let (mut found, mut none) = (0, 0);
+        for _ in 0..40 {
+            let (p, lr) = v.trunk.sample(rng.random_range(0.05..0.95));
+            let a = nalgebra::Vector3::from(p)
+                + nalgebra::Vector3::new(rng.random_range(-0.8..0.8), rng.random_range(-0.8..0.8), rng.random_range(-0.8..0.8)) * lr;
+            let dir = nalgebra::Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let b = a + dir * lr * rng.random_range(0.1..1.5);
+            let reach = 0.3 * lr;
+            let seg = Segment::new(PV::new(a.x, a.y, a.z), PV::new(b.x, b.y, b.z));
+            let pose = Pose::IDENTITY;
+            let theirs = (0..pm.num_triangles() as u32)
+                .map(|t| distance(&pose, &seg, &pose, &pm.triangle(t)).unwrap().distance)
+                .fold(f64::INFINITY, f64::min);
+            match c.segment_nearest(&a.into(), &b.into(), reach) {
+                Some(n) => {
+                    prop_assert!((n.signed_distance.abs() - theirs).abs() < 1e-9 * lr, "ours {} parry {}", n.signed_distance, theirs);
+                    // The reported point on the segment is that far from the reported point of the wall.
+                    let at = a + (b - a) * n.fraction;
+                    let d = (at - nalgebra::Vector3::from(n.closest)).norm();
+                    prop_assert!((d - theirs).abs() < 1e-9 * lr, "{} vs {}", d, theirs);
+                    found += 1;
+                }
+                None => {
+                    prop_assert!(theirs >= reach * (1.0 - 1e-9), "parry finds {} within {}", theirs, reach);
+                    none += 1;
+                }
+            }
+        }
+        prop_assert!(found > 0 && none > 0, "both cases must be exercised: {} {}", found, none);
     }
 }

@@ -311,9 +311,11 @@ pub(super) fn pin_on_lines(w: &mut Work, k: &Consts, lines: &[LinePin]) {
             point: i,
             normal: line.direction,
             stick: false,
+            crease: None,
             line: true,
             push: Vec3::zeros(),
             pn: 0.0,
+            came_loose: false,
         });
     }
 }

@@ -21,13 +21,20 @@
 //!    else sliding, with the kinetic friction of their last normal impulse;
 //! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
 //!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
-//!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step);
+//!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step). A
+//!    pinned point that slid into a second wall turned towards the lumen (every edge of a
+//!    faceted vessel, seen from inside) is put on both and slides along their crease
+//!    ([`back_on_walls`]): put back on the second wall alone, it slid into the first again at
+//!    the next iteration, a new factorisation each time (the phantom's steel wire took 41
+//!    iterations and 36 factorisations a step, most steps unconverged). One that slid off a wall
+//!    turned away stays on its plane, in the lumen;
 //! 3. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` is read: a
 //!    point the wall would have to pull (`n·g ≤ 0`) is released; a sticking point that needs
 //!    more than `μ_s n·g` of tangential impulse starts sliding (and so does every sticking
 //!    point of a solve that did not converge: an inextensible wire pushed against sticking
-//!    points may have no solution); a sliding point sticks when static friction could have held
-//!    it where the step began and it is not still slipping against its kinetic friction, and
+//!    points may have no solution), and slides for the rest of the step (allowed to stick
+//!    again, points stuck and slipped in turn at every round); a sliding point sticks when
+//!    static friction could have held it where the step began and it is not still slipping against its kinetic friction, and
 //!    otherwise carries the kinetic friction `μ_k n·g` against its slip as a shift of its
 //!    inertial target `x̃`. A point that sticks after slipping more than [`STICK_JUMP`] of an
 //!    element sticks where it is rather than where the step began;
@@ -52,9 +59,12 @@ use cosserat_model::Vec3;
 /// Largest number of re-solves per step after the active set changed.
 pub(crate) const MAX_ROUNDS: usize = 4;
 
-/// Penetration (and separation of a pinned point) tolerated without a change of the active set,
-/// as a fraction of the rod's radius.
-const DEPTH_TOLERANCE: f64 = 1e-3;
+/// Penetration tolerated without a change of the active set, as a fraction of the rod's radius
+/// (and the gap within which a point at the solve's starting guess touches). At 1e-3 the
+/// phantom's wires were put back on facets after most iterations, each time a new
+/// factorisation; at 2e-2 (9 µm for the `steel` preset) the torture suite's stiff steps cost
+/// 35–70 % less in the phantom (`docs/benchmarks/torture.md`).
+const DEPTH_TOLERANCE: f64 = 2e-2;
 
 /// How far a touching point may move between two detections of one step before it is queried
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
@@ -66,6 +76,16 @@ const REUSE_DISTANCE: f64 = 0.5;
 /// strains its two elements by that fraction, and from such a start the solve of a stiff chain
 /// pressed on the wall did not converge (`docs/stiff-solver.md`, "Sticking without a jump").
 const STICK_JUMP: f64 = 1e-3;
+
+/// The largest turn [rad] of a pinned point's wall normal that keeps the step's factorisation:
+/// a chord iteration with the old normal's projection still converges, and one that does not
+/// refactorises (`direct_solve`).
+const NORMAL_TURN: f64 = 0.1;
+
+/// Two walls meet in a crease a point slides along when the cosine of the angle between their
+/// normals is at most this in magnitude: nearer to parallel (or to facing each other), the
+/// crease is far from the point (a point moved onto both walls moves `|gap| / sin θ`).
+const CREASE_COS: f64 = 0.95;
 
 /// The shorter rest length of the elements that point `i` ends.
 fn shortest_element(k: &Consts, i: usize) -> f64 {
@@ -208,8 +228,8 @@ impl StiffContacts {
                 && self.cached[i].is_some_and(|(_, gap)| {
                     let held = k.inv_mass[i] == 0.0;
                     let stays = match self.slot[i] {
-                        usize::MAX => gap - reach >= -tol,
-                        s => w.pinned[s].line || gap.abs() + reach <= tol,
+                        s if s != usize::MAX && w.pinned[s].line => true,
+                        _ => gap - reach >= -tol,
                     };
                     gap + reach < margin
                         && gap - reach > -self.radius
@@ -315,9 +335,11 @@ impl StiffContacts {
             point: i,
             normal,
             stick,
+            crease: None,
             line: false,
             push: Vec3::zeros(),
             pn: 0.0,
+            came_loose: false,
         });
     }
 
@@ -347,7 +369,27 @@ impl StiffContacts {
             let mass = 1.0 / k.inv_mass[i];
             let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
             let g = pin_impulse(w, k, &w.lambda[0], i);
-            let pn = p.normal.dot(&g);
+            let mut pn = p.normal.dot(&g);
+            if let Some(m) = p.crease {
+                // The impulses of the two walls, `g = a n + b m + (along the crease)`.
+                let (gm, c) = (m.dot(&g), p.normal.dot(&m));
+                let det = 1.0 - c * c;
+                let (a, b) = ((pn - c * gm) / det, (gm - c * pn) / det);
+                if a > 0.0 && b > 0.0 {
+                    pn = a + b;
+                } else if a > 0.0 || b > 0.0 {
+                    // One wall would have to pull: the point slides on the other.
+                    if b > 0.0 {
+                        p.normal = m;
+                    }
+                    p.crease = None;
+                    pn = a.max(b);
+                    stick_changed = true;
+                    changed = true;
+                } else {
+                    pn = 0.0;
+                }
+            }
             p.pn = pn;
             if !(pn > 0.0) {
                 // The wall would have to pull: let go.
@@ -359,20 +401,20 @@ impl StiffContacts {
                 continue;
             }
             if p.stick {
-                let gt = g - p.normal * pn;
+                let gt = p.sliding_part(&g);
                 let need = gt.norm();
                 // A solve that did not converge with sticking points may have no solution
                 // with them all sticking (an inextensible wire pushed against them): they slide.
                 if need > mu_s * pn || (!converged && need > 0.0) {
                     p.stick = false;
+                    p.came_loose = true;
                     p.push = gt * (mu_k * pn / (need * mass));
                     w.x_pred.set(i, &(x_pred + p.push));
                     stick_changed = true;
                     changed = true;
                 }
             } else {
-                let d = x - w.x_old.get(i);
-                let slip = d - p.normal * p.normal.dot(&d);
+                let slip = p.sliding_part(&(x - w.x_old.get(i)));
                 // The tangential impulse that would have held the point where it was at the
                 // current multipliers: its own momentum and its neighbours' push, but not how
                 // much harder they would push if it were held.
@@ -382,7 +424,7 @@ impl StiffContacts {
                 // every point's net push is its kinetic friction; holding one makes its
                 // neighbours push harder, so the test above alone would lock the chain.
                 let driven = p.push != Vec3::zeros() && slip.dot(&p.push) < 0.0;
-                if mu_s > 0.0 && hold <= mu_s * pn && !driven {
+                if mu_s > 0.0 && hold <= mu_s * pn && !driven && !p.came_loose {
                     // Static friction can hold it, and kinetic friction has stopped it or turned
                     // it around (or acts on it for the first time). A point that barely slipped
                     // sticks where the step began and the step is solved again; one that slipped
@@ -392,8 +434,7 @@ impl StiffContacts {
                     p.stick = true;
                     stick_changed = true;
                     if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
-                        let from = w.x_old.get(i);
-                        w.x.set(i, &(from - p.normal * p.normal.dot(&(from - x))));
+                        w.x.set(i, &(x + p.sliding_part(&(w.x_old.get(i) - x))));
                         changed = true;
                     }
                 } else if mu_k > 0.0 && slip.norm() > 0.0 {
@@ -414,10 +455,10 @@ impl StiffContacts {
         }
         let caught = self.catch_penetrations(w, k, reuse);
         Update {
-            resolve: caught || changed,
-            // Only the kinetic friction's shift of the inertial targets leaves the matrix as it
-            // was.
-            matrix_changed: released || stick_changed || caught,
+            resolve: caught.resolve || changed,
+            // Only the kinetic friction's shift of the inertial targets, and points put back
+            // on a wall whose normal barely turned, leave the matrix as it was.
+            matrix_changed: released || stick_changed || caught.matrix_changed,
         }
     }
 
@@ -426,8 +467,9 @@ impl StiffContacts {
     /// detection no longer sees. Returns whether anything changed. Run after every iteration
     /// of the solve, so that an iterate never travels far into a wall before the rest of the
     /// rod learns of it. `reuse` as in [`detect`](Self::detect).
-    pub(crate) fn catch_penetrations(&mut self, w: &mut Work, k: &Consts, reuse: bool) -> bool {
+    pub(crate) fn catch_penetrations(&mut self, w: &mut Work, k: &Consts, reuse: bool) -> Update {
         let mut changed = false;
+        let mut matrix_changed = false;
         // Points the solve pushed into the mesh, and pinned points that left their plane (a
         // curved wall).
         self.detect(w, k, reuse);
@@ -457,17 +499,19 @@ impl StiffContacts {
                 if w.pinned[s].line {
                     continue;
                 }
-                if gap.abs() > tol {
-                    let x = w.x.get(i);
-                    w.x.set(i, &(x - normal * gap));
-                    w.pinned[s].normal = normal;
+                if gap < -tol {
+                    matrix_changed |= back_on_walls(w, s, normal, gap);
                     changed = true;
                 } else {
+                    // On the wall, or off a wall that turns away from its plane: the plane
+                    // keeps it in the lumen, and the update lets it go if the plane would
+                    // have to pull it.
                     left(gap);
                 }
             } else if gap < -tol {
                 self.pin(w, i, normal, gap, false);
                 changed = true;
+                matrix_changed = true;
             } else {
                 left(gap);
             }
@@ -480,10 +524,14 @@ impl StiffContacts {
         if w.pinned.len() != before {
             self.reindex(w);
             changed = true;
+            matrix_changed = true;
         }
         self.depth_after_solve = deepest;
         self.behind_after_solve = behind;
-        changed
+        Update {
+            resolve: changed,
+            matrix_changed,
+        }
     }
 
     /// Records how each point touches at the end of an accepted step, for the next step and
@@ -508,6 +556,60 @@ impl StiffContacts {
     }
 }
 
+/// Puts pinned point `w.pinned[s]`, found `gap < 0` behind the wall of normal `normal`, back
+/// on it. Slid into a wall that turns towards the lumen (a crease of the mesh, or a curved
+/// wall), the point would slide into the first wall again if only moved out of the second: it
+/// is moved onto both (out along `normal`, staying on the plane of the wall it slid on) and
+/// slides along their crease from then on. A wall barely turned from the one it slides on
+/// (within [`NORMAL_TURN`]) replaces it; a third wall makes a crease with the first. Returns
+/// whether the matrix of the solve changed (the factorisation is kept for a turn within
+/// `NORMAL_TURN`: the iterations refactorise if they stall).
+fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64) -> bool {
+    let parallel = NORMAL_TURN.cos();
+    let p = &mut w.pinned[s];
+    let x = w.x.get(p.point);
+    let near = |a: &Vec3<f64>| a.dot(&normal) >= parallel;
+    // The wall the point stays on while it is moved out of the new one, and whether the
+    // matrix changed.
+    let (stay, turned) = match p.crease {
+        Some(m) if near(&m) => {
+            p.crease = Some(normal);
+            (Some(p.normal), false)
+        }
+        Some(m) if near(&p.normal) => {
+            p.normal = normal;
+            (Some(m), false)
+        }
+        None if near(&p.normal) => {
+            p.normal = normal;
+            (None, false)
+        }
+        // A new wall: the crease of the wall the point slides on with it, unless the two are
+        // too close to parallel (or face each other) for their crease to be near the point.
+        _ if p.normal.dot(&normal).abs() <= CREASE_COS => {
+            p.crease = Some(normal);
+            (Some(p.normal), true)
+        }
+        _ => {
+            p.normal = normal;
+            p.crease = None;
+            (None, true)
+        }
+    };
+    // `y = x + α k + β n` with `k·(y − x) = 0` (on the wall it stays on) and
+    // `n·(y − x) = −gap` (out of the new one).
+    let moved = match stay {
+        Some(k) if 1.0 - k.dot(&normal).powi(2) > 1e-6 => {
+            let c = k.dot(&normal);
+            let beta = -gap / (1.0 - c * c);
+            normal * beta - k * (c * beta)
+        }
+        _ => -normal * gap,
+    };
+    w.x.set(p.point, &(x + moved));
+    turned
+}
+
 /// Pins the run of points a guide holds (from index 1 on, the first point being held by the
 /// hand; see [`crate::guide`]) to its axis for the step's solve, starting from the solve's
 /// starting guess: each is put on the axis and may move only along it. Replaces every pin of
@@ -528,9 +630,11 @@ pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
             point: i,
             normal: axis,
             stick: false,
+            crease: None,
             line: true,
             push: Vec3::zeros(),
             pn: 0.0,
+            came_loose: false,
         });
     }
 }

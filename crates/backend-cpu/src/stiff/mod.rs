@@ -1199,9 +1199,10 @@ fn direct_solve(
         factor.solve(&mut w.rhs);
         w.apply(k);
         used += 1;
-        pins_changed = contacts
-            .as_deref_mut()
-            .is_some_and(|c| c.catch_penetrations(w, k, stiff.reuse_contact_queries));
+        pins_changed = contacts.as_deref_mut().is_some_and(|c| {
+            c.catch_penetrations(w, k, stiff.reuse_contact_queries)
+                .matrix_changed
+        });
     }
     (residual, used)
 }

@@ -1,5 +1,5 @@
-//! A point pinned for one step's solve: to a wall's tangent plane, held still, or held on a
-//! line. The description is shared by the solve (`work.rs`, which projects the point's inverse
+//! A point pinned for one step's solve: to a wall's tangent plane, to the crease of two walls,
+//! held still, or held on a line. The description is shared by the solve (`work.rs`, which projects the point's inverse
 //! mass), by the contacts that decide it (`contact.rs`) and by the bindings (`binding.rs`); it
 //! lives apart from all three so that none of them imports another for it.
 
@@ -14,6 +14,11 @@ pub(crate) struct Pinned {
     pub(crate) normal: Vec3<f64>,
     /// Sticking (no motion), or sliding in the tangent plane.
     pub(crate) stick: bool,
+    /// The normal of a second wall it touches (a crease of the mesh, where the two walls meet
+    /// at an angle towards the lumen): sliding, it moves only along the crease,
+    /// `normal × crease`. On a faceted vessel a point pinned to one face slides into the next
+    /// at every edge, and put back on that one slides into the first again.
+    pub(crate) crease: Option<Vec3<f64>>,
     /// Held on a line along `normal` (a guide, [`pin_guided`](super::contact::pin_guided)) instead of a plane across it;
     /// the contact updates leave such points alone.
     pub(crate) line: bool,
@@ -23,4 +28,39 @@ pub(crate) struct Pinned {
     /// Its normal impulse times the step, `p_n = n · g` [kg m], at the last update (from the
     /// last step before the first).
     pub(crate) pn: f64,
+    /// It stuck earlier in this step and static friction could not hold it: it slides for
+    /// the rest of the step (an active set that lets a point stick and slip in turn within
+    /// one step need not settle).
+    pub(crate) came_loose: bool,
+}
+
+impl Pinned {
+    /// The direction of the crease a sliding point moves along, if it is in one.
+    pub(crate) fn crease_direction(&self) -> Option<Vec3<f64>> {
+        let along = self.normal.cross(&self.crease?);
+        let norm = along.norm();
+        (norm > 0.0).then(|| along / norm)
+    }
+
+    /// The part of a motion `v` the pin allows: none when sticking, else its
+    /// [`sliding_part`](Self::sliding_part).
+    pub(crate) fn allowed(&self, v: &Vec3<f64>) -> Vec3<f64> {
+        if self.stick {
+            Vec3::zeros()
+        } else {
+            self.sliding_part(v)
+        }
+    }
+
+    /// The part of `v` along which the point slides, sticking or not: along the line (guide)
+    /// or the crease, or in the wall's tangent plane.
+    pub(crate) fn sliding_part(&self, v: &Vec3<f64>) -> Vec3<f64> {
+        if self.line {
+            self.normal * self.normal.dot(v)
+        } else if let Some(t) = self.crease_direction() {
+            t * t.dot(v)
+        } else {
+            v - self.normal * self.normal.dot(v)
+        }
+    }
 }

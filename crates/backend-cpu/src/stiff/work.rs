@@ -541,14 +541,7 @@ impl Work {
     /// point keeps only the component in its contact's tangent plane, a sticking one none.
     fn project_pinned(&mut self) {
         for p in &self.pinned {
-            let u = self.u_x.get(p.point);
-            let u = if p.stick {
-                Vec3::zeros()
-            } else if p.line {
-                p.normal * p.normal.dot(&u)
-            } else {
-                u - p.normal * p.normal.dot(&u)
-            };
+            let u = p.allowed(&self.u_x.get(p.point));
             self.u_x.set(p.point, &u);
         }
     }
@@ -591,6 +584,9 @@ impl Work {
                 &axes
             } else if p.line {
                 across = perpendiculars(&p.normal);
+                &across
+            } else if let Some(t) = p.crease_direction() {
+                across = perpendiculars(&t);
                 &across
             } else {
                 std::slice::from_ref(&p.normal)
@@ -1147,9 +1143,11 @@ mod tests {
             point,
             normal,
             stick,
+            crease: None,
             line,
             push: Vec3::zeros(),
             pn: 0.0,
+            came_loose: false,
         };
         // On a line, sliding neighbours, sticking inside and at the free end.
         w.pinned = vec![
