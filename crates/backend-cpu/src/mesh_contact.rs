@@ -16,6 +16,15 @@
 //! distance to the box as clearance, so a rod far from the mesh costs one squared distance per
 //! point and step (a loop the compiler vectorises).
 //!
+//! **Ridges between points.** A wall that bulges into the lumen between two points (the ridge
+//! of a bifurcation, a fold) can reach into the element joining them while both spheres are
+//! clear of it. Every element near the mesh (its points' clearances adding up to less than its
+//! length) is tested as a segment ([`MeshCollider::segment_nearest`]); where it is nearer a
+//! wall than both its points, its two points get a contact on the plane through the wall's
+//! nearest point, across the direction from the wall to the element, at the element's gap: the
+//! element is kept off the ridge as if the ridge were that plane, in both schemes, with the
+//! point contacts they already solve.
+//!
 //! **Near lists.** A point close to a wall (most of a wire pressed along a vessel) is queried
 //! every step, and a tree walk from the root visits every leaf box near it. Instead, such a point
 //! keeps the list of triangles within `reach + skin` of where the list was made
@@ -54,6 +63,15 @@ const NEAR_SKIN: f64 = 0.5;
 /// have crossed, which its sphere query then sees.
 const SWEEP_FRACTION: f64 = 0.5;
 
+/// An element's nearest point to the wall is a ridge between its points only this far (as a
+/// fraction of the element) from both: nearer an end, that end's sphere query has the wall.
+const SEGMENT_END: f64 = 1e-6;
+
+/// An element's gap must be smaller than both its points' own by this fraction of the radius
+/// to give them its contact: along a flat or concave wall the element is never nearer the wall
+/// than its points, and rounding must not make it so.
+const SEGMENT_TOLERANCE: f64 = 0.02;
+
 /// How the points move over the step, for the swept test (see the module docs).
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Motion<'a, T> {
@@ -85,6 +103,9 @@ pub(crate) struct RodMeshContact<T: Real> {
     found: Vec<Contact>,
     /// Scratch: the points whose motion crossed into the wall, and where.
     swept: Vec<(u32, Crossing)>,
+    /// Scratch: elements nearest a wall between their points: element, the direction from the
+    /// wall, the wall's nearest point and the element's gap.
+    ridge: Vec<(u32, Vec3<f64>, Vec3<f64>, f64)>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -106,6 +127,7 @@ impl<T: Real> RodMeshContact<T> {
             has_near: Vec::new(),
             found: Vec::new(),
             swept: Vec::new(),
+            ridge: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
@@ -116,10 +138,13 @@ impl<T: Real> RodMeshContact<T> {
     /// docs).
     pub(crate) fn detect(&mut self, x: &[T], y: &[T], z: &[T], radius: f64, motion: Motion<T>) {
         self.detect_except(x, y, z, radius, &[], motion);
+        self.segment_contacts(x, y, z, radius);
     }
 
-    /// [`detect`](Self::detect), leaving out the points `i` with `skip[i]` (those past the end
-    /// of `skip` are detected): they are not queried and get no contact.
+    /// [`detect`](Self::detect) without the elements' contacts ([`Self::segment_contacts`],
+    /// which the caller adds once the points' contacts are complete), leaving out the points
+    /// `i` with `skip[i]` (those past the end of `skip` are detected): they are not queried and
+    /// get no contact.
     pub(crate) fn detect_except(
         &mut self,
         x: &[T],
@@ -252,6 +277,96 @@ impl<T: Real> RodMeshContact<T> {
 }
 
 impl<T: Real> RodMeshContact<T> {
+    /// Adds the contacts of elements that come nearer a wall between their points than at
+    /// them (see the module docs): each such element's two points get a contact on the plane
+    /// through the wall's nearest point across the direction from it to the element, at the
+    /// distance the element has from it, unless their own contact is nearer. Elements whose
+    /// points' clearances add up to the element's length or more cannot reach the mesh and
+    /// are not queried.
+    pub(crate) fn segment_contacts(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
+        let n = x.len().min(y.len()).min(z.len()).min(self.clear2.len());
+        if n < 2 {
+            return;
+        }
+        let reach = radius + self.settings.margin;
+        let at = |i: usize| Vec3::new(x[i].to_f64(), y[i].to_f64(), z[i].to_f64());
+        // The least distance beyond `reach` of point `i` from the mesh (0 when unknown).
+        let clearance = |i: usize| {
+            if self.clear2[i] > 0.0 {
+                let [cx, cy, cz] = &self.clear_at;
+                let moved = (at(i) - Vec3::new(cx[i], cy[i], cz[i])).norm();
+                (self.clear2[i].sqrt() - moved).max(0.0)
+            } else {
+                0.0
+            }
+        };
+        self.ridge.clear();
+        for j in 0..n - 1 {
+            let (a, b) = (at(j), at(j + 1));
+            if clearance(j) + clearance(j + 1) >= (b - a).norm() {
+                continue;
+            }
+            let Some(near) = self
+                .settings
+                .collider
+                .segment_nearest(&a.into(), &b.into(), reach)
+            else {
+                continue;
+            };
+            if !(SEGMENT_END..=1.0 - SEGMENT_END).contains(&near.fraction) {
+                continue;
+            }
+            let normal = Vec3::from(near.normal);
+            let on_wall = Vec3::from(near.closest);
+            self.ridge
+                .push((j as u32, normal, on_wall, near.signed_distance - radius));
+        }
+        if self.ridge.is_empty() {
+            return;
+        }
+        let mut all: Vec<PointContact<T>> = self.contacts.contacts().collect();
+        let gap_of = |all: &[PointContact<T>], i: u32| {
+            all.iter()
+                .find(|c| c.point == i)
+                .map_or(self.settings.margin, |c| c.gap.to_f64())
+        };
+        let mut added = 0;
+        for &(j, normal, on_wall, gap) in &self.ridge {
+            let ends = [j, j + 1];
+            // Nearer than both points' own contacts: a ridge between them.
+            let own = ends.map(|i| gap_of(&all, i));
+            if !(gap < own[0].min(own[1]) - SEGMENT_TOLERANCE * radius) {
+                continue;
+            }
+            added += 1;
+            self.stats.max_penetration = self.stats.max_penetration.max(-gap);
+            for (&i, own) in ends.iter().zip(own) {
+                let end_gap = normal.dot(&(at(i as usize) - on_wall)) - radius;
+                if end_gap >= own {
+                    continue;
+                }
+                let c = PointContact {
+                    point: i,
+                    normal: Vec3::new(T::lit(normal.x), T::lit(normal.y), T::lit(normal.z)),
+                    gap: T::lit(end_gap),
+                };
+                match all.iter_mut().find(|c| c.point == i) {
+                    Some(old) => *old = c,
+                    None => all.push(c),
+                }
+            }
+        }
+        if added > 0 {
+            self.stats.segment_contacts += added;
+            self.contacts.clear();
+            for c in all {
+                self.contacts.push(c);
+            }
+            self.stats.contacts = self.contacts.len();
+            self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
+        }
+    }
+
     /// Fills `swept` with the points (not skipped) whose motion over the step crosses into the
     /// wall: those that move more than [`SWEEP_FRACTION`] of `reach`, segment by segment
     /// against the tree ([`MeshCollider::first_crossing`]). A point that moves less costs one

@@ -393,3 +393,25 @@ fn a_rod_in_an_inclined_v_groove_stays_out_of_both_walls() {
         );
     }
 }
+
+/// The explicit scheme's ridge test (`contact.rs`) at dt 1 ms: the element lands on the ridge
+/// under its middle and never takes it into its capsule by more than 2 % of the radius.
+#[test]
+fn an_element_lands_on_a_ridge_between_its_points_at_a_millisecond() {
+    let nitinol = preset("nitinol").unwrap().material();
+    for material in [soft(2e-3), nitinol] {
+        let r = material.radius;
+        let mut rod =
+            support::rod_over_a_ridge(material, 2e-3).with_mesh(contact(support::roof(), 0.5, 0.4));
+        let s = settings(1e-3, Vec3::new(0.0, 0.0, -9.81));
+        let mut sc = StiffScratch::new();
+        let mut deepest = f64::NEG_INFINITY;
+        for step in 0..200 {
+            run(&mut rod, &s, &mut sc, step as f64 * 1e-3, 1);
+            deepest = deepest.max(support::into_the_roof(&rod));
+        }
+        let stats = rod.collision_stats().unwrap();
+        assert!(stats.segment_contacts > 0, "r = {r}: {stats:?}");
+        assert!(deepest <= 0.02 * r, "r = {r}: {deepest} m into the roof");
+    }
+}

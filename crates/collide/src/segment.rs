@@ -142,16 +142,16 @@ mod tests {
     use super::*;
     use crate::mesh::TriMesh;
 
-    /// A roof ridge along y at z = 0: two faces falling away from it at 45° on either side,
-    /// normals up (into the lumen above).
+    /// A roof ridge along y at z = 0: two faces falling away from it at a slope of ½ on either
+    /// side, normals up (into the lumen above).
     fn ridge() -> MeshCollider {
         let v = vec![
             [0.0, -1.0, 0.0],
             [0.0, 1.0, 0.0],
-            [1.0, -1.0, -1.0],
-            [1.0, 1.0, -1.0],
-            [-1.0, -1.0, -1.0],
-            [-1.0, 1.0, -1.0],
+            [1.0, -1.0, -0.5],
+            [1.0, 1.0, -0.5],
+            [-1.0, -1.0, -0.5],
+            [-1.0, 1.0, -0.5],
         ];
         let t = vec![[0, 2, 3], [0, 3, 1], [0, 1, 5], [0, 5, 4]];
         let (mesh, _) = TriMesh::new(v, t, "ridge").unwrap();
@@ -169,7 +169,7 @@ mod tests {
         assert!((near.fraction - 0.5).abs() < 1e-12, "{near:?}");
         assert!((near.signed_distance - 0.01).abs() < 1e-12, "{near:?}");
         assert!((Vector3::from(near.normal) - Vector3::z()).norm() < 1e-12);
-        // Each end is 0.5 / √2 ≈ 0.35 from its face: far out of reach.
+        // Each end is 0.26 / √1.25 ≈ 0.23 from its face: far out of reach.
         for end in [[-0.5, 0.2, 0.01], [0.5, 0.2, 0.01]] {
             assert!(c.nearest(&end, 0.05).is_none());
         }

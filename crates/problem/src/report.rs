@@ -43,6 +43,10 @@ pub struct CollisionStats {
     /// query, caught by the swept test and put back on the wall they crossed (counted per
     /// detection).
     pub swept_catches: u64,
+    /// Elements whose segment came nearer a wall between its two points than either point's
+    /// sphere (a ridge or a vertex of the wall between them): each gives its two points a
+    /// contact on the plane across the ridge's normal (counted per detection).
+    pub segment_contacts: u64,
 }
 
 /// Measurements of the coupling since the start.

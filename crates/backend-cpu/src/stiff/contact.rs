@@ -268,6 +268,9 @@ impl StiffContacts {
                 });
             }
         }
+        // Elements nearer a wall than their points, once every point has its contact.
+        self.mesh
+            .segment_contacts(&w.x.x[..m], &w.x.y[..m], &w.x.z[..m], self.radius);
     }
 
     /// Step 1 of the module docs, after the prediction: pins the points touching the mesh at
@@ -552,6 +555,7 @@ impl StiffContacts {
         s.steps += 1;
         s.escaped_points = s.escaped_points.max(self.behind_after_solve);
         s.swept_catches = self.mesh.stats.swept_catches;
+        s.segment_contacts = self.mesh.stats.segment_contacts;
         s.detection_seconds = self.mesh.stats.detection_seconds;
     }
 }

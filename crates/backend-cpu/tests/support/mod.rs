@@ -63,3 +63,63 @@ pub fn wire_pushed_at_a_wall(r: f64) -> CpuRod<f64> {
     )
     .with_mesh(contact(wall, 0.1, 0.1))
 }
+
+/// A roof: a ridge along y at x = z = 0 with faces falling away at 45° on either side to
+/// z = −1, normals upwards.
+pub fn roof() -> Arc<MeshCollider> {
+    let v = vec![
+        [0.0, -1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, -1.0, -1.0],
+        [1.0, 1.0, -1.0],
+        [-1.0, -1.0, -1.0],
+        [-1.0, 1.0, -1.0],
+    ];
+    let (mesh, _) =
+        TriMesh::new(v, vec![[0, 2, 3], [0, 3, 1], [0, 1, 5], [0, 5, 4]], "roof").unwrap();
+    let collider = MeshCollider::new(mesh);
+    assert!(collider.mesh().face_normal(0)[2] > 0.0 && collider.mesh().face_normal(2)[2] > 0.0);
+    Arc::new(collider)
+}
+
+/// Two elements of 0.1 m along x (points at x = −0.15, −0.05, 0.05), radius `r`, `gap` above
+/// the ridge of [`roof`]: the ridge lies under the middle of the second element, where neither
+/// of its points' spheres reaches (each is 3.5 cm from its face).
+pub fn rod_over_a_ridge(material: Material, gap: f64) -> CpuRod<f64> {
+    let r = material.radius;
+    let spec = RodSpec::new(material);
+    let pts: Vec<[f64; 3]> = (0..3)
+        .map(|i| [-0.15 + 0.1 * i as f64, 0.0, r + gap])
+        .collect();
+    let (state, params) = build_rod::<f64>(&pts, &spec).unwrap();
+    CpuRod::new(
+        state,
+        params,
+        [EndCondition::free(), EndCondition::free()],
+        vec![],
+    )
+}
+
+/// How far the rod of [`rod_over_a_ridge`] reaches into the roof, less its radius (positive:
+/// into it): its elements' distances from the ridge and its points' from the faces, in the
+/// xz-plane (the roof does not change along y).
+pub fn into_the_roof(rod: &CpuRod<f64>) -> f64 {
+    let r = rod.params.radius;
+    let p = &rod.state.positions;
+    let mut deepest = f64::NEG_INFINITY;
+    for w in p.windows(2) {
+        let (a, b) = (
+            Vec3::new(w[0].x, 0.0, w[0].z),
+            Vec3::new(w[1].x, 0.0, w[1].z),
+        );
+        let d = b - a;
+        let s = (-a.dot(&d) / d.norm_squared()).clamp(0.0, 1.0);
+        deepest = deepest.max(r - (a + d * s).norm());
+    }
+    for q in p {
+        // The face under the point: z = −|x|, normal (±1, 0, 1)/√2.
+        let above = (q.z + q.x.abs()) / 2.0_f64.sqrt();
+        deepest = deepest.max(r - above);
+    }
+    deepest
+}
