@@ -153,6 +153,7 @@ fn inspect(args: &InspectArgs) -> Result<ExitCode, String> {
             "triangles": triangles,
             "input_triangles": report.input_triangles,
             "degenerate_dropped": report.degenerate_dropped,
+            "short_faces_dropped": report.short_faces_dropped,
             "duplicates_dropped": report.duplicates_dropped,
             "welded_vertices": report.welded_vertices,
             "boundary_edges": report.boundary_edges,
@@ -172,9 +173,10 @@ fn inspect(args: &InspectArgs) -> Result<ExitCode, String> {
     }
     println!("mesh       {name} (scale {})", args.scale);
     println!(
-        "size       {vertices} vertices, {triangles} triangles ({} in the file; {} zero-area and {} duplicate dropped, {} vertices welded)",
+        "size       {vertices} vertices, {triangles} triangles ({} in the file; {} zero-area, {} short and {} duplicate dropped, {} vertices welded)",
         report.input_triangles,
         report.degenerate_dropped,
+        report.short_faces_dropped,
         report.duplicates_dropped,
         report.welded_vertices
     );

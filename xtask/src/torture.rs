@@ -3,18 +3,22 @@
 //! queries), into `docs/benchmarks/torture.md`.
 //!
 //! Vessels: the generated tree; a generated tree with a strong bow and a trunk narrowing to a
-//! third of its inlet (a stenosis-like taper); the vascular phantom of `data/meshes/`; and the
-//! phantom with injected defects (a tenth of its triangles flipped in patches and a loose
-//! fragment), which the mesh intake must repair. Instruments: the soft wire of the insertion
-//! scenes and the `nitinol`, `steel` and `catheter-polymer` presets, with the stiff scheme at the steps the README recommends in a
-//! vessel (1 ms, 0.1 ms, 0.05 ms, 0.1 ms). The hand pushes at 0.2 m/s and twists back and forth
-//! (5 rad/s, 1.5 Hz) through the control API every millisecond, for one second; every 10 ms the
-//! inside test counts the points outside the lumen at any depth. A run that diverges is reported
-//! with where it stopped. The exit status is non-zero when any point was ever outside, or a run
-//! diverged.
+//! third of its inlet (a stenosis-like taper); a generated tree with a stenosis to 40 % of the
+//! radius, a fusiform aneurysm of 1.8× and a branch leaving at 80°; the vascular phantom of
+//! `data/meshes/`; the phantom with injected defects the mesh intake must repair (a tenth of
+//! its triangles flipped in patches and a loose fragment; a seam, zero-area triangles, faces
+//! of two vertices and 32 fragments); the phantom with its ends closed, entered through a
+//! port; and the carotid bifurcation of `data/meshes/`. Instruments: the soft wire of the
+//! insertion scenes and the `nitinol`, `steel` and `catheter-polymer` presets, with the stiff
+//! scheme at the steps the README recommends in a vessel (1 ms, 0.1 ms, 0.05 ms, 0.1 ms). The
+//! hand pushes at 0.2 m/s and twists back and forth (5 rad/s, 1.5 Hz) through the control API
+//! every millisecond, for one second (0.35 s in the carotid, whose branches are shorter); after
+//! every millisecond the inside test counts the points outside the lumen at any depth. A run
+//! that diverges is reported with where it stopped. The exit status is non-zero when any point
+//! was ever outside, or a run diverged.
 
 use crate::bench::{conditions, machine, root};
-use cosserat::cosserat_collide::VesselParams;
+use cosserat::cosserat_collide::{Bulge, VesselParams};
 use cosserat::scene::load_scene;
 use cosserat::{Environment, RodHandle, StateField};
 use std::fmt::Write as _;
@@ -29,6 +33,8 @@ struct Vessel {
     set: Vec<(String, String)>,
     /// A generated tree that replaces the scene's environment.
     tree: Option<VesselParams>,
+    /// How long the hand pushes [s]: up to the vessel's length at 0.2 m/s.
+    seconds: f64,
 }
 
 /// One instrument: a material at its recommended step.
@@ -78,6 +84,8 @@ struct Outcome {
     factorisations: f64,
     contacts: usize,
     us_per_step: f64,
+    /// Of which in the contact queries.
+    detection_us_per_step: f64,
     stopped: Option<String>,
     /// When a point was first found outside: time [s], point and depth [m].
     first_outside: Option<(f64, usize, f64)>,
@@ -131,6 +139,138 @@ fn defective_phantom(dir: &Path) -> Result<PathBuf, String> {
     Ok(path)
 }
 
+/// The boundary loops of `mesh` (its open ends), each as its vertices in order along the
+/// triangles' winding.
+fn openings(mesh: &cosserat::cosserat_collide::TriMesh) -> Vec<Vec<u32>> {
+    let mut count = std::collections::HashMap::new();
+    for t in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    // Boundary edges as they run in their triangle: a → b.
+    let mut next = std::collections::HashMap::new();
+    for t in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if count[&(a.min(b), a.max(b))] == 1 {
+                next.insert(a, b);
+            }
+        }
+    }
+    let mut loops = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut starts: Vec<u32> = next.keys().copied().collect();
+    starts.sort_unstable();
+    for start in starts {
+        let mut ring = Vec::new();
+        let mut v = start;
+        while seen.insert(v) {
+            ring.push(v);
+            match next.get(&v) {
+                Some(&w) => v = w,
+                None => break,
+            }
+        }
+        if ring.len() >= 3 {
+            loops.push(ring);
+        }
+    }
+    loops
+}
+
+/// Writes `vertices` and 0-based `faces` (any number of corners) as an OBJ file.
+fn write_obj(path: &Path, vertices: &[[f64; 3]], faces: &[Vec<u32>]) -> Result<(), String> {
+    let mut text = String::new();
+    for v in vertices {
+        let _ = writeln!(text, "v {} {} {}", v[0], v[1], v[2]);
+    }
+    for f in faces {
+        let corners: Vec<String> = f.iter().map(|i| (i + 1).to_string()).collect();
+        let _ = writeln!(text, "f {}", corners.join(" "));
+    }
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn phantom() -> Result<cosserat::cosserat_collide::TriMesh, String> {
+    cosserat::cosserat_collide::load_mesh(root().join("data/meshes/phantom.obj"), 1.0)
+        .map(|(mesh, _)| mesh)
+        .map_err(|e| e.to_string())
+}
+
+/// The phantom with every open end closed by a fan of triangles from its centre (a vessel
+/// whose ends are rounded shut, as exported anatomy often is), written as an OBJ file; and the
+/// radius of the port the wire enters through: the mean radius of the end at the entry.
+fn closed_phantom(dir: &Path, entry: [f64; 3]) -> Result<(PathBuf, f64), String> {
+    let mesh = phantom()?;
+    let mut vertices: Vec<[f64; 3]> = mesh.vertices().iter().map(|v| [v.x, v.y, v.z]).collect();
+    let mut faces: Vec<Vec<u32>> = mesh.triangles().iter().map(|t| t.to_vec()).collect();
+    let mut port = f64::INFINITY;
+    let mut nearest = f64::INFINITY;
+    for ring in openings(&mesh) {
+        let centre = ring
+            .iter()
+            .map(|&v| mesh.vertices()[v as usize])
+            .sum::<nalgebra::Vector3<f64>>()
+            / ring.len() as f64;
+        let radius = ring
+            .iter()
+            .map(|&v| (mesh.vertices()[v as usize] - centre).norm())
+            .sum::<f64>()
+            / ring.len() as f64;
+        let d = (centre - nalgebra::Vector3::from(entry)).norm();
+        if d < nearest {
+            (nearest, port) = (d, radius);
+        }
+        let c = vertices.len() as u32;
+        vertices.push([centre.x, centre.y, centre.z]);
+        // Each boundary edge a → b runs along its triangle's winding: the cap runs b → a.
+        for k in 0..ring.len() {
+            faces.push(vec![ring[(k + 1) % ring.len()], ring[k], c]);
+        }
+    }
+    let path = dir.join("phantom-closed.obj");
+    write_obj(&path, &vertices, &faces)?;
+    eprintln!("closed phantom: port radius {port:.2} mm at the entry's end");
+    Ok((path, port))
+}
+
+/// The phantom cut in two by a seam (the triangles beyond x = −150 mm use copies of their
+/// vertices, so that the two halves share no vertex, as separately exported parts do), with 36
+/// zero-area triangles, two faces of two vertices and 32 loose fragments (small tetrahedra
+/// outside the vessel), written as an OBJ file.
+fn seamed_phantom(dir: &Path) -> Result<PathBuf, String> {
+    let mesh = phantom()?;
+    let mut vertices: Vec<[f64; 3]> = mesh.vertices().iter().map(|v| [v.x, v.y, v.z]).collect();
+    let copy = vertices.len() as u32;
+    vertices.extend_from_within(..);
+    let mut faces: Vec<Vec<u32>> = Vec::new();
+    for t in mesh.triangles() {
+        let centroid_x: f64 = t.iter().map(|&v| mesh.vertices()[v as usize].x).sum::<f64>() / 3.0;
+        let shift = if centroid_x < -150.0 { copy } else { 0 };
+        faces.push(t.iter().map(|&v| v + shift).collect());
+    }
+    for t in mesh.triangles().iter().step_by(mesh.triangles().len() / 36).take(36) {
+        faces.push(vec![t[0], t[1], t[1]]);
+    }
+    faces.push(vec![0, 1]);
+    faces.push(vec![2, 3]);
+    for k in 0..32 {
+        let base = vertices.len() as u32;
+        let at = [40.0 + 3.0 * k as f64, 80.0, 40.0];
+        for d in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+            vertices.push([at[0] + d[0], at[1] + d[1], at[2] + d[2]]);
+        }
+        for f in [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {
+            faces.push(f.iter().map(|&i| base + i).collect());
+        }
+    }
+    let path = dir.join("phantom-seamed.obj");
+    write_obj(&path, &vertices, &faces)?;
+    Ok(path)
+}
+
 fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> {
     let mut set = vessel.set.clone();
     set.extend([
@@ -177,11 +317,13 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         factorisations: 0.0,
         contacts: 0,
         us_per_step: 0.0,
+        detection_us_per_step: 0.0,
         stopped: None,
         first_outside: None,
     };
     let mut wall = 0.0;
-    for tick in 0..1000 {
+    let ticks = (vessel.seconds / 1e-3).round() as usize;
+    for tick in 0..ticks {
         let t = tick as f64 * 1e-3;
         let twist = 5.0 * (2.0 * std::f64::consts::PI * 1.5 * t).sin();
         sim.set_end_velocity(wire, 0, axis.map(|a| a * 0.2), axis.map(|a| a * twist))
@@ -207,6 +349,7 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
             out.contact_escaped = out.contact_escaped.max(st.escaped_points);
             out.contact_depth = out.contact_depth.max(st.max_penetration);
             out.contacts += st.contacts;
+            out.detection_us_per_step += st.detection_seconds * 1e6 / sim.steps().max(1) as f64;
         }
     }
     if let Some(st) = sim.stiff_summary() {
@@ -223,12 +366,25 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("cosserat-torture-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let defective = defective_phantom(&dir)?;
+    let phantom_entry = [1.0, 0.42, -0.32];
+    let (closed, port) = closed_phantom(&dir, phantom_entry)?;
+    let seamed = seamed_phantom(&dir)?;
+    let mesh_path = |p: &Path| {
+        (
+            "environment.mesh.path".to_string(),
+            format!("\"{}\"", p.display()),
+        )
+    };
+    let deg = std::f64::consts::PI / 180.0;
+    let mut sharp = VesselParams::default();
+    sharp.branches[0].angle = 80.0 * deg;
     let vessels = [
         Vessel {
             label: "generated tree (26k triangles)",
             scene: "scenes/nitinol-guidewire-insertion.toml",
             set: Vec::new(),
             tree: None,
+            seconds: 1.0,
         },
         Vessel {
             label: "generated tree, bowed and narrowing to a third",
@@ -239,27 +395,85 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 trunk_radius_end: 0.0033,
                 ..VesselParams::default()
             }),
+            seconds: 1.0,
+        },
+        Vessel {
+            label: "generated tree, a stenosis to 40 %, an aneurysm of 1.8× and an 80° bifurcation",
+            scene: "scenes/nitinol-guidewire-insertion.toml",
+            set: Vec::new(),
+            tree: Some(VesselParams {
+                bulges: vec![
+                    Bulge {
+                        at: 0.12,
+                        length: 0.03,
+                        factor: 0.4,
+                    },
+                    Bulge {
+                        at: 0.35,
+                        length: 0.04,
+                        factor: 1.8,
+                    },
+                ],
+                ..sharp
+            }),
+            seconds: 1.0,
         },
         Vessel {
             label: "vascular phantom (data/meshes)",
             scene: "scenes/phantom-insertion.toml",
             set: Vec::new(),
             tree: None,
+            seconds: 1.0,
         },
         Vessel {
             label: "phantom with flipped patches and a fragment",
             scene: "scenes/phantom-insertion.toml",
-            set: vec![(
-                "environment.mesh.path".to_string(),
-                format!("\"{}\"", defective.display()),
-            )],
+            set: vec![mesh_path(&defective)],
             tree: None,
+            seconds: 1.0,
+        },
+        Vessel {
+            label: "phantom with a seam, 36 zero-area triangles, 2 two-vertex faces and 32 fragments",
+            scene: "scenes/phantom-insertion.toml",
+            set: vec![mesh_path(&seamed)],
+            tree: None,
+            seconds: 1.0,
+        },
+        Vessel {
+            label: "phantom with its ends closed, entered through a port",
+            scene: "scenes/phantom-insertion.toml",
+            set: vec![
+                mesh_path(&closed),
+                (
+                    "environment.mesh.entry".to_string(),
+                    format!(
+                        "{{ point = [{}, {}, {}], direction = [-1.0, 0.0, 0.0], radius = {port} }}",
+                        phantom_entry[0], phantom_entry[1], phantom_entry[2]
+                    ),
+                ),
+            ],
+            tree: None,
+            seconds: 1.0,
+        },
+        Vessel {
+            label: "carotid bifurcation (data/meshes/carotids.stl)",
+            scene: "scenes/phantom-insertion.toml",
+            set: vec![
+                mesh_path(&root().join("data/meshes/carotids.stl")),
+                (
+                    "environment.mesh.entry".to_string(),
+                    "{ point = [0.55, 0.77, 0.22], direction = [0.0, -1.0, 0.0] }".to_string(),
+                ),
+            ],
+            tree: None,
+            // The common carotid and the internal one are about 85 mm long together.
+            seconds: 0.35,
         },
     ];
     let mut table = String::new();
     let _ = writeln!(
         table,
-        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [mm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [mm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | of which contact queries | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut clean = true;
     for vessel in &vessels {
@@ -273,7 +487,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 Ok(o) => {
                     clean &= o.most_outside == 0 && o.contact_escaped == 0 && o.stopped.is_none();
                     format!(
-                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {} |",
+                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {} |",
                         vessel.label,
                         instrument.label,
                         instrument.dt,
@@ -290,13 +504,14 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                         o.iterations,
                         o.factorisations,
                         o.us_per_step,
+                        o.detection_us_per_step,
                         o.stopped.as_deref().unwrap_or("no")
                     )
                 }
                 Err(e) => {
                     clean = false;
                     format!(
-                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | could not run: {e} |",
+                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
                         vessel.label, instrument.label, instrument.dt
                     )
                 }
@@ -318,7 +533,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
          wall (contact queries)`: the most points the contact queries found behind a wall at \
          the start of a step, and the deepest penetration they saw, within their reach; \
          `first outside`: when, which point and how deep the inside test first found a \
-         point outside; `µs/step`: wall time of the steps alone.\n\n{table}",
+         point outside; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
+         (points, swept points and elements, all iterations).\n\n{table}",
         machine(),
         conditions()
     );

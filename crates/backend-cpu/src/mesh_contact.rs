@@ -284,6 +284,13 @@ impl<T: Real> RodMeshContact<T> {
     /// points' clearances add up to the element's length or more cannot reach the mesh and
     /// are not queried.
     pub(crate) fn segment_contacts(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
+        let t0 = std::time::Instant::now();
+        self.segment_queries(x, y, z, radius);
+        self.stats.detection_seconds += t0.elapsed().as_secs_f64();
+    }
+
+    /// [`Self::segment_contacts`] less its timing.
+    fn segment_queries(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
         let n = x.len().min(y.len()).min(z.len()).min(self.clear2.len());
         if n < 2 {
             return;

@@ -118,6 +118,7 @@ pub fn parse_obj(text: &str, name: &str, scale: f64) -> Result<(TriMesh, MeshRep
     let mut tris: Vec<[i64; 3]> = Vec::new();
     let mut tri_lines: Vec<usize> = Vec::new();
     let mut poly: Vec<i64> = Vec::with_capacity(8);
+    let mut short_faces = 0;
     for (ln0, raw) in text.lines().enumerate() {
         let ln = ln0 + 1;
         let line = raw.split('#').next().unwrap_or("").trim();
@@ -163,11 +164,11 @@ pub fn parse_obj(text: &str, name: &str, scale: f64) -> Result<(TriMesh, MeshRep
                     }
                     poly.push(idx);
                 }
+                // A face of one or two vertices has no area: dropped and reported, as a
+                // zero-area triangle is.
                 if poly.len() < 3 {
-                    return Err(err(
-                        ln,
-                        format!("face has {} vertices, expected at least 3", poly.len()),
-                    ));
+                    short_faces += 1;
+                    continue;
                 }
                 for k in 1..poly.len() - 1 {
                     tris.push([poly[0], poly[k], poly[k + 1]]);
@@ -177,7 +178,9 @@ pub fn parse_obj(text: &str, name: &str, scale: f64) -> Result<(TriMesh, MeshRep
             _ => {}
         }
     }
-    build(verts, &tris, Some((&tri_lines, &vert_lines)), name, 0)
+    let (mesh, mut report) = build(verts, &tris, Some((&tri_lines, &vert_lines)), name, 0)?;
+    report.short_faces_dropped = short_faces;
+    Ok((mesh, report))
 }
 
 /// Parses STL data, binary or ASCII. `name` labels errors (usually the file path).

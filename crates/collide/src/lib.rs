@@ -63,5 +63,5 @@ pub use repair::OrientationRepair;
 pub use rods::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
 pub use segment::SegmentNearest;
 pub use sweep::Crossing;
-pub use vessel::{Vessel, VesselParams};
+pub use vessel::{Bulge, Vessel, VesselParams};
 pub use winding::WindingNumber;

@@ -138,6 +138,8 @@ pub struct MeshReport {
     pub input_triangles: usize,
     /// Triangles dropped because they had zero area (repeated vertex or collinear corners).
     pub degenerate_dropped: usize,
+    /// Faces of the file dropped because they had fewer than three vertices (OBJ).
+    pub short_faces_dropped: usize,
     /// Triangles dropped because another triangle used the same three vertices.
     pub duplicates_dropped: usize,
     /// Vertices merged because they had bit-identical coordinates (STL stores each corner separately).

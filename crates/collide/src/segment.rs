@@ -102,6 +102,7 @@ impl MeshCollider {
         to: &[f64; 3],
         reach: f64,
     ) -> Option<SegmentNearest> {
+        DBG[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let p = Vector3::from(*from);
         let d = Vector3::from(*to) - p;
         let mid = p + d * 0.5;
@@ -109,7 +110,16 @@ impl MeshCollider {
         let reach2 = reach * reach;
         self.bvh()
             .for_each_near(&mid.into(), 0.5 * d.norm() + reach, |slot| {
-                let (d2, s) = segment_triangle_distance2(&p, &d, &self.tris[slot]);
+                DBG[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let t = &self.tris[slot];
+                // Both ends farther than `reach` on one side of the triangle's plane: so is the
+                // whole segment (two multiply–adds before the exact distance).
+                let (h0, h1) = (t.n.dot(&(p - t.a)), t.n.dot(&(p + d - t.a)));
+                if (h0 > reach && h1 > reach) || (h0 < -reach && h1 < -reach) {
+                    return;
+                }
+                DBG[2].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let (d2, s) = segment_triangle_distance2(&p, &d, t);
                 if d2 < reach2 && best.is_none_or(|(b, _, _)| d2 < b) {
                     best = Some((d2, s, slot));
                 }
@@ -197,3 +207,5 @@ mod tests {
         );
     }
 }
+
+pub static DBG: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];

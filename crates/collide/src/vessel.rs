@@ -45,6 +45,32 @@ pub struct BranchParams {
     pub radius_end: f64,
 }
 
+/// A smooth change of the trunk's radius over a stretch of its length: a stenosis (`factor`
+/// below 1) or a fusiform aneurysm (above 1). The radius is multiplied by
+/// `1 + (factor − 1) (1 + cos(2π d / length)) / 2` within `length / 2` of its centre `d = 0`.
+/// Keep a bulge away from the branches' holes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bulge {
+    /// Its centre, as a fraction `0..1` of the trunk length.
+    pub at: f64,
+    /// Its length along the trunk (m).
+    pub length: f64,
+    /// The radius at its centre over the radius without it.
+    pub factor: f64,
+}
+
+impl Bulge {
+    /// The factor on the radius at fraction `u` of a trunk of length `trunk_length`.
+    fn scale(&self, u: f64, trunk_length: f64) -> f64 {
+        let d = (u - self.at) * trunk_length;
+        if d.abs() >= 0.5 * self.length {
+            1.0
+        } else {
+            1.0 + (self.factor - 1.0) * 0.5 * (1.0 + (2.0 * PI * d / self.length).cos())
+        }
+    }
+}
+
 /// Parameters of [`generate`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct VesselParams {
@@ -60,6 +86,8 @@ pub struct VesselParams {
     pub bow: f64,
     /// The branches.
     pub branches: Vec<BranchParams>,
+    /// Stenoses and aneurysms of the trunk.
+    pub bulges: Vec<Bulge>,
 }
 
 impl Default for VesselParams {
@@ -107,6 +135,7 @@ impl Default for VesselParams {
                     radius_end: 0.003,
                 },
             ],
+            bulges: Vec::new(),
         }
     }
 }
@@ -280,7 +309,10 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
         && finite_pos(p.trunk_radius_start)
         && finite_pos(p.trunk_radius_end)
         && p.bow.is_finite()
-        && p.target_triangles >= 100)
+        && p.target_triangles >= 100
+        && p.bulges
+            .iter()
+            .all(|b| b.at > 0.0 && b.at < 1.0 && finite_pos(b.length) && finite_pos(b.factor)))
     {
         return Err(invalid(format!("invalid vessel parameters {p:?}")));
     }
@@ -300,7 +332,12 @@ pub fn generate(p: &VesselParams) -> Result<Vessel, MeshError> {
     let trunk_r: Vec<f64> = (0..ns)
         .map(|i| {
             let u = i as f64 / (ns - 1) as f64;
-            p.trunk_radius_start + (p.trunk_radius_end - p.trunk_radius_start) * u
+            let bulged: f64 = p
+                .bulges
+                .iter()
+                .map(|b| b.scale(u, p.trunk_length))
+                .product();
+            (p.trunk_radius_start + (p.trunk_radius_end - p.trunk_radius_start) * u) * bulged
         })
         .collect();
     let t0 = (trunk_pts[1] - trunk_pts[0]).normalize();

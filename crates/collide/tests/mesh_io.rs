@@ -104,8 +104,12 @@ fn obj_errors_name_file_line_and_value() {
     let e = parse_obj("v 0 0\n", "short.obj", 1.0).unwrap_err();
     assert!(msg(&e).contains("short.obj:1"), "{e}");
 
+    // A face of two vertices is dropped (see below): nothing is left.
     let e = parse_obj("v 0 0 0\nv 1 0 0\nf 1 2\n", "face2.obj", 1.0).unwrap_err();
-    assert!(matches!(e, MeshError::Parse { line: Some(3), .. }), "{e:?}");
+    assert!(
+        matches!(e, MeshError::Empty { .. }) && msg(&e).contains("face2.obj"),
+        "{e:?}"
+    );
 
     let e = parse_obj("# nothing\nv 0 0 0\n", "empty.obj", 1.0).unwrap_err();
     assert!(
@@ -377,4 +381,14 @@ fn a_patch_spans_its_parallelogram_with_normals_along_u_cross_v() {
     // Parallel edges span nothing: an error naming the patch, not a panic.
     let err = TriMesh::patch([0.0; 3], u, u, 3, "flat").unwrap_err();
     assert!(err.to_string().contains("flat"), "{err}");
+}
+
+/// Faces of one or two vertices (found in exported anatomy) are dropped and counted, not an
+/// error: the rest of the mesh loads.
+#[test]
+fn obj_faces_of_fewer_than_three_vertices_are_dropped_and_reported() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2\nf 4\nf 1 2 4\n";
+    let (mesh, report) = parse_obj(text, "short.obj", 1.0).unwrap();
+    assert_eq!(report.short_faces_dropped, 2);
+    assert_eq!(mesh.triangles().len(), 2);
 }

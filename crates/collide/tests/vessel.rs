@@ -194,3 +194,50 @@ fn bad_parameters_are_errors() {
     p.branches[1].azimuth = 0.0;
     assert!(generate(&p).is_err());
 }
+
+/// A stenosis and an aneurysm change the trunk's radius where they are and nowhere else: the
+/// wall's distance from the centreline at their centres is the radius times their factor.
+#[test]
+fn bulges_narrow_and_widen_the_trunk_where_they_are() {
+    use cosserat_collide::{Bulge, MeshCollider};
+    let plain = VesselParams {
+        branches: Vec::new(),
+        bow: 0.0,
+        ..VesselParams::default()
+    };
+    let bulged = VesselParams {
+        bulges: vec![
+            Bulge {
+                at: 0.3,
+                length: 0.04,
+                factor: 0.4,
+            },
+            Bulge {
+                at: 0.7,
+                length: 0.05,
+                factor: 2.0,
+            },
+        ],
+        ..plain.clone()
+    };
+    let (a, b) = (generate(&plain).unwrap(), generate(&bulged).unwrap());
+    let (ca, cb) = (
+        MeshCollider::new(a.mesh.clone()),
+        MeshCollider::new(b.mesh.clone()),
+    );
+    for (u, factor) in [(0.3, 0.4), (0.7, 2.0), (0.5, 1.0), (0.1, 1.0)] {
+        let (p, r) = a.trunk.sample(u);
+        let wall_a = ca.nearest(&p, 1.0).unwrap().distance;
+        let wall_b = cb.nearest(&p, 1.0).unwrap().distance;
+        // The wall is faceted: within a few per cent of the radius.
+        assert!(
+            (wall_a - r).abs() < 0.03 * r,
+            "u = {u}: plain wall at {wall_a}, radius {r}"
+        );
+        assert!(
+            (wall_b - factor * r).abs() < 0.03 * factor * r,
+            "u = {u}: wall at {wall_b}, expected {}",
+            factor * r
+        );
+    }
+}

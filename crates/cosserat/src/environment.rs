@@ -292,6 +292,12 @@ pub struct Outside {
 /// sentences for warnings; empty for a clean mesh.
 pub fn intake_notes(name: &str, report: &MeshReport, repair: &OrientationRepair) -> Vec<String> {
     let mut notes = Vec::new();
+    if report.short_faces_dropped > 0 {
+        notes.push(format!(
+            "{name}: dropped {} faces of fewer than three vertices",
+            report.short_faces_dropped
+        ));
+    }
     if report.degenerate_dropped > 0 || report.duplicates_dropped > 0 {
         notes.push(format!(
             "{name}: dropped {} zero-area and {} duplicate triangles of {}",
