@@ -247,11 +247,20 @@ fn seamed_phantom(dir: &Path) -> Result<PathBuf, String> {
     vertices.extend_from_within(..);
     let mut faces: Vec<Vec<u32>> = Vec::new();
     for t in mesh.triangles() {
-        let centroid_x: f64 = t.iter().map(|&v| mesh.vertices()[v as usize].x).sum::<f64>() / 3.0;
+        let centroid_x: f64 = t
+            .iter()
+            .map(|&v| mesh.vertices()[v as usize].x)
+            .sum::<f64>()
+            / 3.0;
         let shift = if centroid_x < -150.0 { copy } else { 0 };
         faces.push(t.iter().map(|&v| v + shift).collect());
     }
-    for t in mesh.triangles().iter().step_by(mesh.triangles().len() / 36).take(36) {
+    for t in mesh
+        .triangles()
+        .iter()
+        .step_by(mesh.triangles().len() / 36)
+        .take(36)
+    {
         faces.push(vec![t[0], t[1], t[1]]);
     }
     faces.push(vec![0, 1]);
@@ -259,7 +268,12 @@ fn seamed_phantom(dir: &Path) -> Result<PathBuf, String> {
     for k in 0..32 {
         let base = vertices.len() as u32;
         let at = [40.0 + 3.0 * k as f64, 80.0, 40.0];
-        for d in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+        for d in [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ] {
             vertices.push([at[0] + d[0], at[1] + d[1], at[2] + d[2]]);
         }
         for f in [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {

@@ -19,7 +19,9 @@
 //! **Ridges between points.** A wall that bulges into the lumen between two points (the ridge
 //! of a bifurcation, a fold) can reach into the element joining them while both spheres are
 //! clear of it. Every element near the mesh (its points' clearances adding up to less than its
-//! length) is tested as a segment ([`MeshCollider::segment_nearest`]); where it is nearer a
+//! length) is tested as a segment against the ridge triangles near it (where the lumen is not
+//! convex, the only place this can happen: `cosserat_collide::segment`), kept in a near list
+//! as the points' are ([`MeshCollider::segment_near_slots`]); where it is nearer a
 //! wall than both its points, its two points get a contact on the plane through the wall's
 //! nearest point, across the direction from the wall to the element, at the element's gap: the
 //! element is kept off the ridge as if the ridge were that plane, in both schemes, with the
@@ -106,6 +108,12 @@ pub(crate) struct RodMeshContact<T: Real> {
     /// Scratch: elements nearest a wall between their points: element, the direction from the
     /// wall, the wall's nearest point and the element's gap.
     ridge: Vec<(u32, Vec3<f64>, Vec3<f64>, f64)>,
+    /// Per element, the leaf-order slots of the triangles within `reach + skin` of it as it was
+    /// at `seg_anchor` (its two ends), and whether that list exists: the elements' near lists,
+    /// as the points' (see the module docs).
+    seg_near: Vec<Vec<u32>>,
+    seg_anchor: Vec<[[f64; 3]; 2]>,
+    seg_has_near: Vec<bool>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -128,6 +136,9 @@ impl<T: Real> RodMeshContact<T> {
             found: Vec::new(),
             swept: Vec::new(),
             ridge: Vec::new(),
+            seg_near: Vec::new(),
+            seg_anchor: Vec::new(),
+            seg_has_near: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
@@ -308,16 +319,42 @@ impl<T: Real> RodMeshContact<T> {
             }
         };
         self.ridge.clear();
+        if self.seg_near.len() != n - 1 {
+            self.seg_near = vec![Vec::new(); n - 1];
+            self.seg_anchor = vec![[[0.0; 3]; 2]; n - 1];
+            self.seg_has_near = vec![false; n - 1];
+        }
         for j in 0..n - 1 {
             let (a, b) = (at(j), at(j + 1));
             if clearance(j) + clearance(j + 1) >= (b - a).norm() {
                 continue;
             }
-            let Some(near) = self
-                .settings
-                .collider
-                .segment_nearest(&a.into(), &b.into(), reach)
-            else {
+            // The element's near list, remade when an end has moved more than the skin.
+            let skin = NEAR_SKIN * reach;
+            let [from, to] = self.seg_anchor[j];
+            if !self.seg_has_near[j]
+                || (a - Vec3::from(from)).norm() > skin
+                || (b - Vec3::from(to)).norm() > skin
+            {
+                self.settings.collider.segment_near_slots(
+                    &a.into(),
+                    &b.into(),
+                    reach + skin,
+                    true,
+                    &mut self.seg_near[j],
+                );
+                self.seg_anchor[j] = [a.into(), b.into()];
+                self.seg_has_near[j] = true;
+            }
+            if self.seg_near[j].is_empty() {
+                continue;
+            }
+            let Some(near) = self.settings.collider.segment_nearest_among(
+                &a.into(),
+                &b.into(),
+                reach,
+                &self.seg_near[j],
+            ) else {
                 continue;
             };
             if !(SEGMENT_END..=1.0 - SEGMENT_END).contains(&near.fraction) {

@@ -240,6 +240,48 @@ impl TriData {
     }
 }
 
+/// [`MeshCollider::ridges`] for the triangles of `mesh` in the leaf order of `bvh`, with their
+/// unit normals `face` (into the lumen).
+fn ridge_slots(mesh: &TriMesh, bvh: &Bvh, face: &[Vector3<f64>]) -> Vec<bool> {
+    let mut by_edge: HashMap<(u32, u32), Vec<u32>> =
+        HashMap::with_capacity(mesh.triangles().len() * 2);
+    for (t, tri) in mesh.triangles().iter().enumerate() {
+        for k in 0..3 {
+            let (u, v) = (tri[k], tri[(k + 1) % 3]);
+            by_edge
+                .entry((u.min(v), u.max(v)))
+                .or_default()
+                .push(t as u32);
+        }
+    }
+    let mut ridge = vec![false; mesh.triangles().len()];
+    for ((u, v), tris) in &by_edge {
+        let reflex = match tris[..] {
+            [a, b] => {
+                // The corner of `b` off the edge, against `a`'s plane (and the other way).
+                let off = |t: u32, other: u32| {
+                    let tri = mesh.triangles()[other as usize];
+                    let w = tri.into_iter().find(|x| x != u && x != v).unwrap_or(*u);
+                    let p = mesh.vertices();
+                    let e = p[w as usize] - p[*u as usize];
+                    face[t as usize].dot(&e) < -1e-9 * e.norm()
+                };
+                off(a, b) || off(b, a)
+            }
+            _ => true,
+        };
+        if reflex {
+            for &t in tris {
+                ridge[t as usize] = true;
+            }
+        }
+    }
+    bvh.tri_indices()
+        .iter()
+        .map(|&t| ridge[t as usize])
+        .collect()
+}
+
 /// The result of a nearest-triangle query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Nearest {
@@ -271,6 +313,11 @@ pub struct MeshCollider {
     edge_normals: Vec<[Vector3<f64>; 3]>,
     /// Whether each of those edges lies on the mesh's boundary (belongs to one triangle only).
     edge_on_boundary: Vec<[bool; 3]>,
+    /// Per leaf-order slot: whether the triangle has an edge where the lumen is not convex (a
+    /// ridge: the neighbour across it falls away behind its plane), a boundary edge or an edge
+    /// of more than two triangles. Only near such triangles can a segment in the lumen be
+    /// nearer the wall between its ends than at them (see [`crate::segment`]).
+    pub(crate) ridges: Vec<bool>,
     /// Whether each mesh vertex lies on the boundary.
     vertex_on_boundary: Vec<bool>,
 }
@@ -337,9 +384,11 @@ impl MeshCollider {
             edge_normals.push(en);
             edge_on_boundary.push(boundary);
         }
+        let ridges = ridge_slots(&mesh, &bvh, &face);
         let winding = crate::winding::WindingNumber::new(&mesh, &bvh);
         Self {
             winding,
+            ridges,
             mesh,
             bvh,
             tris,
@@ -382,6 +431,16 @@ impl MeshCollider {
                 self.vertex_on_boundary[self.mesh.triangles()[t][k as usize] as usize]
             }
         }
+    }
+
+    /// The number of triangle edges on the mesh's boundary.
+    #[cfg(test)]
+    pub(crate) fn edge_on_boundary_count(&self) -> usize {
+        self.edge_on_boundary
+            .iter()
+            .flatten()
+            .filter(|&&b| b)
+            .count()
     }
 
     /// The pseudo-normal of `feature` of the triangle in leaf-order slot `slot`.

@@ -14,6 +14,17 @@
 //! ([`crate::contact::closest_point_triangle`]); the minimum of a convex distance is reached at
 //! one of those. The tree is searched with the sphere around the segment's midpoint that holds
 //! the capsule.
+//!
+//! **Only ridges matter.** Where the lumen is convex (inside a straight or gently curved tube,
+//! at every crease of its facets), the distance to the wall is a concave function of the
+//! position (the distance to the boundary of a convex set is concave inside it), so along a
+//! segment it is smallest at an end, which the point queries see. The interior of a segment
+//! can only be nearer where the lumen is not convex: at a ridge edge, whose neighbouring
+//! triangle falls away behind the plane of the other (the carina of a bifurcation, the inner
+//! wall of a bend), or at the rim of an opening. [`MeshCollider`] marks the triangles with such
+//! an edge once, and a rod's element queries list only those
+//! ([`MeshCollider::segment_near_slots`] with `ridges_only`): in a tube they find nothing and
+//! cost a list check.
 
 use nalgebra::Vector3;
 
@@ -102,28 +113,101 @@ impl MeshCollider {
         to: &[f64; 3],
         reach: f64,
     ) -> Option<SegmentNearest> {
-        DBG[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let p = Vector3::from(*from);
-        let d = Vector3::from(*to) - p;
-        let mid = p + d * 0.5;
-        let mut best: Option<(f64, f64, usize)> = None;
-        let reach2 = reach * reach;
+        let (p, d) = (
+            Vector3::from(*from),
+            Vector3::from(*to) - Vector3::from(*from),
+        );
+        let mut best = None;
         self.bvh()
-            .for_each_near(&mid.into(), 0.5 * d.norm() + reach, |slot| {
-                DBG[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            .for_each_near(&(p + d * 0.5).into(), 0.5 * d.norm() + reach, |slot| {
+                self.consider(&p, &d, reach, slot, &mut best);
+            });
+        self.answer(&p, &d, best)
+    }
+
+    /// The leaf-order slots of the triangles closer than `r` to the segment `from → to`,
+    /// written to `out` (cleared first). A segment whose ends are each within `r − r'` of this
+    /// one's can only come within `r'` of these triangles (every point of it is that close to
+    /// the matching point of this one), so a slowly moving element can query this list
+    /// ([`Self::segment_nearest_among`]) instead of the tree.
+    ///
+    /// With `ridges_only`, only triangles that have a ridge edge (where the lumen is not
+    /// convex, see the module docs) are listed: the only ones a segment in the lumen can be
+    /// nearer to between its ends than at them.
+    pub fn segment_near_slots(
+        &self,
+        from: &[f64; 3],
+        to: &[f64; 3],
+        r: f64,
+        ridges_only: bool,
+        out: &mut Vec<u32>,
+    ) {
+        out.clear();
+        let (p, d) = (
+            Vector3::from(*from),
+            Vector3::from(*to) - Vector3::from(*from),
+        );
+        self.bvh()
+            .for_each_near(&(p + d * 0.5).into(), 0.5 * d.norm() + r, |slot| {
                 let t = &self.tris[slot];
-                // Both ends farther than `reach` on one side of the triangle's plane: so is the
-                // whole segment (two multiply–adds before the exact distance).
-                let (h0, h1) = (t.n.dot(&(p - t.a)), t.n.dot(&(p + d - t.a)));
-                if (h0 > reach && h1 > reach) || (h0 < -reach && h1 < -reach) {
-                    return;
-                }
-                DBG[2].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let (d2, s) = segment_triangle_distance2(&p, &d, t);
-                if d2 < reach2 && best.is_none_or(|(b, _, _)| d2 < b) {
-                    best = Some((d2, s, slot));
+                if (self.ridges[slot] || !ridges_only)
+                    && !beyond_plane(&p, &d, t, r)
+                    && segment_triangle_distance2(&p, &d, t).0 < r * r
+                {
+                    out.push(slot as u32);
                 }
             });
+    }
+
+    /// [`Self::segment_nearest`] among the triangles in leaf-order `slots` (from
+    /// [`Self::segment_near_slots`]): the same answer when `slots` holds every triangle within
+    /// `reach` of the segment.
+    pub fn segment_nearest_among(
+        &self,
+        from: &[f64; 3],
+        to: &[f64; 3],
+        reach: f64,
+        slots: &[u32],
+    ) -> Option<SegmentNearest> {
+        let (p, d) = (
+            Vector3::from(*from),
+            Vector3::from(*to) - Vector3::from(*from),
+        );
+        let mut best = None;
+        for &slot in slots {
+            self.consider(&p, &d, reach, slot as usize, &mut best);
+        }
+        self.answer(&p, &d, best)
+    }
+
+    /// Keeps in `best` (squared distance, fraction, slot) the nearer of it and the triangle of
+    /// `slot`, if that one is within `reach` of the segment `p + s d`.
+    #[inline]
+    fn consider(
+        &self,
+        p: &Vector3<f64>,
+        d: &Vector3<f64>,
+        reach: f64,
+        slot: usize,
+        best: &mut Option<(f64, f64, usize)>,
+    ) {
+        let t = &self.tris[slot];
+        if beyond_plane(p, d, t, reach) {
+            return;
+        }
+        let (d2, s) = segment_triangle_distance2(p, d, t);
+        if d2 < reach * reach && best.is_none_or(|(b, _, _)| d2 < b) {
+            *best = Some((d2, s, slot));
+        }
+    }
+
+    /// The [`SegmentNearest`] of what [`Self::consider`] kept.
+    fn answer(
+        &self,
+        p: &Vector3<f64>,
+        d: &Vector3<f64>,
+        best: Option<(f64, f64, usize)>,
+    ) -> Option<SegmentNearest> {
         let (d2, s, slot) = best?;
         let t = &self.tris[slot];
         let at = p + d * s;
@@ -145,6 +229,14 @@ impl MeshCollider {
             normal: normal.into(),
         })
     }
+}
+
+/// Whether both ends of the segment `p + s d` are farther than `r` on one side of triangle
+/// `t`'s plane: then so is the whole segment (two multiply–adds before the exact distance).
+#[inline]
+fn beyond_plane(p: &Vector3<f64>, d: &Vector3<f64>, t: &TriData, r: f64) -> bool {
+    let (h0, h1) = (t.n.dot(&(p - t.a)), t.n.dot(&(p + d - t.a)));
+    (h0 > r && h1 > r) || (h0 < -r && h1 < -r)
 }
 
 #[cfg(test)]
@@ -197,6 +289,47 @@ mod tests {
         assert!(near.normal[2] > 0.0, "{near:?}");
     }
 
+    /// The near list of an element answers as the tree does for the element moved within the
+    /// list's skin.
+    #[test]
+    fn a_near_list_answers_as_the_tree() {
+        let c = ridge();
+        let (from, to) = ([-0.5, 0.2, 0.01], [0.5, 0.2, 0.01]);
+        let mut slots = Vec::new();
+        c.segment_near_slots(&from, &to, 0.05 + 0.02, true, &mut slots);
+        assert!(!slots.is_empty() && slots.len() < 4, "{slots:?}");
+        for shift in [[0.0, 0.0, 0.0], [0.01, -0.01, 0.015], [0.0, 0.019, -0.005]] {
+            let a = [from[0] + shift[0], from[1] + shift[1], from[2] + shift[2]];
+            let b = [to[0] - shift[1], to[1] + shift[0], to[2] + shift[2]];
+            assert_eq!(
+                c.segment_nearest_among(&a, &b, 0.05, &slots),
+                c.segment_nearest(&a, &b, 0.05)
+            );
+        }
+    }
+
+    /// Every edge of the roof's ridge falls away from the lumen: all four triangles are ridge
+    /// triangles. Inside a straight tube no edge does: only the triangles at its open ends
+    /// (boundary edges) are marked.
+    #[test]
+    fn ridges_are_where_the_lumen_is_not_convex() {
+        assert!(ridge().ridges.iter().all(|&r| r));
+        let tube = crate::vessel::generate(&crate::vessel::VesselParams {
+            branches: Vec::new(),
+            bow: 0.0,
+            target_triangles: 2000,
+            ..Default::default()
+        })
+        .unwrap();
+        let c = MeshCollider::new(tube.mesh.clone());
+        let marked = c.ridges.iter().filter(|&&r| r).count();
+        let boundary = c.edge_on_boundary_count();
+        assert!(
+            marked > 0 && marked <= boundary,
+            "{marked} marked, {boundary} boundary edges"
+        );
+    }
+
     /// Far from the mesh nothing is found.
     #[test]
     fn a_distant_element_finds_nothing() {
@@ -207,5 +340,3 @@ mod tests {
         );
     }
 }
-
-pub static DBG: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];
