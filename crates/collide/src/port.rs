@@ -20,7 +20,7 @@ use nalgebra::Vector3;
 
 use crate::contact::{MeshCollider, closest_point_triangle};
 use crate::mesh::{MeshError, TriMesh};
-use crate::rods::closest_points_segments;
+use crate::segment::segment_triangle_distance2;
 
 /// Samples of the winding number along the axis before the first wall.
 const AXIS_SAMPLES: usize = 256;
@@ -93,35 +93,6 @@ impl std::fmt::Display for PortError {
 }
 
 impl std::error::Error for PortError {}
-
-/// Distance from the segment `a b` to the triangle `t`.
-fn segment_triangle_distance(a: &Vector3<f64>, b: &Vector3<f64>, t: &[Vector3<f64>; 3]) -> f64 {
-    // Through the triangle: zero.
-    let n = (t[1] - t[0]).cross(&(t[2] - t[0]));
-    let (da, db) = (n.dot(&(a - t[0])), n.dot(&(b - t[0])));
-    if da * db <= 0.0 && da != db {
-        let p = a + (b - a) * (da / (da - db));
-        let (c, _) = closest_point_triangle(&p, &t[0], &t[1], &t[2]);
-        if (c - p).norm() <= 1e-12 * n.norm().sqrt() {
-            return 0.0;
-        }
-    }
-    let ends = [a, b]
-        .map(|p| (closest_point_triangle(p, &t[0], &t[1], &t[2]).0 - p).norm())
-        .into_iter()
-        .fold(f64::INFINITY, f64::min);
-    (0..3)
-        .map(|k| {
-            let (_, _, c1, c2) = closest_points_segments(
-                (*a).into(),
-                (*b).into(),
-                t[k].into(),
-                t[(k + 1) % 3].into(),
-            );
-            (Vector3::from(c1) - Vector3::from(c2)).norm()
-        })
-        .fold(ends, f64::min)
-}
 
 /// Places a port on `mesh` at `point` along `direction` (any length), with `radius` or, without
 /// one, a radius found from the mesh: the opening's (the distance from the crossing to the
@@ -210,7 +181,10 @@ pub fn open_port(
     );
     let mesh = collider.mesh();
     let kept: Vec<[u32; 3]> = (0..mesh.triangles().len())
-        .filter(|&t| segment_triangle_distance(&a, &b, &mesh.triangle(t)) >= radius)
+        .filter(|&t| {
+            let [p, q, r] = mesh.triangle(t);
+            segment_triangle_distance2(&a, &(b - a), &p, &q, &r).0 >= radius * radius
+        })
         .map(|t| mesh.triangles()[t])
         .collect();
     let opened = mesh.triangles().len() - kept.len();

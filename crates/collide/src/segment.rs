@@ -50,28 +50,30 @@ pub struct SegmentNearest {
     pub normal: [f64; 3],
 }
 
-/// The distance from the segment `p + s d` (`0 ≤ s ≤ 1`) to triangle `t`, and `s` at the
-/// nearest point: `(distance², s)`. Zero where the segment passes through the triangle.
+/// The distance from the segment `p + s d` (`0 ≤ s ≤ 1`) to the triangle `abc`, and `s` at
+/// the nearest point: `(distance², s)`. Zero where the segment passes through the triangle.
 pub(crate) fn segment_triangle_distance2(
     p: &Vector3<f64>,
     d: &Vector3<f64>,
-    t: &TriData,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
 ) -> (f64, f64) {
-    if let Some(s) = crossing(p, d, t) {
+    if let Some(s) = crossing(p, d, a, b, c) {
         return (0.0, s);
     }
     let q = p + d;
     let mut best = (f64::INFINITY, 0.0);
     for (s, end) in [(0.0, p), (1.0, &q)] {
-        let (c, _) = closest_point_triangle(end, &t.a, &t.b, &t.c);
-        let d2 = (end - c).norm_squared();
+        let (x, _) = closest_point_triangle(end, a, b, c);
+        let d2 = (end - x).norm_squared();
         if d2 < best.0 {
             best = (d2, s);
         }
     }
-    for (a, b) in [(&t.a, &t.b), (&t.b, &t.c), (&t.c, &t.a)] {
+    for (u, v) in [(a, b), (b, c), (c, a)] {
         let (s, _, c1, c2) =
-            closest_points_segments((*p).into(), q.into(), (*a).into(), (*b).into());
+            closest_points_segments((*p).into(), q.into(), (*u).into(), (*v).into());
         let d2 = (Vector3::from(c1) - Vector3::from(c2)).norm_squared();
         if d2 < best.0 {
             best = (d2, s);
@@ -80,17 +82,23 @@ pub(crate) fn segment_triangle_distance2(
     best
 }
 
-/// Where the segment `p + s d` passes through triangle `t` (either side), if it does.
-fn crossing(p: &Vector3<f64>, d: &Vector3<f64>, t: &TriData) -> Option<f64> {
-    let e1 = t.b - t.a;
-    let e2 = t.c - t.a;
+/// Where the segment `p + s d` passes through triangle `abc` (either side), if it does.
+fn crossing(
+    p: &Vector3<f64>,
+    d: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> Option<f64> {
+    let e1 = b - a;
+    let e2 = c - a;
     let h = d.cross(&e2);
     let det = e1.dot(&h);
     if det.abs() <= 1e-300 {
         return None;
     }
     let inv = 1.0 / det;
-    let o = p - t.a;
+    let o = p - a;
     let u = o.dot(&h) * inv;
     if !(0.0..=1.0).contains(&u) {
         return None;
@@ -152,7 +160,7 @@ impl MeshCollider {
                 let t = &self.tris[slot];
                 if (self.ridges[slot] || !ridges_only)
                     && !beyond_plane(&p, &d, t, r)
-                    && segment_triangle_distance2(&p, &d, t).0 < r * r
+                    && segment_triangle_distance2(&p, &d, &t.a, &t.b, &t.c).0 < r * r
                 {
                     out.push(slot as u32);
                 }
@@ -195,7 +203,7 @@ impl MeshCollider {
         if beyond_plane(p, d, t, reach) {
             return;
         }
-        let (d2, s) = segment_triangle_distance2(p, d, t);
+        let (d2, s) = segment_triangle_distance2(p, d, &t.a, &t.b, &t.c);
         if d2 < reach * reach && best.is_none_or(|(b, _, _)| d2 < b) {
             *best = Some((d2, s, slot));
         }
