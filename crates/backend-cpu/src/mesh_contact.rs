@@ -114,6 +114,8 @@ pub(crate) struct RodMeshContact<T: Real> {
     seg_near: Vec<Vec<u32>>,
     seg_anchor: Vec<[[f64; 3]; 2]>,
     seg_has_near: Vec<bool>,
+    /// Scratch: each point's gap from its own contact (the margin without one).
+    own_gap: Vec<f64>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -139,6 +141,7 @@ impl<T: Real> RodMeshContact<T> {
             seg_near: Vec::new(),
             seg_anchor: Vec::new(),
             seg_has_near: Vec::new(),
+            own_gap: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
@@ -288,6 +291,20 @@ impl<T: Real> RodMeshContact<T> {
 }
 
 impl<T: Real> RodMeshContact<T> {
+    /// The walls the sphere of point `i` touched at the last detection (its contacts on the
+    /// lumen side, one per triangle): unit normal of the closest feature (into the lumen) and
+    /// gap (distance less `radius`). Empty for a point that was not queried.
+    pub(crate) fn walls_of(
+        &self,
+        i: usize,
+        radius: f64,
+    ) -> impl Iterator<Item = (Vec3<f64>, f64)> + '_ {
+        self.found
+            .iter()
+            .filter(move |c| c.point as usize == i && c.signed_distance >= 0.0)
+            .map(move |c| (Vec3::from(c.normal), c.signed_distance - radius))
+    }
+
     /// Adds the contacts of elements that come nearer a wall between their points than at
     /// them (see the module docs): each such element's two points get a contact on the plane
     /// through the wall's nearest point across the direction from it to the element, at the
@@ -306,7 +323,9 @@ impl<T: Real> RodMeshContact<T> {
         if n < 2 {
             return;
         }
-        let reach = radius + self.settings.margin;
+        let margin = self.settings.margin;
+        let reach = radius + margin;
+        let skin = NEAR_SKIN * reach;
         let at = |i: usize| Vec3::new(x[i].to_f64(), y[i].to_f64(), z[i].to_f64());
         // The least distance beyond `reach` of point `i` from the mesh (0 when unknown).
         let clearance = |i: usize| {
@@ -318,6 +337,14 @@ impl<T: Real> RodMeshContact<T> {
                 0.0
             }
         };
+        // Each point's own gap: its contact's, or at least the margin.
+        self.own_gap.clear();
+        self.own_gap.resize(n, margin);
+        for c in self.contacts.contacts() {
+            if let Some(g) = self.own_gap.get_mut(c.point as usize) {
+                *g = c.gap.to_f64();
+            }
+        }
         self.ridge.clear();
         if self.seg_near.len() != n - 1 {
             self.seg_near = vec![Vec::new(); n - 1];
@@ -329,8 +356,15 @@ impl<T: Real> RodMeshContact<T> {
             if clearance(j) + clearance(j + 1) >= (b - a).norm() {
                 continue;
             }
+            // Only a wall nearer than both points' own, by the tolerance, makes a ridge
+            // contact: the distance it must come within. A wall the element runs along at
+            // its points' distance is beyond it, and its plane rules it out cheaply.
+            let limit =
+                self.own_gap[j].min(self.own_gap[j + 1]) + radius - SEGMENT_TOLERANCE * radius;
+            if !(limit > 0.0) {
+                continue;
+            }
             // The element's near list, remade when an end has moved more than the skin.
-            let skin = NEAR_SKIN * reach;
             let [from, to] = self.seg_anchor[j];
             if !self.seg_has_near[j]
                 || (a - Vec3::from(from)).norm() > skin
@@ -352,7 +386,7 @@ impl<T: Real> RodMeshContact<T> {
             let Some(near) = self.settings.collider.segment_nearest_among(
                 &a.into(),
                 &b.into(),
-                reach,
+                limit,
                 &self.seg_near[j],
             ) else {
                 continue;
@@ -369,24 +403,11 @@ impl<T: Real> RodMeshContact<T> {
             return;
         }
         let mut all: Vec<PointContact<T>> = self.contacts.contacts().collect();
-        let gap_of = |all: &[PointContact<T>], i: u32| {
-            all.iter()
-                .find(|c| c.point == i)
-                .map_or(self.settings.margin, |c| c.gap.to_f64())
-        };
-        let mut added = 0;
         for &(j, normal, on_wall, gap) in &self.ridge {
-            let ends = [j, j + 1];
-            // Nearer than both points' own contacts: a ridge between them.
-            let own = ends.map(|i| gap_of(&all, i));
-            if !(gap < own[0].min(own[1]) - SEGMENT_TOLERANCE * radius) {
-                continue;
-            }
-            added += 1;
             self.stats.max_penetration = self.stats.max_penetration.max(-gap);
-            for (&i, own) in ends.iter().zip(own) {
+            for i in [j, j + 1] {
                 let end_gap = normal.dot(&(at(i as usize) - on_wall)) - radius;
-                if end_gap >= own {
+                if end_gap >= self.own_gap[i as usize] {
                     continue;
                 }
                 let c = PointContact {
@@ -400,15 +421,13 @@ impl<T: Real> RodMeshContact<T> {
                 }
             }
         }
-        if added > 0 {
-            self.stats.segment_contacts += added;
-            self.contacts.clear();
-            for c in all {
-                self.contacts.push(c);
-            }
-            self.stats.contacts = self.contacts.len();
-            self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
+        self.stats.segment_contacts += self.ridge.len() as u64;
+        self.contacts.clear();
+        for c in all {
+            self.contacts.push(c);
         }
+        self.stats.contacts = self.contacts.len();
+        self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
     }
 
     /// Fills `swept` with the points (not skipped) whose motion over the step crosses into the

@@ -18,7 +18,7 @@
 
 use nalgebra::Vector3;
 
-use crate::contact::{MeshCollider, closest_point_triangle};
+use crate::contact::MeshCollider;
 use crate::mesh::{MeshError, TriMesh};
 use crate::segment::segment_triangle_distance2;
 

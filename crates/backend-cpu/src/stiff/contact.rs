@@ -18,7 +18,11 @@
 //!    are within the tolerance of it (left to step 2, which pins them if the solve pushes them
 //!    in: pinned first, most of them were let go after the first solve): sticking (at their
 //!    start-of-step place, projected onto the wall) if they stuck at the end of the last step,
-//!    else sliding, with the kinetic friction of their last normal impulse;
+//!    else sliding, with the kinetic friction of their last normal impulse. A point touching
+//!    two walls at an angle (a groove, the crease of two facets) is put on both and pinned to
+//!    their crease, each wall with its own normal force: pinned to one plane under the mean
+//!    normal, a rod in a right-angled groove felt `μ m g cos α` of friction instead of the
+//!    wedge's `√2 μ m g cos α` and slid where it should stick;
 //! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
 //!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
 //!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step). A
@@ -301,26 +305,52 @@ impl StiffContacts {
                 continue;
             }
             let mass = 1.0 / k.inv_mass[i];
-            // In the tangent plane.
-            let slip = v - normal * towards;
+            // Touching two walls that meet at an angle (a groove, the crease of two facets):
+            // on both, sliding along their crease, each wall's normal force its own.
+            let crease = self.two_walls(i, tol);
+            let (normal, gap) = crease.map_or((normal, gap), |[a, _]| a);
+            let stick = self.last[i] == Touch::Stick;
+            let before = w.x.get(i);
+            self.pin(w, i, normal, gap, stick);
+            let s = self.slot[i];
+            if let Some([_, (other, other_gap)]) = crease {
+                // Its gap to the second wall from where the first put it.
+                let moved = w.x.get(i) - before;
+                back_on_walls(w, s, other, other_gap + other.dot(&moved));
+            }
+            if stick {
+                continue;
+            }
+            // Along what it slides.
+            let slip = w.pinned[s].sliding_part(&v);
             let (push, pn) = match self.last[i] {
                 Touch::Slide(pn) if slip.norm() > 0.0 => {
                     (-slip.normalize() * (mu_k * pn / mass), pn)
                 }
                 Touch::Slide(pn) => (Vec3::zeros(), pn),
-                Touch::Stick => {
-                    self.pin(w, i, normal, gap, true);
-                    continue;
-                }
                 _ => (Vec3::zeros(), 0.0),
             };
-            self.pin(w, i, normal, gap, false);
-            let p = &mut w.pinned[self.slot[i]];
+            let p = &mut w.pinned[s];
             p.push = push;
             p.pn = pn;
             w.x_pred.set(i, &(w.x_pred.get(i) + push));
         }
         self.mesh.contacts = found;
+    }
+
+    /// The two walls point `i` touches (within `tol`) at the last detection, when it touches
+    /// two whose normals are far enough from parallel for a crease near it ([`CREASE_COS`]):
+    /// the nearest, and the nearest of those at an angle to it, each as normal and gap.
+    fn two_walls(&self, i: usize, tol: f64) -> Option<[(Vec3<f64>, f64); 2]> {
+        let nearest = |skip: Option<Vec3<f64>>| {
+            self.mesh
+                .walls_of(i, self.radius)
+                .filter(|&(_, gap)| gap <= tol)
+                .filter(|(n, _)| skip.is_none_or(|a| a.dot(n).abs() <= CREASE_COS))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+        };
+        let first = nearest(None)?;
+        Some([first, nearest(Some(first.0))?])
     }
 
     /// Pins point `i` on the plane through its wall point (normal `normal`, the sphere `gap`
