@@ -62,6 +62,11 @@ fn lowest(rod: &CpuRod<f64>) -> f64 {
         .fold(f64::MAX, f64::min)
 }
 
+fn centre_of_mass(rod: &CpuRod<f64>) -> Vec3<f64> {
+    let p = &rod.state.positions;
+    p.iter().sum::<Vec3<f64>>() / p.len() as f64
+}
+
 fn fastest(rod: &CpuRod<f64>) -> f64 {
     rod.state
         .velocities
@@ -140,12 +145,11 @@ fn coulomb_friction_on_an_incline_at_a_millisecond() {
             let s = settings(1e-3, Vec3::new(0.0, 0.0, -g));
             let steps = 200;
             let t = steps as f64 * s.dt;
-            let com = |rod: &CpuRod<f64>| rod.state.positions.iter().sum::<Vec3<f64>>() / 11.0;
-            let com0 = com(&rod);
+            let com0 = centre_of_mass(&rod);
             let mut sc = StiffScratch::new();
             run(&mut rod, &s, &mut sc, 0.0, steps);
-            let travelled = (com(&rod) - com0).dot(&down);
-            let off_plane = (com(&rod) - com0).dot(&normal);
+            let travelled = (centre_of_mass(&rod) - com0).dot(&down);
+            let off_plane = (centre_of_mass(&rod) - com0).dot(&normal);
             assert!(
                 off_plane.abs() < 1e-3 * r,
                 "θ = {theta_deg}°: left the plane by {off_plane} m"
@@ -359,8 +363,7 @@ fn coulomb_friction_in_an_inclined_v_groove_at_a_millisecond() {
             let s = settings(1e-3, Vec3::new(0.0, 0.0, -g));
             let steps = 200;
             let t = steps as f64 * s.dt;
-            let com = |rod: &CpuRod<f64>| rod.state.positions.iter().sum::<Vec3<f64>>() / 11.0;
-            let com0 = com(&rod);
+            let com0 = centre_of_mass(&rod);
             let mut sc = StiffScratch::new();
             let mut deepest = 0.0_f64;
             for step in 0..steps {
@@ -372,7 +375,7 @@ fn coulomb_friction_in_an_inclined_v_groove_at_a_millisecond() {
                     }
                 }
             }
-            let moved = com(&rod) - com0;
+            let moved = centre_of_mass(&rod) - com0;
             let along = moved.dot(&down);
             let label = format!("α = {alpha_deg}°, r = {r}");
             assert!(deepest <= 0.02 * r, "{label}: {deepest} m into a wall");

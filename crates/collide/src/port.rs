@@ -7,7 +7,8 @@
 //!   open vessel end) the wire is outside the lumen without having left it;
 //! - **closed meshes**: an anatomy whose vessel ends are rounded shut (or a whole organ) has no
 //!   opening; the wire must pass through the wall, so the port cuts a hole there: the triangles
-//!   within the port's radius of the axis, around where it crosses the wall, are removed. The
+//!   within the port's radius of the axis, around where it crosses the wall, that face the axis
+//!   (within 60°) are removed; a vessel's side wall beyond the end stays. The
 //!   hole's rim is an opening like any other: the inside test caps it
 //!   ([`crate::winding`]), contacts see its rim.
 //!
@@ -28,6 +29,10 @@ const AXIS_SAMPLES: usize = 256;
 /// Without a given radius, a port through a wall opens this fraction of the lumen's largest
 /// radius found just behind the wall (within [`LUMEN_PROBE`] of it).
 const DEFAULT_RADIUS_FRACTION: f64 = 0.5;
+
+/// A triangle the port opens faces its axis: the cosine of the angle between its normal and
+/// the axis is at least this (within 60°).
+const FACING: f64 = 0.5;
 
 /// How far behind the wall the lumen's radius is probed for the default port radius [m].
 const LUMEN_PROBE: f64 = 0.01;
@@ -123,9 +128,10 @@ pub fn open_port(
     let inside = |s: f64| collider.lumen_winding(&at(s)) >= 0.5;
     let wall = collider.first_intersection(&point, &at(reach));
     let end = wall.map_or(reach, |w| w.fraction * reach);
-    // Through an opening: the lumen is reached before any wall.
+    // Through an opening: the lumen is reached before any wall. (Not at the wall itself: a
+    // point on the wall has a winding number of one half, inside by rounding as often as not.)
     let ds = end / AXIS_SAMPLES as f64;
-    let first_inside = (0..=AXIS_SAMPLES)
+    let first_inside = (0..AXIS_SAMPLES)
         .map(|k| k as f64 * ds)
         .find(|&s| inside(s));
     let nearest_wall = |s: f64| {
@@ -174,7 +180,8 @@ pub fn open_port(
     let radius = radius
         .unwrap_or_else(|| DEFAULT_RADIUS_FRACTION * behind.iter().copied().fold(0.0, f64::max));
     // Open the wall: every triangle within the radius of the axis, within two radii of the
-    // crossing along it.
+    // crossing along it, that faces the axis (the wall it passes through, not the side wall of
+    // a vessel beyond it: a port as wide as the vessel would cut that away too).
     let (a, b) = (
         e + d * (s_hit - 2.0 * radius),
         e + d * (s_hit + 2.0 * radius),
@@ -183,7 +190,8 @@ pub fn open_port(
     let kept: Vec<[u32; 3]> = (0..mesh.triangles().len())
         .filter(|&t| {
             let [p, q, r] = mesh.triangle(t);
-            segment_triangle_distance2(&a, &(b - a), &p, &q, &r).0 >= radius * radius
+            mesh.face_normal(t).dot(&d).abs() < FACING
+                || segment_triangle_distance2(&a, &(b - a), &p, &q, &r).0 >= radius * radius
         })
         .map(|t| mesh.triangles()[t])
         .collect();
@@ -262,6 +270,31 @@ mod tests {
         assert!(collider.lumen_winding(&[0.5, 0.5, 0.5]) > 0.9);
         assert!(port.holds(&[-0.2, 0.5, 0.55]));
         assert!(!port.holds(&[0.2, 0.5, 0.9]));
+    }
+
+    /// A port as wide as the vessel opens the end wall it passes through, not the side walls
+    /// beyond it.
+    #[test]
+    fn a_port_as_wide_as_the_vessel_leaves_its_side_walls() {
+        let (collider, port) =
+            open_port(closed_box(10), [-0.5, 0.5, 0.5], [1.0, 0.0, 0.0], Some(0.6)).expect("port");
+        assert!(port.opened > 0);
+        assert!(
+            collider
+                .first_intersection(&[-0.5, 0.5, 0.5], &[0.5, 0.5, 0.5])
+                .is_none()
+        );
+        for to in [
+            [0.1, -0.5, 0.5],
+            [0.1, 1.5, 0.5],
+            [0.1, 0.5, -0.5],
+            [0.1, 0.5, 1.5],
+        ] {
+            assert!(
+                collider.first_intersection(&[0.1, 0.5, 0.5], &to).is_some(),
+                "no side wall towards {to:?}"
+            );
+        }
     }
 
     #[test]

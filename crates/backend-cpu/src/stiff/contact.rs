@@ -316,7 +316,7 @@ impl StiffContacts {
             if let Some([_, (other, other_gap)]) = crease {
                 // Its gap to the second wall from where the first put it.
                 let moved = w.x.get(i) - before;
-                back_on_walls(w, s, other, other_gap + other.dot(&moved));
+                back_on_walls(w, s, other, other_gap + other.dot(&moved), self.radius);
             }
             if stick {
                 continue;
@@ -533,7 +533,7 @@ impl StiffContacts {
                     continue;
                 }
                 if gap < -tol {
-                    matrix_changed |= back_on_walls(w, s, normal, gap);
+                    matrix_changed |= back_on_walls(w, s, normal, gap, self.radius);
                     changed = true;
                 } else {
                     // On the wall, or off a wall that turns away from its plane: the plane
@@ -597,11 +597,22 @@ impl StiffContacts {
 /// slides along their crease from then on. A wall barely turned from the one it slides on
 /// (within [`NORMAL_TURN`]) replaces it; a third wall makes a crease with the first. Returns
 /// whether the matrix of the solve changed (the factorisation is kept for a turn within
-/// `NORMAL_TURN`: the iterations refactorise if they stall).
-fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64) -> bool {
+/// `NORMAL_TURN`: the iterations refactorise if they stall). A point more than its radius
+/// behind the new wall (caught by the swept test) is only moved out along its normal: the
+/// crease of two planes may lie far from such a point.
+fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64, radius: f64) -> bool {
     let parallel = NORMAL_TURN.cos();
     let p = &mut w.pinned[s];
     let x = w.x.get(p.point);
+    if -gap > radius {
+        // Deep behind the new wall (a crossing the swept test caught): the crease of its plane
+        // with the old one may be far from the point. Out along the new wall's normal only.
+        let turned = p.crease.is_some() || p.normal.dot(&normal) < parallel;
+        p.normal = normal;
+        p.crease = None;
+        w.x.set(p.point, &(x - normal * gap));
+        return turned;
+    }
     let near = |a: &Vec3<f64>| a.dot(&normal) >= parallel;
     // The wall the point stays on while it is moved out of the new one, and whether the
     // matrix changed.
