@@ -88,6 +88,9 @@ struct Outcome {
     detection_us_per_step: f64,
     /// The fastest any point moved over a tick [m/s]: a whip, or a solve gone wrong.
     fastest: f64,
+    /// The deepest any inside point's sphere reached into the wall after any step, by the
+    /// oracle: the radius less the point's distance from the mesh [m].
+    sphere_depth: f64,
     stopped: Option<String>,
     /// When a point was first found outside: time [s], point and depth [m].
     first_outside: Option<(f64, usize, f64)>,
@@ -323,6 +326,7 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         d.map(|x| x / l)
     };
     let per_tick = (1e-3 / instrument.dt).round().max(1.0) as u64;
+    let radius = sim.rod_radius(wire);
     let mut out = Outcome {
         frames: 0,
         most_outside: 0,
@@ -335,6 +339,7 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         us_per_step: 0.0,
         detection_us_per_step: 0.0,
         fastest: 0.0,
+        sphere_depth: 0.0,
         stopped: None,
         first_outside: None,
     };
@@ -345,16 +350,35 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         let twist = 5.0 * (2.0 * std::f64::consts::PI * 1.5 * t).sin();
         sim.set_end_velocity(wire, 0, axis.map(|a| a * 0.2), axis.map(|a| a * twist))
             .map_err(|e| e.to_string())?;
-        let started = Instant::now();
-        let stepped = sim.run(per_tick);
-        wall += started.elapsed().as_secs_f64();
-        if let Err(e) = stepped {
-            out.stopped = Some(format!("t = {:.3} s: {e}", sim.time()));
+        let before = points.clone();
+        let mut stopped = None;
+        for _ in 0..per_tick {
+            let started = Instant::now();
+            let stepped = sim.run(1);
+            wall += started.elapsed().as_secs_f64();
+            if let Err(e) = stepped {
+                stopped = Some(format!("t = {:.3} s: {e}", sim.time()));
+                break;
+            }
+            // The spheres' depth in the wall after every step, by the oracle: points within a
+            // radius of the mesh (a bounded tree query) and inside the lumen (the inside test).
+            sim.read(wire, StateField::Positions, &mut points)
+                .map_err(|e| e.to_string())?;
+            if let Some(env) = sim.environment() {
+                let c = &env.collider;
+                for p in &points {
+                    if let Some(near) = c.nearest(p, radius)
+                        && c.lumen_winding(p) >= 0.5
+                    {
+                        out.sphere_depth = out.sphere_depth.max(radius - near.distance);
+                    }
+                }
+            }
+        }
+        if stopped.is_some() {
+            out.stopped = stopped;
             break;
         }
-        let before = points.clone();
-        sim.read(wire, StateField::Positions, &mut points)
-            .map_err(|e| e.to_string())?;
         for (a, b) in before.iter().zip(&points) {
             let d: f64 = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
             out.fastest = out.fastest.max(d / 1e-3);
@@ -497,7 +521,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
     let mut table = String::new();
     let _ = writeln!(
         table,
-        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [mm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | behind a wall (contact queries) | their deepest [µm] | deepest sphere (inside test) [µm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut clean = true;
     for vessel in &vessels {
@@ -511,7 +535,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 Ok(o) => {
                     clean &= o.most_outside == 0 && o.contact_escaped == 0 && o.stopped.is_none();
                     format!(
-                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {:.2} | {} |",
+                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {:.2} | {} |",
                         vessel.label,
                         instrument.label,
                         instrument.dt,
@@ -519,7 +543,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                         o.most_outside,
                         o.deepest * 1e3,
                         o.contact_escaped,
-                        o.contact_depth * 1e3,
+                        o.contact_depth * 1e6,
+                        o.sphere_depth * 1e6,
                         o.first_outside.map_or("—".to_string(), |(t, p, d)| format!(
                             "t = {t:.3} s, point {p}, {:.2} mm",
                             d * 1e3
@@ -536,7 +561,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 Err(e) => {
                     clean = false;
                     format!(
-                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
+                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
                         vessel.label, instrument.label, instrument.dt
                     )
                 }
@@ -556,7 +581,10 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
          (inside test)`: the most points the inside test found outside the lumen at once, and \
          `deepest` the deepest of them (distance behind the wall plus the radius); `behind a \
          wall (contact queries)`: the most points the contact queries found behind a wall at \
-         the start of a step, and the deepest penetration they saw, within their reach; \
+         the start of a step, and the deepest penetration the steps ended with, within their reach; `deepest sphere`: \
+         the deepest any point's sphere reached into the wall after any step, by the inside \
+         test and the distance from the mesh (radius less distance, points inside the lumen), \
+         its independent measure; \
          `first outside`: when, which point and how deep the inside test first found a \
          point outside; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
          (points, swept points and elements, all iterations); `fastest point`: the largest \

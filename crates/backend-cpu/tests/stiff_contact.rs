@@ -172,8 +172,8 @@ fn coulomb_friction_on_an_incline_at_a_millisecond() {
     }
 }
 
-/// A wire pushed into a wall at dt 1 ms does not pass through it; it buckles sideways (the
-/// explicit scheme's test, at fifty times its step).
+/// A wire pushed into a wall at dt 1 ms does not pass through it (by more than the contact
+/// tolerance); it buckles sideways (the explicit scheme's test, at fifty times its step).
 #[test]
 fn a_wire_pushed_into_a_wall_buckles_at_a_millisecond() {
     let r = 1e-3;
@@ -192,8 +192,9 @@ fn a_wire_pushed_into_a_wall_buckles_at_a_millisecond() {
     }
     let stats = rod.collision_stats().unwrap();
     assert!(stats.max_contacts > 0, "the tip touched the wall");
+    // Within the contact's penetration tolerance, 2 % of the radius (`stiff/contact.rs`).
     assert!(
-        furthest <= 0.2 - r * (1.0 - 1e-3),
+        furthest <= 0.2 - r * (1.0 - 0.02),
         "a point passed the wall: x = {furthest}"
     );
     let lateral = rod
