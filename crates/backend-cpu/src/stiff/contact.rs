@@ -64,17 +64,11 @@ use cosserat_model::Vec3;
 pub(crate) const MAX_ROUNDS: usize = 4;
 
 /// Penetration tolerated without a change of the active set, as a fraction of the rod's radius
-/// (and the gap within which a point that touched at the end of the last step still touches at
-/// the solve's starting guess; a new contact must come within [`TOUCH_TOLERANCE`]). At 1e-3 the
+/// (and the gap within which a point at the solve's starting guess touches). At 1e-3 the
 /// phantom's wires were put back on facets after most iterations, each time a new
 /// factorisation; at 2e-2 (9 µm for the `steel` preset) the torture suite's stiff steps cost
 /// 20–35 % less in the phantom (`docs/benchmarks/torture.md`, `docs/stiff-solver.md`).
 const DEPTH_TOLERANCE: f64 = 2e-2;
-
-/// The gap within which a point free at the end of the last step touches a wall at the start
-/// of the next, as a fraction of the radius; one that touched keeps touching within
-/// [`DEPTH_TOLERANCE`].
-const TOUCH_TOLERANCE: f64 = 1e-3;
 
 /// How far a touching point may move between two detections of one step before it is queried
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
@@ -295,16 +289,9 @@ impl StiffContacts {
         let tol = self.tolerance();
         let mu_k = self.friction.kinetic_coefficient;
         let found = std::mem::take(&mut self.mesh.contacts);
-        let touch = TOUCH_TOLERANCE * self.radius;
         for c in found.contacts() {
             let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
-            // A contact persists within the tolerance; a new one must touch.
-            let reach = if self.last[i] == Touch::Free {
-                touch
-            } else {
-                tol
-            };
-            if k.inv_mass[i] == 0.0 || gap > reach || self.slot[i] != usize::MAX {
+            if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
             // The motion of the prediction over the step.

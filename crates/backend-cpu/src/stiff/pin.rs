@@ -36,6 +36,7 @@ pub(crate) struct Pinned {
 
 impl Pinned {
     /// The direction of the crease a sliding point moves along, if it is in one.
+    #[inline]
     pub(crate) fn crease_direction(&self) -> Option<Vec3<f64>> {
         let along = self.normal.cross(&self.crease?);
         let norm = along.norm();
@@ -44,6 +45,7 @@ impl Pinned {
 
     /// The part of a motion `v` the pin allows: none when sticking, else its
     /// [`sliding_part`](Self::sliding_part).
+    #[inline]
     pub(crate) fn allowed(&self, v: &Vec3<f64>) -> Vec3<f64> {
         if self.stick {
             Vec3::zeros()
@@ -54,6 +56,7 @@ impl Pinned {
 
     /// The part of `v` along which the point slides, sticking or not: along the line (guide)
     /// or the crease, or in the wall's tangent plane.
+    #[inline]
     pub(crate) fn sliding_part(&self, v: &Vec3<f64>) -> Vec3<f64> {
         if self.line {
             self.normal * self.normal.dot(v)
