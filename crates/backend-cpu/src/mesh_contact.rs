@@ -114,8 +114,10 @@ pub(crate) struct RodMeshContact<T: Real> {
     seg_near: Vec<Vec<u32>>,
     seg_anchor: Vec<[[f64; 3]; 2]>,
     seg_has_near: Vec<bool>,
-    /// Scratch: each point's gap from its own contact (the margin without one).
+    /// Scratch: each point's gap from its own contact (the margin without one), and its
+    /// clearance beyond the reach (0 when unknown).
     own_gap: Vec<f64>,
+    clearance: Vec<f64>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
 }
@@ -142,6 +144,7 @@ impl<T: Real> RodMeshContact<T> {
             seg_anchor: Vec::new(),
             seg_has_near: Vec::new(),
             own_gap: Vec::new(),
+            clearance: Vec::new(),
             contacts: ContactSet::new(),
             stats: CollisionStats::default(),
         }
@@ -327,16 +330,21 @@ impl<T: Real> RodMeshContact<T> {
         let reach = radius + margin;
         let skin = NEAR_SKIN * reach;
         let at = |i: usize| Vec3::new(x[i].to_f64(), y[i].to_f64(), z[i].to_f64());
-        // The least distance beyond `reach` of point `i` from the mesh (0 when unknown).
-        let clearance = |i: usize| {
-            if self.clear2[i] > 0.0 {
-                let [cx, cy, cz] = &self.clear_at;
-                let moved = (at(i) - Vec3::new(cx[i], cy[i], cz[i])).norm();
-                (self.clear2[i].sqrt() - moved).max(0.0)
+        // The least distance beyond `reach` of each point from the mesh (0 when unknown), in
+        // one pass.
+        self.clearance.clear();
+        let [cx, cy, cz] = &self.clear_at;
+        self.clearance.extend((0..n).map(|i| {
+            let c2 = self.clear2[i];
+            if c2 > 0.0 {
+                let moved2 = (x[i].to_f64() - cx[i]).powi(2)
+                    + (y[i].to_f64() - cy[i]).powi(2)
+                    + (z[i].to_f64() - cz[i]).powi(2);
+                (c2.sqrt() - moved2.sqrt()).max(0.0)
             } else {
                 0.0
             }
-        };
+        }));
         // Each point's own gap: its contact's, or at least the margin.
         self.own_gap.clear();
         self.own_gap.resize(n, margin);
@@ -353,7 +361,8 @@ impl<T: Real> RodMeshContact<T> {
         }
         for j in 0..n - 1 {
             let (a, b) = (at(j), at(j + 1));
-            if clearance(j) + clearance(j + 1) >= (b - a).norm() {
+            let clear = self.clearance[j] + self.clearance[j + 1];
+            if clear * clear >= (b - a).norm_squared() {
                 continue;
             }
             // Only a wall nearer than both points' own, by the tolerance, makes a ridge
