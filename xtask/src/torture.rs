@@ -144,47 +144,6 @@ fn defective_phantom(dir: &Path) -> Result<PathBuf, String> {
     Ok(path)
 }
 
-/// The boundary loops of `mesh` (its open ends), each as its vertices in order along the
-/// triangles' winding.
-fn openings(mesh: &cosserat::cosserat_collide::TriMesh) -> Vec<Vec<u32>> {
-    let mut count = std::collections::HashMap::new();
-    for t in mesh.triangles() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-        }
-    }
-    // Boundary edges as they run in their triangle: a → b.
-    let mut next = std::collections::HashMap::new();
-    for t in mesh.triangles() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if count[&(a.min(b), a.max(b))] == 1 {
-                next.insert(a, b);
-            }
-        }
-    }
-    let mut loops = Vec::new();
-    let mut seen = std::collections::HashSet::new();
-    let mut starts: Vec<u32> = next.keys().copied().collect();
-    starts.sort_unstable();
-    for start in starts {
-        let mut ring = Vec::new();
-        let mut v = start;
-        while seen.insert(v) {
-            ring.push(v);
-            match next.get(&v) {
-                Some(&w) => v = w,
-                None => break,
-            }
-        }
-        if ring.len() >= 3 {
-            loops.push(ring);
-        }
-    }
-    loops
-}
-
 /// Writes `vertices` and 0-based `faces` (any number of corners) as an OBJ file.
 fn write_obj(path: &Path, vertices: &[[f64; 3]], faces: &[Vec<u32>]) -> Result<(), String> {
     let mut text = String::new();
@@ -213,26 +172,18 @@ fn closed_phantom(dir: &Path, entry: [f64; 3]) -> Result<(PathBuf, f64), String>
     let mut faces: Vec<Vec<u32>> = mesh.triangles().iter().map(|t| t.to_vec()).collect();
     let mut port = f64::INFINITY;
     let mut nearest = f64::INFINITY;
-    for ring in openings(&mesh) {
-        let centre = ring
-            .iter()
-            .map(|&v| mesh.vertices()[v as usize])
-            .sum::<nalgebra::Vector3<f64>>()
-            / ring.len() as f64;
-        let radius = ring
-            .iter()
-            .map(|&v| (mesh.vertices()[v as usize] - centre).norm())
-            .sum::<f64>()
-            / ring.len() as f64;
+    for cap in cosserat::cosserat_collide::opening_caps(&mesh) {
+        // Each fan triangle is (centre, rim, rim).
+        let centre = cap[0][0];
+        let radius = cap.iter().map(|t| (t[1] - centre).norm()).sum::<f64>() / cap.len() as f64;
         let d = (centre - nalgebra::Vector3::from(entry)).norm();
         if d < nearest {
             (nearest, port) = (d, radius);
         }
-        let c = vertices.len() as u32;
-        vertices.push([centre.x, centre.y, centre.z]);
-        // Each boundary edge a → b runs along its triangle's winding: the cap runs b → a.
-        for k in 0..ring.len() {
-            faces.push(vec![ring[(k + 1) % ring.len()], ring[k], c]);
+        for t in cap {
+            let base = vertices.len() as u32;
+            vertices.extend(t.iter().map(|v| [v.x, v.y, v.z]));
+            faces.push(vec![base, base + 1, base + 2]);
         }
     }
     let path = dir.join("phantom-closed.obj");

@@ -411,7 +411,6 @@ impl<T: Real> RodMeshContact<T> {
         if self.ridge.is_empty() {
             return;
         }
-        let mut all: Vec<PointContact<T>> = self.contacts.contacts().collect();
         for &(j, normal, on_wall, gap) in &self.ridge {
             self.stats.max_penetration = self.stats.max_penetration.max(-gap);
             for i in [j, j + 1] {
@@ -419,22 +418,14 @@ impl<T: Real> RodMeshContact<T> {
                 if end_gap >= self.own_gap[i as usize] {
                     continue;
                 }
-                let c = PointContact {
+                self.contacts.set(PointContact {
                     point: i,
                     normal: Vec3::new(T::lit(normal.x), T::lit(normal.y), T::lit(normal.z)),
                     gap: T::lit(end_gap),
-                };
-                match all.iter_mut().find(|c| c.point == i) {
-                    Some(old) => *old = c,
-                    None => all.push(c),
-                }
+                });
             }
         }
         self.stats.segment_contacts += self.ridge.len() as u64;
-        self.contacts.clear();
-        for c in all {
-            self.contacts.push(c);
-        }
         self.stats.contacts = self.contacts.len();
         self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
     }

@@ -64,4 +64,4 @@ pub use rods::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
 pub use segment::SegmentNearest;
 pub use sweep::Crossing;
 pub use vessel::{Bulge, Vessel, VesselParams};
-pub use winding::WindingNumber;
+pub use winding::{WindingNumber, opening_caps};

@@ -30,6 +30,7 @@ use nalgebra::Vector3;
 
 use crate::contact::{MeshCollider, TriData, closest_point_triangle};
 use crate::rods::closest_points_segments;
+use crate::sweep::segment_triangle;
 
 /// The part of a segment nearest to the wall.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,7 +60,7 @@ pub(crate) fn segment_triangle_distance2(
     b: &Vector3<f64>,
     c: &Vector3<f64>,
 ) -> (f64, f64) {
-    if let Some(s) = crossing(p, d, a, b, c) {
+    if let Some(s) = segment_triangle(p, d, a, b, c) {
         return (0.0, s);
     }
     let q = p + d;
@@ -80,36 +81,6 @@ pub(crate) fn segment_triangle_distance2(
         }
     }
     best
-}
-
-/// Where the segment `p + s d` passes through triangle `abc` (either side), if it does.
-fn crossing(
-    p: &Vector3<f64>,
-    d: &Vector3<f64>,
-    a: &Vector3<f64>,
-    b: &Vector3<f64>,
-    c: &Vector3<f64>,
-) -> Option<f64> {
-    let e1 = b - a;
-    let e2 = c - a;
-    let h = d.cross(&e2);
-    let det = e1.dot(&h);
-    if det.abs() <= 1e-300 {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let o = p - a;
-    let u = o.dot(&h) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let k = o.cross(&e1);
-    let v = d.dot(&k) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let s = e2.dot(&k) * inv;
-    (0.0..=1.0).contains(&s).then_some(s)
 }
 
 impl MeshCollider {

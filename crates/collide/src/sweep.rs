@@ -18,7 +18,7 @@
 use nalgebra::Vector3;
 
 use crate::bvh::STACK_SIZE;
-use crate::contact::{MeshCollider, TriData};
+use crate::contact::MeshCollider;
 
 /// Relative slack of the barycentric bounds: a segment passing within this fraction of a
 /// triangle's size outside an edge still hits it.
@@ -49,9 +49,15 @@ enum Facing {
 /// The fraction along `from + s d` (`0 ≤ s ≤ 1`) at which the segment meets the triangle, if
 /// it does.
 #[inline]
-fn segment_triangle(from: &Vector3<f64>, d: &Vector3<f64>, t: &TriData) -> Option<f64> {
-    let e1 = t.b - t.a;
-    let e2 = t.c - t.a;
+pub(crate) fn segment_triangle(
+    from: &Vector3<f64>,
+    d: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> Option<f64> {
+    let e1 = b - a;
+    let e2 = c - a;
     let p = d.cross(&e2);
     let det = e1.dot(&p);
     // Parallel to the plane (or degenerate): a segment grazing a wall in its plane does not
@@ -60,7 +66,7 @@ fn segment_triangle(from: &Vector3<f64>, d: &Vector3<f64>, t: &TriData) -> Optio
         return None;
     }
     let inv = 1.0 / det;
-    let s = from - t.a;
+    let s = from - a;
     let u = s.dot(&p) * inv;
     if !(-EDGE_SLACK..=1.0 + EDGE_SLACK).contains(&u) {
         return None;
@@ -137,7 +143,7 @@ impl MeshCollider {
                     if facing == Facing::IntoWall && t.n.dot(&d) >= 0.0 {
                         continue;
                     }
-                    if let Some(f) = segment_triangle(&a, &d, t)
+                    if let Some(f) = segment_triangle(&a, &d, &t.a, &t.b, &t.c)
                         && best.is_none_or(|(b, _)| f < b)
                     {
                         best = Some((f, slot));

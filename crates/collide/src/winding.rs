@@ -244,6 +244,13 @@ fn caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
     caps_of(mesh.vertices(), mesh.triangles())
 }
 
+/// The fans that close every opening of `mesh` (each boundary loop by triangles from its
+/// centroid, the centroid first, wound to continue the wall's orientation): the surface the
+/// inside test closes a mesh with, and a way to close a mesh's open ends.
+pub fn opening_caps(mesh: &TriMesh) -> Vec<Vec<[Vector3<f64>; 3]>> {
+    caps(mesh)
+}
+
 /// [`caps`] of the triangles `triangles` of `vertices` (a part of a mesh).
 pub(crate) fn caps_of(
     vertices: &[Vector3<f64>],

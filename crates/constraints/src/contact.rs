@@ -107,6 +107,21 @@ impl<T: Real> ContactSet<T> {
         }
     }
 
+    /// Makes `c` the contact of its point: replaces the point's contact (its impulses reset)
+    /// if it has one, else pushes it.
+    pub fn set(&mut self, c: PointContact<T>) {
+        let Some(i) = self.point.iter().position(|&p| p == c.point) else {
+            self.push(c);
+            return;
+        };
+        self.gap[i] = c.gap;
+        self.normal_impulse[i] = T::zero();
+        for k in 0..3 {
+            self.normal[k][i] = c.normal[k];
+            self.tangent_impulse[k][i] = T::zero();
+        }
+    }
+
     /// The contacts, in the order they were pushed.
     pub fn contacts(&self) -> impl ExactSizeIterator<Item = PointContact<T>> + '_ {
         let [x, y, z] = &self.normal;

@@ -604,19 +604,18 @@ fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64, radius: f6
     let parallel = NORMAL_TURN.cos();
     let p = &mut w.pinned[s];
     let x = w.x.get(p.point);
-    if -gap > radius {
-        // Deep behind the new wall (a crossing the swept test caught): the crease of its plane
-        // with the old one may be far from the point. Out along the new wall's normal only.
-        let turned = p.crease.is_some() || p.normal.dot(&normal) < parallel;
-        p.normal = normal;
-        p.crease = None;
-        w.x.set(p.point, &(x - normal * gap));
-        return turned;
-    }
     let near = |a: &Vec3<f64>| a.dot(&normal) >= parallel;
     // The wall the point stays on while it is moved out of the new one, and whether the
     // matrix changed.
     let (stay, turned) = match p.crease {
+        // Deep behind the new wall (a crossing the swept test caught): the crease of its plane
+        // with the old one may be far from the point. Out along the new wall's normal only.
+        _ if -gap > radius => {
+            let turned = p.crease.is_some() || !near(&p.normal);
+            p.normal = normal;
+            p.crease = None;
+            (None, turned)
+        }
         Some(m) if near(&m) => {
             p.crease = Some(normal);
             (Some(p.normal), false)
