@@ -308,6 +308,25 @@ impl<T: Real> RodMeshContact<T> {
             .map(move |c| (Vec3::from(c.normal), c.signed_distance - radius))
     }
 
+    /// Whether element `j`, from `a` to `b`, certainly gets no element contact from
+    /// [`Self::segment_contacts`] whatever its points' gaps: its near list of ridge triangles
+    /// exists, is still valid where the element is, and is empty. A caller that reuses a point's
+    /// last contact instead of querying it (`crate::stiff`) may do so only next to such elements,
+    /// since an element's contact depends on its points' exact gaps.
+    pub(crate) fn no_ridge_near(&self, j: usize, a: Vec3<f64>, b: Vec3<f64>, radius: f64) -> bool {
+        let skin = NEAR_SKIN * (radius + self.settings.margin);
+        let (Some(&has), Some(near), Some([from, to])) = (
+            self.seg_has_near.get(j),
+            self.seg_near.get(j),
+            self.seg_anchor.get(j),
+        ) else {
+            return false;
+        };
+        has && near.is_empty()
+            && (a - Vec3::from(*from)).norm() <= skin
+            && (b - Vec3::from(*to)).norm() <= skin
+    }
+
     /// Adds the contacts of elements that come nearer a wall between their points than at
     /// them (see the module docs): each such element's two points get a contact on the plane
     /// through the wall's nearest point across the direction from it to the element, at the

@@ -70,6 +70,9 @@ pub(crate) const MAX_ROUNDS: usize = 4;
 /// 20–35 % less in the phantom (`docs/benchmarks/torture.md`, `docs/stiff-solver.md`).
 const DEPTH_TOLERANCE: f64 = 2e-2;
 
+/// The farthest one iteration of the solve may move a point, as a fraction of the rod's radius.
+const ITERATION_MOVE: f64 = 1.0;
+
 /// How far a touching point may move between two detections of one step before it is queried
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
 const REUSE_DISTANCE: f64 = 0.5;
@@ -194,6 +197,11 @@ impl StiffContacts {
         self.mesh.stats = CollisionStats::default();
     }
 
+    /// The farthest one iteration of the solve may move a point (see `Work::apply`).
+    pub(crate) fn max_iteration_move(&self) -> f64 {
+        ITERATION_MOVE * self.radius
+    }
+
     fn tolerance(&self) -> f64 {
         DEPTH_TOLERANCE * self.radius
     }
@@ -216,7 +224,9 @@ impl StiffContacts {
     /// than the point moves, so the gap passed on is a lower bound (the penetration statistics
     /// an upper bound) and on the same side of every threshold as the exact one. Between the
     /// iterations of a solve the points move little, so most contacts are not queried again,
-    /// and the decisions are those of a full query.
+    /// and the decisions are those of a full query. Points next to an element that may touch a
+    /// ridge are always queried: an element's contact depends on its points' exact gaps
+    /// ([`RodMeshContact::no_ridge_near`]).
     fn detect(&mut self, w: &Work, k: &Consts, reuse: bool) {
         let m = w.n + 1;
         if self.cached.len() != m {
@@ -227,8 +237,14 @@ impl StiffContacts {
         let tol = self.tolerance();
         let reach = REUSE_DISTANCE * tol;
         let margin = self.mesh.settings.margin;
+        let no_ridge = |j: usize| {
+            self.mesh
+                .no_ridge_near(j, w.x.get(j), w.x.get(j + 1), self.radius)
+        };
         for i in 0..m {
             self.skip[i] = reuse
+                && (i == 0 || no_ridge(i - 1))
+                && (i == w.n || no_ridge(i))
                 && self.cached[i].is_some_and(|(_, gap)| {
                     let held = k.inv_mass[i] == 0.0;
                     let stays = match self.slot[i] {

@@ -1197,7 +1197,10 @@ fn direct_solve(
         }
         previous = residual;
         factor.solve(&mut w.rhs);
-        w.apply(k);
+        let max_move = contacts
+            .as_deref()
+            .map_or(f64::INFINITY, |c| c.max_iteration_move());
+        w.apply(k, max_move);
         used += 1;
         pins_changed = contacts.as_deref_mut().is_some_and(|c| {
             c.catch_penetrations(w, k, stiff.reuse_contact_queries)

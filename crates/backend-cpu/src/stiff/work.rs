@@ -418,18 +418,44 @@ impl Work {
     /// Applies the multiplier increments in `rhs` through the Jacobians of the last
     /// [`constraints`](Self::constraints): `Δx = u + M⁻¹ Jᵀ Δλ`, `Δθ = u_θ + K_θ⁻¹ J_θᵀ Δλ`
     /// (the frames turned by `q ← normalise(q ⊗ (1, Δθ/2))`); adds them to `λ`.
-    pub(crate) fn apply(&mut self, k: &Consts) {
+    ///
+    /// A Newton step that would move some point further than `max_move` is shortened, the
+    /// whole step (points, frames and multipliers) by one factor, so that no point moves
+    /// more than that: a damped Newton step along the same direction. With contacts the solve
+    /// passes the rod's radius (`StiffContacts::max_iteration_move`): an iterate that leaps
+    /// (a stiff wire's solve right after its pinned points changed) would otherwise carry
+    /// points millimetres through walls and ridges, where the contact queries then pinned
+    /// them, and the step converged to a state that whipped the wire (the phantom's steel wire
+    /// at 5e-5 s reached 1000 m/s; `docs/stiff-solver.md`).
+    pub(crate) fn apply(&mut self, k: &Consts, max_move: f64) {
         let n = self.n;
-        let rhs = std::mem::take(&mut self.rhs);
+        let mut rhs = std::mem::take(&mut self.rhs);
         self.add_jt(k, &rhs);
         self.project_pinned();
         self.lambda_zero = false;
+        let longest = (0..=n)
+            .map(|i| self.u_x.get(i).norm_squared())
+            .fold(0.0_f64, f64::max)
+            .sqrt();
+        let scale = if longest > max_move {
+            max_move / longest
+        } else {
+            1.0
+        };
+        let fs = F::splat(scale);
+        if scale < 1.0 {
+            for d in rhs.iter_mut() {
+                for j in chunks(n) {
+                    d.store(j, d.load(j).scale(fs));
+                }
+            }
+        }
         for i in chunks(n + 1) {
-            self.x.store(i, self.x.load(i) + self.u_x.load(i));
+            self.x.store(i, self.x.load(i) + self.u_x.load(i).scale(fs));
         }
         let half = F::splat(0.5);
         for j in chunks(n) {
-            let th = self.u_th.load(j) + self.dtheta.load(j).mul(self.inv_k.load(j));
+            let th = (self.u_th.load(j) + self.dtheta.load(j).mul(self.inv_k.load(j))).scale(fs);
             let r = self.q.load(j).mul(Q {
                 w: F::ONE,
                 v: th.scale(half),
@@ -1131,6 +1157,67 @@ mod tests {
     /// densely with each pinned point's inverse mass `w (I − n nᵀ)` (sliding) or `0` (sticking),
     /// plus half the axial compliance per sticking point on its elements' stretch rows; and the
     /// projected update `Δx = K⁻¹ Jᵀ μ` of those points.
+    /// A Newton step that would move a point further than the limit is shortened as a whole:
+    /// every point's move, every frame's turn and every multiplier's increment is the full
+    /// step's times one factor, and the farthest point moves exactly the limit.
+    #[test]
+    fn a_limited_newton_step_is_the_full_step_shortened() {
+        let n = 11;
+        let (k, mut w) = setup(n);
+        w.constraints(&k);
+        w.precondition(&k, 1.0, true);
+        w.rhs(&k);
+        let mut asm = Assembled::default();
+        w.assemble(&k, &mut asm);
+        let mut factor = crate::stiff::direct::BlockTridiagonal::default();
+        factor.factor(&asm);
+        factor.solve(&mut w.rhs);
+        let start = w.clone();
+        let mut full = w.clone();
+        full.apply(&k, f64::INFINITY);
+        let moved = |a: &Work, i: usize| a.x.get(i) - start.x.get(i);
+        let longest = (0..=n).map(|i| moved(&full, i).norm()).fold(0.0, f64::max);
+        assert!(longest > 0.0);
+        let limit = 0.3 * longest;
+        w.apply(&k, limit);
+        let scale = limit / longest;
+        let farthest = (0..=n).map(|i| moved(&w, i).norm()).fold(0.0, f64::max);
+        assert!(
+            (farthest - limit).abs() <= 1e-12 * limit,
+            "{farthest} vs {limit}"
+        );
+        for i in 0..=n {
+            close(&moved(&w, i), &(moved(&full, i) * scale), longest, "point");
+        }
+        // The frames turn by `q ← normalise(q ⊗ (1, Δθ/2))`: `Δθ = 2 v / w` of `q̄_start q`.
+        let turn = |a: &Work, j: usize| {
+            let r = start.q.get(j).conjugate() * a.q.get(j);
+            r.imag() * (2.0 / r.w)
+        };
+        for j in 0..n {
+            let (t, tf) = (turn(&w, j), turn(&full, j) * scale);
+            assert!(
+                (t - tf).norm() <= 1e-9 * tf.norm(),
+                "frame {j}: {t} vs {tf}"
+            );
+            for c in 0..2 {
+                let (l, lf) = (w.lambda[c].get(j), full.lambda[c].get(j) * scale);
+                close(&l, &lf, lf.amax(), "multiplier");
+            }
+        }
+        // Within the limit the step is the full one.
+        let mut within = start.clone();
+        within.apply(&k, 2.0 * longest);
+        for i in 0..=n {
+            close(
+                &moved(&within, i),
+                &moved(&full, i),
+                longest,
+                "unlimited point",
+            );
+        }
+    }
+
     #[test]
     fn pinned_points_enter_the_newton_matrix_with_projected_inverse_masses() {
         let n = 9;
