@@ -430,3 +430,60 @@ fn an_element_lands_on_a_ridge_between_its_points_at_a_millisecond() {
         assert!(deepest <= 0.02 * r, "r = {r}: {deepest} m into the roof");
     }
 }
+
+/// The statistics' `max_penetration` is the deepest any point's sphere reached into the wall at
+/// the end of any step, as the oracle measures it after every step (the point's distance from
+/// the mesh by a nearest-triangle query, inside the lumen by the winding number): a soft wire
+/// (10 cm) pushed at 0.2 m/s into the procedural vessel's curved wall at dt 1 ms, with the
+/// contact queries' reuse (the default), whose gaps are only bounds. The held point is left out
+/// of both (the hand answers for it). Before the exact measure, the statistics reported 7.4 µm
+/// where the oracle found 1.8 (the bounds of the reused queries).
+#[test]
+fn max_penetration_is_the_deepest_sphere_the_oracle_finds() {
+    use cosserat_backend_cpu::PrescribedMotion;
+    use cosserat_collide::Vessel;
+    let vessel = Vessel::default_tree().unwrap();
+    let collider = Arc::new(MeshCollider::new(vessel.mesh.clone()));
+    let entry = Vec3::from(vessel.entry_point);
+    let along = Vec3::from(vessel.entry_direction);
+    let push = PrescribedMotion::push(along * 0.2);
+    let ends = [EndCondition::clamped().driven(push), EndCondition::free()];
+    let material = Material::new(5e6, 5e6 / 3.0, 1100.0, 4e-4);
+    let r = material.radius;
+    let mut rod = rod_along(material, entry, along, 0.1, 40, ends).with_mesh(contact(
+        collider.clone(),
+        0.08,
+        0.05,
+    ));
+    let s = settings(1e-3, Vec3::zeros());
+    let mut sc = StiffScratch::new();
+    let mut oracle = 0.0_f64;
+    for step in 0..500 {
+        run(&mut rod, &s, &mut sc, step as f64 * 1e-3, 1);
+        for p in &rod.state.positions[1..] {
+            let p = [p.x, p.y, p.z];
+            assert!(
+                collider.lumen_winding(&p) >= 0.5,
+                "step {step}: a point outside"
+            );
+            if let Some(near) = collider.nearest(&p, r) {
+                oracle = oracle.max(r - near.distance);
+            }
+        }
+    }
+    let stats = rod.collision_stats().unwrap();
+    assert!(stats.max_contacts >= 3, "the wire met the wall: {stats:?}");
+    assert!(oracle > 0.0, "the wire pressed on the wall");
+    assert!(stats.reused_queries > 0, "{stats:?}");
+    assert_eq!(
+        stats.steps,
+        sc.report().steps,
+        "the statistics count the kept steps"
+    );
+    assert_eq!(stats.escaped_points, 0);
+    assert!(
+        (stats.max_penetration - oracle).abs() <= 1e-12,
+        "statistics {} m, oracle {oracle} m",
+        stats.max_penetration
+    );
+}

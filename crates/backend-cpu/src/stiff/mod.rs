@@ -681,6 +681,7 @@ fn step_fixed<T: Real>(
     let mut result = Ok(());
     // What the batch's steps report, added to `report` only if the batch is kept.
     let mut kept = StiffReport::default();
+    let contacts_at_start = contacts.as_deref().map(StiffContacts::checkpoint);
     for step in 0..steps {
         let t = time + step as f64 * h;
         // The step the implicit solve takes: `h`, or `2h/3` for a BDF2 step with history.
@@ -774,7 +775,7 @@ fn step_fixed<T: Real>(
         // to zero before reading it.
         std::mem::swap(&mut w.lambda_prev, &mut w.lambda);
         if let Some(c) = contacts.as_deref_mut() {
-            c.end_step(w);
+            c.end_step(w, k);
         }
         kept.steps += 1;
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
@@ -824,6 +825,9 @@ fn step_fixed<T: Real>(
     if result.is_err() && keep_start_on_divergence {
         // The caller retakes the batch from its start, which `rod.state` still holds.
         w.shadow = false;
+        if let (Some(c), Some(start)) = (contacts.as_deref_mut(), contacts_at_start) {
+            c.restore(start);
+        }
         return result.map(|()| stats);
     }
     report.steps += kept.steps;
