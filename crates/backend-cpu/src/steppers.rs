@@ -273,8 +273,12 @@ fn summarise(settings: &StiffSettings, scratch: &[StiffScratch], steps: u64) -> 
         s.unconverged_steps += r.unconverged_steps;
         s.halved_steps += r.halved_steps;
         s.axial_steps += r.axial_steps;
-        s.max_residual = s.max_residual.max(r.max_residual);
+        if r.max_residual > s.max_residual {
+            s.max_residual = r.max_residual;
+            s.worst_step = r.worst_step;
+        }
         s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
+        s.last_unconverged_step = s.last_unconverged_step.max(r.last_unconverged_step);
     }
     s
 }

@@ -124,6 +124,10 @@ pub struct StiffReport {
     /// [`StiffSettings::tolerance`](crate::StiffSettings::tolerance), raised for an `f32` rod to the strain its positions
     /// resolve (which depends on how far the rod is from the origin).
     pub max_tolerance: f64,
+    /// The step (its index) that ended with [`max_residual`](Self::max_residual).
+    pub worst_step: u64,
+    /// The last step (its index) that ended above its tolerance, if any.
+    pub last_unconverged_step: Option<u64>,
 }
 
 /// What the stiff solver did since the simulation was built, over all rods
@@ -154,6 +158,12 @@ pub struct StiffSummary {
     /// The largest residual tolerance a rod-step was held to (the settings', raised for `f32`
     /// rods to the strain their positions resolve).
     pub max_tolerance: f64,
+    /// The step (its index, of the simulation's steps) at which a rod ended with
+    /// [`max_residual`](Self::max_residual).
+    pub worst_step: u64,
+    /// The last step (its index) at which a rod ended above its tolerance, if any: a run
+    /// whose only loose steps were early transients ends converged.
+    pub last_unconverged_step: Option<u64>,
 }
 
 impl StiffSummary {

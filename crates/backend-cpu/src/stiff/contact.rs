@@ -44,10 +44,8 @@
 //!    element sticks where it is rather than where the step began;
 //! 4. if anything changed, the solve continues from its current multipliers, for at most
 //!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
-//!    changed (a change of kinetic friction only moves the targets `x̃`, and only a point's
-//!    first friction of the step counts as a change: later changes ride along with the next
-//!    round, if any, and the next step); positions a last change moves onto the wall are not
-//!    solved again (the next step does).
+//!    changed (a change of kinetic friction only moves the targets `x̃`); positions a last
+//!    change moves onto the wall are not solved again (the next step does).
 //!
 //! New contacts start sliding rather than sticking: sticking first made the pushed guidewire
 //! of `scenes/guidewire-insertion.toml` end steps unconverged and compressed (largest strain
@@ -506,14 +504,11 @@ impl StiffContacts {
                         changed = true;
                     }
                 } else if mu_k > 0.0 && slip.norm() > 0.0 {
-                    // Kinetic friction against the slip, from this solve's normal impulse. A
-                    // point's first friction calls for another round; a later change of it
-                    // does not (it takes effect if another change calls for a round, and
-                    // at the next step, which starts from this normal impulse): chasing it
-                    // took 1.6 of the phantom's 3.9 rounds a step (`steel`) for a friction
-                    // one step behind at most.
+                    // Kinetic friction against the slip, from this solve's normal impulse; a
+                    // change of more than a tenth is solved again (see `docs/stiff-solver.md`
+                    // for what a friction one step behind cost).
                     let push = -slip.normalize() * (mu_k * pn / mass);
-                    if p.push == Vec3::zeros() {
+                    if (push - p.push).norm() > 0.1 * push.norm() {
                         changed = true;
                     }
                     w.x_pred.set(i, &(x_pred + push - p.push));

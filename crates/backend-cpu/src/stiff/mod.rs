@@ -780,9 +780,13 @@ fn step_fixed<T: Real>(
         kept.steps += 1;
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
             kept.unconverged_steps += 1;
+            kept.last_unconverged_step = Some(first_step + step);
         }
         kept.max_tolerance = kept.max_tolerance.max(tolerance);
-        kept.max_residual = kept.max_residual.max(residual);
+        if residual > kept.max_residual {
+            kept.max_residual = residual;
+            kept.worst_step = first_step + step;
+        }
         // 3. Velocities from the positions and frames. Drag of the medium, implicit
         // (`v (1 + h γ) = v_solved`) and applied after the solve so that it removes kinetic
         // energy without changing static equilibria.
@@ -834,7 +838,11 @@ fn step_fixed<T: Real>(
     report.unconverged_steps += kept.unconverged_steps;
     report.axial_steps += kept.axial_steps;
     report.max_tolerance = report.max_tolerance.max(kept.max_tolerance);
-    report.max_residual = report.max_residual.max(kept.max_residual);
+    if kept.max_residual > report.max_residual {
+        report.max_residual = kept.max_residual;
+        report.worst_step = kept.worst_step;
+    }
+    report.last_unconverged_step = report.last_unconverged_step.max(kept.last_unconverged_step);
     w.x.write_to(&mut rod.state.positions);
     w.v.write_to(&mut rod.state.velocities);
     w.q.write_to(&mut rod.state.frames);
@@ -1138,6 +1146,9 @@ fn solve_step<T: Real>(
     (residual, tolerance)
 }
 
+/// The most iterations a round of the direct solve adds for Newton steps that were shortened.
+const SHORTENED_EXTRA: usize = 4;
+
 /// The Newton iterations of one round of the direct solve (step 2 of the module docs), from
 /// the multipliers in `w`; `first` for the first round of a step (the frames' geometric bound
 /// then starts from the previous step's multipliers). Returns the last residual and the
@@ -1159,8 +1170,11 @@ fn direct_solve(
     // Whether the last iteration pinned points (the matrix changed).
     let mut pins_changed = false;
     let mut previous = f64::INFINITY;
-    for it in 0..=stiff.iterations {
-        let last = it == stiff.iterations;
+    // Iterations allowed: the settings', and one more for each shortened one (see below).
+    let mut cap = stiff.iterations;
+    let mut it = 0;
+    loop {
+        let last = it >= cap;
         if last && stiff.tolerance <= 0.0 {
             break;
         }
@@ -1204,7 +1218,12 @@ fn direct_solve(
         let max_move = contacts
             .as_deref()
             .map_or(f64::INFINITY, |c| c.max_iteration_move());
-        w.apply(k, max_move);
+        // A shortened Newton step (`Work::apply`) is only part of an iteration: it earns
+        // another, up to `SHORTENED_EXTRA` in a round.
+        if w.apply(k, max_move) && cap < stiff.iterations + SHORTENED_EXTRA {
+            cap += 1;
+        }
+        it += 1;
         used += 1;
         pins_changed = contacts.as_deref_mut().is_some_and(|c| {
             c.catch_penetrations(w, k, stiff.reuse_contact_queries)
