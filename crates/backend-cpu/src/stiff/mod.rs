@@ -1146,9 +1146,6 @@ fn solve_step<T: Real>(
     (residual, tolerance)
 }
 
-/// The most iterations a round of the direct solve adds for Newton steps that were shortened.
-const SHORTENED_EXTRA: usize = 4;
-
 /// The Newton iterations of one round of the direct solve (step 2 of the module docs), from
 /// the multipliers in `w`; `first` for the first round of a step (the frames' geometric bound
 /// then starts from the previous step's multipliers). Returns the last residual and the
@@ -1170,11 +1167,8 @@ fn direct_solve(
     // Whether the last iteration pinned points (the matrix changed).
     let mut pins_changed = false;
     let mut previous = f64::INFINITY;
-    // Iterations allowed: the settings', and one more for each shortened one (see below).
-    let mut cap = stiff.iterations;
-    let mut it = 0;
-    loop {
-        let last = it >= cap;
+    for it in 0..=stiff.iterations {
+        let last = it == stiff.iterations;
         if last && stiff.tolerance <= 0.0 {
             break;
         }
@@ -1218,12 +1212,7 @@ fn direct_solve(
         let max_move = contacts
             .as_deref()
             .map_or(f64::INFINITY, |c| c.max_iteration_move());
-        // A shortened Newton step (`Work::apply`) is only part of an iteration: it earns
-        // another, up to `SHORTENED_EXTRA` in a round.
-        if w.apply(k, max_move) && cap < stiff.iterations + SHORTENED_EXTRA {
-            cap += 1;
-        }
-        it += 1;
+        w.apply(k, max_move);
         used += 1;
         pins_changed = contacts.as_deref_mut().is_some_and(|c| {
             c.catch_penetrations(w, k, stiff.reuse_contact_queries)

@@ -427,7 +427,7 @@ impl Work {
     /// points millimetres through walls and ridges, where the contact queries then pinned
     /// them, and the step converged to a state that whipped the wire (the phantom's steel wire
     /// at 5e-5 s reached 1000 m/s; `docs/stiff-solver.md`).
-    pub(crate) fn apply(&mut self, k: &Consts, max_move: f64) -> bool {
+    pub(crate) fn apply(&mut self, k: &Consts, max_move: f64) {
         let n = self.n;
         let mut rhs = std::mem::take(&mut self.rhs);
         self.add_jt(k, &rhs);
@@ -466,7 +466,6 @@ impl Work {
             }
         }
         self.rhs = rhs;
-        scale < 1.0
     }
 
     /// Assembles `J K⁻¹ Jᵀ + α̃` (Deul et al. 2018, eq. 17; `direct.rs`) at the Jacobians of the
