@@ -259,11 +259,16 @@ fn explicit_stable(p: &Preset, dt: f64, steps: u64) -> bool {
     let mut r = scenario(p, length(), elements(), false);
     let mut s = settings(dt);
     s.divergence_strain = 0.05;
+    // A run whose points reach the command-line tool's speed limit (1000 m/s) has diverged
+    // too. Even so these batches pass at 2.6 (nitinol) to 10 (suture) times the step at which
+    // the tool's run of the same pendulum diverges (`docs/stiff-solver.md`, "Why a second
+    // scheme"; not yet traced).
     step_rod_batch(&mut r, &s, 0.0, 0, 0, steps).is_ok()
         && r.state
             .frames
             .iter()
             .all(|q| q.coords.iter().all(|c| c.is_finite()))
+        && r.state.velocities.iter().all(|v| v.norm() < 1e3)
 }
 
 /// The environment variable `key` parsed, or `default` when it is unset or does not parse.
