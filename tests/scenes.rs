@@ -193,3 +193,44 @@ fn the_stiff_scheme_takes_bindings_and_refuses_rod_contact() {
         "{err}"
     );
 }
+
+/// `solver.stability_safety` sets the fraction of the estimated critical step below which the
+/// explicit scheme runs without a warning: at 0.8 of the estimate the default (0.5) warns and
+/// 0.9 does not; a step above the estimate is refused whatever the fraction; a fraction outside
+/// (0, 1] is refused naming the field.
+#[test]
+fn the_stability_safety_fraction_is_the_users() {
+    use cosserat::cosserat_model::Material;
+    use cosserat::cosserat_model::stability::{StabilityInput, stable_step};
+    // The estimate of GOOD's rod: E = 1 MPa, ν = 0.5 (the default), 8 elements of 12.5 mm.
+    let material = Material::new(1e6, 1e6 / 3.0, 1000.0, 0.002);
+    let hc = stable_step(&StabilityInput::new(&material, 0.1 / 8.0, false)).critical_dt;
+    let build = |dt: f64, safety: Option<f64>| -> Result<cosserat::Simulation, String> {
+        let mut set = vec![("solver.dt".to_string(), format!("{dt:e}"))];
+        if let Some(f) = safety {
+            set.push(("solver.stability_safety".to_string(), format!("{f:?}")));
+        }
+        let (b, _, _) =
+            parse_scene(Path::new("good.toml"), GOOD, &set).map_err(|e| e.to_string())?;
+        b.build().map_err(|e| e.to_string())
+    };
+    let warned = |sim: &cosserat::Simulation| {
+        sim.warnings()
+            .iter()
+            .any(|w| w.contains("below the estimated critical step"))
+    };
+    assert!(warned(&build(0.8 * hc, None).unwrap()));
+    assert!(!warned(&build(0.8 * hc, Some(0.9)).unwrap()));
+    assert!(!warned(&build(0.4 * hc, None).unwrap()));
+    assert!(build(1.1 * hc, Some(1.0)).is_err());
+    for bad in [0.0, 1.5, -0.2] {
+        let e = match build(0.4 * hc, Some(bad)) {
+            Ok(_) => panic!("{bad} accepted"),
+            Err(e) => e,
+        };
+        assert!(
+            e.contains("solver.stability_safety") && e.contains(&format!("{bad}")),
+            "{e}"
+        );
+    }
+}

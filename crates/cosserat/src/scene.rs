@@ -218,6 +218,9 @@ pub struct SolverSection {
     /// Refuse a time step beyond the estimated stable step of the explicit scheme (default
     /// true).
     pub check_stability: bool,
+    /// The fraction of the estimated critical step of the explicit scheme below which a step is
+    /// accepted without a warning (default 0.5, `SimulationBuilder::stability_safety`).
+    pub stability_safety: f64,
     /// Stop a run whose total energy grows beyond the work its loads and driven ends could
     /// have done (default true; `cosserat::energy_watch`).
     pub energy_check: bool,
@@ -273,6 +276,7 @@ impl Default for SolverSection {
             divergence_speed: 1e3,
             constraint_solver: "iterative".into(),
             check_stability: true,
+            stability_safety: cosserat_model::stability::SAFETY,
             energy_check: true,
             scheme: "explicit".into(),
             stiff: None,
@@ -546,6 +550,14 @@ impl Checker<'_> {
         }
     }
 
+    fn fraction(&self, field: &str, v: f64) -> Result<f64, SceneError> {
+        if v > 0.0 && v <= 1.0 {
+            Ok(v)
+        } else {
+            Err(self.invalid(field, v, "expected a number in (0, 1]"))
+        }
+    }
+
     fn non_negative(&self, field: &str, v: f64) -> Result<f64, SceneError> {
         if v.is_finite() && v >= 0.0 {
             Ok(v)
@@ -636,6 +648,7 @@ impl Checker<'_> {
             .divergence_strain(divergence_strain)
             .divergence_speed(self.positive("solver.divergence_speed", s.divergence_speed)?)
             .check_stability(s.check_stability)
+            .stability_safety(self.fraction("solver.stability_safety", s.stability_safety)?)
             .energy_check(s.energy_check)
             .direct_constraints(match s.constraint_solver.as_str() {
                 "iterative" => false,
