@@ -198,20 +198,22 @@ pub(crate) fn elastic_forces<T: Real>(
             let (t0, t1, t2) = (ex * inv_len, ey * inv_len, ez * inv_len);
             let (x, y, z, w) = (qx[j], qy[j], qz[j], qw[j]);
             // Directors d1, d2, d3 of the frame.
+            // Directors in the homogeneous form (`cosserat_model::quat::directors` says why).
+            let (ww, xx, yy, zz) = (w * w, x * x, y * y, z * z);
             let d1 = (
-                one - two * (y * y + z * z),
+                ww + xx - yy - zz,
                 two * (x * y + w * z),
                 two * (x * z - w * y),
             );
             let d2 = (
                 two * (x * y - w * z),
-                one - two * (x * x + z * z),
+                ww - xx + yy - zz,
                 two * (y * z + w * x),
             );
             let d3 = (
                 two * (x * z + w * y),
                 two * (y * z - w * x),
-                one - two * (x * x + y * y),
+                ww - xx - yy + zz,
             );
             let t_d3 = t0 * d3.0 + t1 * d3.1 + t2 * d3.2;
             let c = kp[j];

@@ -21,10 +21,12 @@ fn quat_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
 }
 
 // Rotates the world vector v into body coordinates (inverse of quat_rotate).
+// The homogeneous form (v (w² − |u|²) + 2 u (u·v) + 2 w u × v): for a quaternion normalised in
+// f32 it is a rotation scaled by |q|², so the small components the parallel penalty reads stay
+// small (cosserat_model::quat::directors says what the other form cost).
 fn quat_rotate_inv(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
     let u = -q.xyz;
-    let t = cross(u, v) * 2.0;
-    return v + t * q.w + cross(u, t);
+    return v * (q.w * q.w - dot(u, u)) + u * (2.0 * dot(u, v)) + cross(u, v) * (2.0 * q.w);
 }
 
 // The third director d3 = q e3 q̄.
@@ -32,7 +34,7 @@ fn quat_d3(q: vec4<f32>) -> vec3<f32> {
     return vec3<f32>(
         2.0 * (q.x * q.z + q.w * q.y),
         2.0 * (q.y * q.z - q.w * q.x),
-        1.0 - 2.0 * (q.x * q.x + q.y * q.y),
+        q.w * q.w - q.x * q.x - q.y * q.y + q.z * q.z,
     );
 }
 
