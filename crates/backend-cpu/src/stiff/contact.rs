@@ -123,12 +123,6 @@ enum Touch {
     Slide(f64),
 }
 
-/// See [`StiffContacts::checkpoint`].
-pub(crate) struct Checkpoint {
-    last: Vec<Touch>,
-    stats: CollisionStats,
-}
-
 /// The mesh contact state of one rod in the stiff scheme.
 #[derive(Clone, Debug)]
 pub(crate) struct StiffContacts {
@@ -150,6 +144,9 @@ pub(crate) struct StiffContacts {
     /// into the lumen, force [N] (normal and friction).
     forces: Vec<(usize, Vec3<f64>, Vec3<f64>)>,
     pub(crate) stats: CollisionStats,
+    /// `last` and `stats` where the current batch of steps began ([`Self::checkpoint`]).
+    last_at_start: Vec<Touch>,
+    stats_at_start: CollisionStats,
 }
 
 impl StiffContacts {
@@ -167,6 +164,8 @@ impl StiffContacts {
             skip: Vec::new(),
             forces: Vec::new(),
             stats: CollisionStats::default(),
+            last_at_start: Vec::new(),
+            stats_at_start: CollisionStats::default(),
         }
     }
 
@@ -189,22 +188,20 @@ impl StiffContacts {
         &self.forces
     }
 
-    /// What a batch of steps changes in the contact state that outlives a step: how each point
-    /// touched at the end of the last step, and the statistics. A batch that diverges and is
-    /// retaken from its start ([`Self::restore`]) must not leave its discarded steps in them:
-    /// a failed try's penetration is no state the run was ever in, and its touches would start
-    /// the retaken step.
-    pub(crate) fn checkpoint(&self) -> Checkpoint {
-        Checkpoint {
-            last: self.last.clone(),
-            stats: self.stats,
-        }
+    /// Keeps what a batch of steps changes in the contact state that outlives a step: how each
+    /// point touched at the end of the last step, and the statistics. A batch that diverges and
+    /// is retaken from its start ([`Self::restore`]) must not leave its discarded steps in
+    /// them: a failed try's penetration is no state the run was ever in, and its touches would
+    /// start the retaken step. Kept in buffers of its own: no allocation per batch.
+    pub(crate) fn checkpoint(&mut self) {
+        self.last_at_start.clone_from(&self.last);
+        self.stats_at_start = self.stats;
     }
 
     /// Puts back what [`Self::checkpoint`] kept.
-    pub(crate) fn restore(&mut self, checkpoint: Checkpoint) {
-        self.last = checkpoint.last;
-        self.stats = checkpoint.stats;
+    pub(crate) fn restore(&mut self) {
+        self.last.clone_from(&self.last_at_start);
+        self.stats = self.stats_at_start;
     }
 
     /// Forgets the contacts of earlier steps and the statistics (see `StiffScratch::prepare`).
@@ -260,8 +257,6 @@ impl StiffContacts {
         };
         for i in 0..m {
             self.skip[i] = reuse
-                && (i == 0 || no_ridge(i - 1))
-                && (i == w.n || no_ridge(i))
                 && self.cached[i].is_some_and(|(_, gap)| {
                     let held = k.inv_mass[i] == 0.0;
                     let stays = match self.slot[i] {
@@ -272,7 +267,9 @@ impl StiffContacts {
                         && gap - reach > -self.radius
                         && (held || stays)
                         && (w.x.get(i) - self.queried_at[i]).norm() < reach
-                });
+                })
+                && (i == 0 || no_ridge(i - 1))
+                && (i == w.n || no_ridge(i));
         }
         // Swept from where the step began (in the lumen): a point the solve moved across a
         // wall, beyond its sphere's reach, is caught where it crossed.
@@ -616,23 +613,28 @@ impl StiffContacts {
                 continue;
             }
             let p = [x.x, x.y, x.z];
-            // Behind the wall by its bound: the inside test says whether it is.
-            let out = bound < -radius
-                && if collider.encloses_volume() {
+            // Behind the wall by its bound: the inside test says whether it is. One distance
+            // query either way.
+            let (near, out) = if bound < -radius {
+                let near = collider.nearest(&p, f64::INFINITY);
+                let out = if collider.encloses_volume() {
                     collider.lumen_winding(&p) < 0.5
                 } else {
-                    collider
-                        .nearest(&p, f64::INFINITY)
-                        .is_some_and(|n| n.signed_distance < 0.0)
+                    near.is_some_and(|n| n.signed_distance < 0.0)
                 };
-            if out {
-                outside += 1;
-                if let Some(near) = collider.nearest(&p, f64::INFINITY) {
-                    deepest = deepest.max(radius + near.distance);
-                }
-            } else if let Some(near) = collider.nearest(&p, radius - deepest) {
-                deepest = deepest.max(radius - near.distance);
+                (near, out)
+            } else {
+                (collider.nearest(&p, radius - deepest), false)
+            };
+            if let Some(near) = near {
+                let depth = if out {
+                    radius + near.distance
+                } else {
+                    radius - near.distance
+                };
+                deepest = deepest.max(depth);
             }
+            outside += usize::from(out);
         }
         (deepest, outside)
     }

@@ -681,7 +681,9 @@ fn step_fixed<T: Real>(
     let mut result = Ok(());
     // What the batch's steps report, added to `report` only if the batch is kept.
     let mut kept = StiffReport::default();
-    let contacts_at_start = contacts.as_deref().map(StiffContacts::checkpoint);
+    if let Some(c) = contacts.as_deref_mut() {
+        c.checkpoint();
+    }
     for step in 0..steps {
         let t = time + step as f64 * h;
         // The step the implicit solve takes: `h`, or `2h/3` for a BDF2 step with history.
@@ -829,8 +831,8 @@ fn step_fixed<T: Real>(
     if result.is_err() && keep_start_on_divergence {
         // The caller retakes the batch from its start, which `rod.state` still holds.
         w.shadow = false;
-        if let (Some(c), Some(start)) = (contacts.as_deref_mut(), contacts_at_start) {
-            c.restore(start);
+        if let Some(c) = contacts.as_deref_mut() {
+            c.restore();
         }
         return result.map(|()| stats);
     }
