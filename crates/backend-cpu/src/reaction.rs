@@ -13,10 +13,9 @@
 //! and `J_{c,k}` is the impulse constraint `c` would have given the point had it been free: for
 //! the end's distance constraint that is minus the impulse it gave its other point (measured
 //! inside the red–black or Gauss–Seidel sweeps), for a binding or rod–rod contact it is the
-//! kinematic point's share, recorded by [`cosserat_constraints::PointVelocities`]. A clamped end also
-//! holds its frame; its torque is the Euler balance of the held frame,
-//! `M = R I (ω_prescribed − ω_integrated) / h` in world coordinates, with `ω_integrated` the
-//! body angular velocity the torques alone would have given it.
+//! kinematic point's share, recorded by [`cosserat_constraints::PointVelocities`]. A clamp holds
+//! the end frame through its node (`cosserat_model::rod::EndNode`); its torque is the one that
+//! node gives the end frame, in world coordinates.
 //!
 //! [`EndReaction`] is the wrench the holder applies *to the rod* (the support reaction of
 //! statics: a clamped cantilever under gravity gets `+W` upwards); a haptic device renders its
@@ -34,8 +33,7 @@
 //! too.
 
 use cosserat_constraints::KinematicImpulses;
-use cosserat_model::quat::rotate;
-use cosserat_model::{Quat, Real, Vec3};
+use cosserat_model::{Real, Vec3};
 pub use cosserat_problem::EndReaction;
 
 /// Default cut-off of the reaction low-pass filter [Hz]: well below a haptic loop's 1 kHz and
@@ -99,20 +97,11 @@ impl<T: Real> Reactions<T> {
         self.force_pre[end] = (v_prescribed - v_before) * (mass / h) - force;
     }
 
-    /// A clamped end's frame `q`, its body inertia, the integrated and the prescribed body
-    /// angular velocities.
+    /// A clamped end's torque on the rod (world frame): what its clamp node gives the end
+    /// frame.
     #[inline]
-    pub(crate) fn record_frame(
-        &mut self,
-        end: usize,
-        q: &Quat<T>,
-        inertia: Vec3<T>,
-        w_integrated: Vec3<T>,
-        w_prescribed: Vec3<T>,
-        h: T,
-    ) {
-        let body = (w_prescribed - w_integrated).component_mul(&inertia) / h;
-        self.torque[end] = rotate(q, &body);
+    pub(crate) fn record_torque(&mut self, end: usize, torque: Vec3<T>) {
+        self.torque[end] = torque;
     }
 
     /// After the constraints: `distance[e]` is the impulse the end's distance constraint gave

@@ -7,9 +7,11 @@ use crate::soa::{self, SoaParams, SoaState};
 use cosserat_constraints::{
     ContactSet, KinematicImpulses, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa,
 };
-use cosserat_model::energy::{bend_damping_node, stretch_damping_element};
-use cosserat_model::quat::rotate_inv;
-use cosserat_model::{Real, RodParams, RodState, Vec3};
+use cosserat_model::energy::{
+    bend_damping_node, bend_twist_node, clamp_damping, stretch_damping_element,
+};
+use cosserat_model::quat::{exp_rotation, rotate};
+use cosserat_model::{Quat, Real, RodParams, RodState, Vec3};
 use cosserat_problem::CollisionStats;
 use cosserat_problem::EndCondition;
 use cosserat_problem::EndReaction;
@@ -224,6 +226,10 @@ impl<T: Real> CpuRod<T> {
         if old.kind == condition.kind {
             return;
         }
+        if condition.holds_frame() {
+            // The clamp closes on the end frame where it is.
+            self.state.seat_clamp(&self.params, end);
+        }
         let n = self.elements();
         let point = if end == 0 { 0 } else { n };
         self.params.inv_masses[point] = if condition.holds_point() {
@@ -401,23 +407,29 @@ pub(crate) fn before_constraints<T: Real>(
     for load in &rod.loads {
         w.f.set(load.point, w.f.get(load.point) + load.force);
     }
+    // A clamp holds the end frame through its node (`cosserat_model::rod::EndNode`); the clamp
+    // frame then turns with the clamp's prescribed rotation.
+    for (e, (end, frame)) in rod.ends.iter().zip([0, n - 1]).enumerate() {
+        if end.holds_frame() {
+            let omega = end.velocities_at(t).1;
+            let torque = clamp_torque(w, &rod.state.clamp_frames[e], &rod.params, e, frame, omega);
+            w.tq.set(frame, w.tq.get(frame) + torque);
+            if let Some(rx) = rod.reaction.as_deref_mut() {
+                rx.record_torque(e, rotate(&w.frame(frame), &torque));
+            }
+            let turned = exp_rotation(&(omega * h)) * rod.state.clamp_frames[e];
+            rod.state.clamp_frames[e] = turned / turned.norm();
+        }
+    }
     soa::integrate_velocities(w, p, h);
-    // Held ends follow their prescribed motion exactly.
-    for (e, (end, (point, frame))) in rod.ends.iter().zip([(0, 0), (n, n - 1)]).enumerate() {
+    // Held end points follow their prescribed motion exactly.
+    for (e, (end, point)) in rod.ends.iter().zip([0, n]).enumerate() {
         if end.holds_point() {
-            let (v, omega) = end.velocities_at(t);
+            let v = end.velocities_at(t).0;
             if let Some(rx) = rod.reaction.as_deref_mut() {
                 rx.record_point(e, p.masses[point], w.f.get(point), w.v.get(point), v, h);
             }
             w.v.set(point, v);
-            if end.holds_frame() {
-                let q = w.frame(frame);
-                let body = rotate_inv(&q, &omega);
-                if let Some(rx) = rod.reaction.as_deref_mut() {
-                    rx.record_frame(e, &q, p.inertia.get(frame), w.w.get(frame), body, h);
-                }
-                w.w.set(frame, body);
-            }
         }
     }
     if let Some(guide) = &rod.guide {
@@ -433,6 +445,34 @@ pub(crate) fn before_constraints<T: Real>(
             rod.params.radius.to_f64(),
             Motion::Velocity([&w.v.x, &w.v.y, &w.v.z], h.to_f64()),
         );
+    }
+}
+
+/// The body torque the clamp of end `e` gives the end frame `frame` of the working layout: its
+/// node's elasticity and damping against the clamp frame `clamp`, which turns at the world
+/// angular velocity `omega`.
+#[inline]
+fn clamp_torque<T: Real>(
+    w: &SoaState<T>,
+    clamp: &Quat<T>,
+    params: &RodParams<T>,
+    e: usize,
+    frame: usize,
+    omega: Vec3<T>,
+) -> Vec3<T> {
+    let node = &params.end_nodes[e];
+    let l = params.end_node_length(e);
+    let q = w.frame(frame);
+    let (_, a, b) = if e == 0 {
+        bend_twist_node(clamp, &q, &node.rest_darboux, &node.stiffness, l)
+    } else {
+        bend_twist_node(&q, clamp, &node.rest_darboux, &node.stiffness, l)
+    };
+    let elastic = if e == 0 { b } else { a };
+    if node.damping > T::zero() {
+        elastic + clamp_damping(&q, &w.w.get(frame), clamp, &omega, node.damping, l)
+    } else {
+        elastic
     }
 }
 

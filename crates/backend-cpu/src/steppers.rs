@@ -518,6 +518,12 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
         for (t, q) in r.state.frames.iter_mut().zip(frames) {
             *t = Quat::new(T::lit(q[0]), T::lit(q[1]), T::lit(q[2]), T::lit(q[3]));
         }
+        // A clamp closes on the written end frame, as a held point follows a written position.
+        for end in 0..2 {
+            if r.ends[end].holds_frame() {
+                r.state.seat_clamp(&r.params, end);
+            }
+        }
         Ok(())
     }
 
@@ -624,13 +630,16 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
     }
 
     fn energies(&self) -> Energies {
-        let model = ForceModel {
-            extensible: self.settings.extensible,
-            gravity: self.settings.gravity,
-        };
         self.rods
             .iter()
-            .map(|r| energies(&r.state, &r.params, &model))
+            .map(|r| {
+                let model = ForceModel {
+                    extensible: self.settings.extensible,
+                    gravity: self.settings.gravity,
+                    clamped: r.ends.map(|e| e.holds_frame()),
+                };
+                energies(&r.state, &r.params, &model)
+            })
             .fold(Energies::default(), Energies::sum)
     }
 

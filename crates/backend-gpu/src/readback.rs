@@ -367,6 +367,7 @@ impl GpuSimulation {
                         })
                         .collect(),
                     angular_velocities: (0..n).map(|i| v3(w, b + i)).collect(),
+                    clamp_frames: [Quat::identity(); 2],
                 }
             })
             .collect())

@@ -308,6 +308,7 @@ impl Stepper for GpuStepper {
         let model = ForceModel {
             extensible: self.settings.extensible,
             gravity: self.settings.gravity,
+            clamped: [false; 2],
         };
         self.states
             .iter()

@@ -41,6 +41,51 @@ pub fn bend_twist_node<T: Real>(
     (energy, fw + svxf, svxf - fw)
 }
 
+/// Bending/twisting energy of the clamp node at end `end` (0: first, 1: last; see
+/// [`crate::rod::EndNode`]) and the body-frame torques on the rod's end frame and on the clamp
+/// frame: `(energy, torque on the end frame, torque on the clamp frame)`.
+#[inline(always)]
+pub fn clamp_node<T: Real>(s: &RodState<T>, p: &RodParams<T>, end: usize) -> (T, Vec3<T>, Vec3<T>) {
+    let node = &p.end_nodes[end];
+    let l = p.end_node_length(end);
+    if end == 0 {
+        let (e, tc, tf) = bend_twist_node(
+            &s.clamp_frames[0],
+            &s.frames[0],
+            &node.rest_darboux,
+            &node.stiffness,
+            l,
+        );
+        (e, tf, tc)
+    } else {
+        let n = s.elements();
+        bend_twist_node(
+            &s.frames[n - 1],
+            &s.clamp_frames[1],
+            &node.rest_darboux,
+            &node.stiffness,
+            l,
+        )
+    }
+}
+
+/// Damping torque (body frame) on the rod's end frame `q` turning at body angular velocity `w`
+/// relative to the clamp frame `clamp` turning at world angular velocity `clamp_omega`, over
+/// the clamp node of length `l` with coefficient `c`: the interior nodes' dissipation
+/// ([`bend_damping_node`]) with the clamp as the other frame.
+#[inline(always)]
+pub fn clamp_damping<T: Real>(
+    q: &Quat<T>,
+    w: &Vec3<T>,
+    clamp: &Quat<T>,
+    clamp_omega: &Vec3<T>,
+    c: T,
+    l: T,
+) -> Vec3<T> {
+    let body = rotate_inv(clamp, clamp_omega);
+    bend_damping_node(clamp, q, &body, w, c, l).1
+}
+
 /// Parallel-constraint penalty of one element and its forces and torque.
 ///
 /// Returns `(energy, force on r_{j+1}, body-frame torque on q_j)`; the force on `r_j` is the
@@ -122,6 +167,8 @@ pub struct ForceModel<T: Real> {
     pub extensible: bool,
     /// Gravitational acceleration [m/s²].
     pub gravity: Vec3<T>,
+    /// Which ends are clamped (`[first, last]`): their clamp nodes act.
+    pub clamped: [bool; 2],
 }
 
 /// Energies of one rod, split by term [J].
@@ -178,6 +225,9 @@ pub fn energies<T: Real>(s: &RodState<T>, p: &RodParams<T>, model: &ForceModel<T
             p.node_length(j),
         );
         e.bend_twist += eb.to_f64();
+    }
+    for end in (0..2).filter(|&e| model.clamped[e]) {
+        e.bend_twist += clamp_node(s, p, end).0.to_f64();
     }
     for j in 0..n {
         let (ra, rb) = (&s.positions[j], &s.positions[j + 1]);
@@ -258,6 +308,10 @@ pub fn accumulate_forces<T: Real>(
         torques[j] += ta;
         torques[j + 1] += tb;
     }
+    for end in (0..2).filter(|&e| model.clamped[e]) {
+        let frame = if end == 0 { 0 } else { n - 1 };
+        torques[frame] += clamp_node(s, p, end).1;
+    }
     // A rod without rotational damping pays nothing for it.
     if p.bend_damping.iter().any(|&c| c > T::zero()) {
         for j in 0..n.saturating_sub(1) {
@@ -314,7 +368,7 @@ mod tests {
         ]);
         spec.bend_damping = 1e-3;
         spec.stretch_damping = 0.5;
-        let (mut s, p) = build_rod::<f64>(&pts, &spec).unwrap();
+        let (mut s, mut p) = build_rod::<f64>(&pts, &spec).unwrap();
         // Perturb frames and positions off the adapted configuration and give them velocities.
         for q in s.frames.iter_mut() {
             *q = rotate_body(
@@ -347,6 +401,17 @@ mod tests {
                 rng.random_range(-5.0..5.0),
             );
         }
+        // Clamps turned away from their rest against the end frames.
+        let n = s.elements();
+        for (end, frame) in [(0, 0), (1, n - 1)] {
+            let turn = Vec3::new(
+                rng.random_range(-0.3..0.3),
+                rng.random_range(-0.3..0.3),
+                rng.random_range(-0.3..0.3),
+            );
+            s.clamp_frames[end] = rotate_body(&s.frames[frame], &turn);
+            p.end_nodes[end].rest_darboux = Vec3::new(rng.random_range(-3.0..3.0), 1.0, -2.0);
+        }
         (s, p)
     }
 
@@ -354,6 +419,7 @@ mod tests {
         ForceModel {
             extensible,
             gravity: Vec3::new(0.3, -9.81, 0.1),
+            clamped: [true, true],
         }
     }
 
@@ -487,6 +553,7 @@ mod tests {
         let m = ForceModel {
             extensible: true,
             gravity: Vec3::zeros(),
+            clamped: [true, true],
         };
         let e0 = energies(&s, &p, &m);
         let rot = crate::quat::exp_rotation(&Vec3::new(0.7, -1.3, 2.1));
@@ -495,7 +562,7 @@ mod tests {
         for r in moved.positions.iter_mut() {
             *r = rotate(&rot, r) + shift;
         }
-        for q in moved.frames.iter_mut() {
+        for q in moved.frames.iter_mut().chain(moved.clamp_frames.iter_mut()) {
             *q = rot * *q;
         }
         let e1 = energies(&moved, &p, &m);
@@ -520,6 +587,10 @@ mod tests {
         let mut moment: Vec3<f64> = rest.positions.iter().zip(&f).map(|(r, f)| r.cross(f)).sum();
         for j in 0..n {
             moment += rotate(&rest.frames[j], &t[j]);
+        }
+        // The clamps take the opposite of what their nodes give the rod.
+        for end in 0..2 {
+            moment += rotate(&rest.clamp_frames[end], &clamp_node(&rest, &p0, end).2);
         }
         let scale = f.iter().map(|x| x.norm()).fold(0.0, f64::max);
         assert!(net.norm() < 1e-9 * scale);

@@ -20,6 +20,11 @@ pub struct RodState<T: Real> {
     pub frames: Vec<Quat<T>>,
     /// Frame angular velocities in body coordinates [rad/s].
     pub angular_velocities: Vec<Vec3<T>>,
+    /// The frames of the clamps at the first (`[0]`) and last (`[1]`) end point (body →
+    /// world): what holds a clamped end, half an element from the rod's end frame, which the
+    /// clamp's bend–twist node ([`EndNode`]) ties to it. Moved only by the clamp's prescribed
+    /// rotation; unused at free and pinned ends.
+    pub clamp_frames: [Quat<T>; 2],
 }
 
 impl<T: Real> RodState<T> {
@@ -53,8 +58,68 @@ impl<T: Real> RodState<T> {
                 })
                 .collect(),
             angular_velocities: self.angular_velocities.iter().map(v).collect(),
+            clamp_frames: self.clamp_frames.map(|q| cast_quat(&q)),
         }
     }
+
+    /// Puts the clamp of end `end` (0: first, 1: last) where it holds the end frame at rest:
+    /// what a clamp closed on the rod as it is does (see [`clamp_frame_at_rest`]).
+    pub fn seat_clamp(&mut self, params: &RodParams<T>, end: usize) {
+        let n = self.elements();
+        let (frame, l) = if end == 0 {
+            (self.frames[0], params.rest_lengths[0])
+        } else {
+            (self.frames[n - 1], params.rest_lengths[n - 1])
+        };
+        let node = &params.end_nodes[end.min(1)];
+        self.clamp_frames[end.min(1)] =
+            clamp_frame_at_rest(&frame, &node.rest_darboux, l * T::lit(0.5), end);
+    }
+}
+
+/// `q` in another precision.
+fn cast_quat<T: Real, U: Real>(q: &Quat<T>) -> Quat<U> {
+    Quat::new(
+        U::lit(q.w.to_f64()),
+        U::lit(q.i.to_f64()),
+        U::lit(q.j.to_f64()),
+        U::lit(q.k.to_f64()),
+    )
+}
+
+/// The frame of a clamp at rest against the rod's end frame `frame`, for the end node's rest
+/// Darboux vector `rest` over its length `l` (half the end element): the clamp frame `q_c`
+/// with `(2/l) Im(q̄_c q_0) = û` at the first end and `(2/l) Im(q̄_{n−1} q_c) = û` at the last.
+pub fn clamp_frame_at_rest<T: Real>(frame: &Quat<T>, rest: &Vec3<T>, l: T, end: usize) -> Quat<T> {
+    let v = rest * (l * T::lit(0.5));
+    let w = (T::one() - v.norm_squared()).max(T::zero()).sqrt();
+    let s = Quat::new(w, v.x, v.y, v.z);
+    let q = if end == 0 {
+        frame * s.conjugate()
+    } else {
+        frame * s
+    };
+    q / q.norm()
+}
+
+/// The bend–twist node between a clamp and the rod's end frame.
+///
+/// A clamp holds the rod at its end point, but the rod's first frame sits at the middle of the
+/// first element. Holding that frame (as CoRdE and most rod codes do) clamps the rod half an
+/// element in from its end, a first-order error in every clamped answer. Instead the clamp has
+/// a frame of its own at the end point ([`RodState::clamp_frames`]), tied to the end frame by
+/// a bend–twist node of half an element's length: the half cell of the staggered grid, which
+/// makes clamped deflections, reactions and frequencies second order in the element length
+/// (`docs/model.md`, "Clamps").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EndNode<T: Real> {
+    /// Bending/twisting stiffness `(EI₁, EI₂, GJ)` [N m²].
+    pub stiffness: Vec3<T>,
+    /// Rest Darboux vector `û` (body frame of the lower frame: the clamp's at the first end,
+    /// the end frame's at the last) [1/m].
+    pub rest_darboux: Vec3<T>,
+    /// Rotational internal damping [N m² s].
+    pub damping: T,
 }
 
 /// The fixed parameters of one rod of `n` elements.
@@ -85,6 +150,9 @@ pub struct RodParams<T: Real> {
     pub drag: T,
     /// Cross-section radius [m], for collisions and output.
     pub radius: T,
+    /// The bend–twist nodes between a clamp and the end frame, at the first (`[0]`) and last
+    /// (`[1]`) end; they act only where an end is clamped.
+    pub end_nodes: [EndNode<T>; 2],
 }
 
 impl<T: Real> RodParams<T> {
@@ -97,6 +165,14 @@ impl<T: Real> RodParams<T> {
     #[inline(always)]
     pub fn node_length(&self, j: usize) -> T {
         (self.rest_lengths[j] + self.rest_lengths[j + 1]) * T::lit(0.5)
+    }
+
+    /// Length of the clamp node at end `end` (0: first, 1: last): half the end element, the
+    /// distance from the end point to the end frame.
+    #[inline(always)]
+    pub fn end_node_length(&self, end: usize) -> T {
+        let j = if end == 0 { 0 } else { self.elements() - 1 };
+        self.rest_lengths[j] * T::lit(0.5)
     }
 }
 
@@ -299,7 +375,19 @@ pub fn build_rod<T: Real>(
         .unwrap_or_else(|| m.shear_stiffness());
     let t = T::lit;
     let v3 = |v: Vec3<f64>| Vec3::new(t(v.x), t(v.y), t(v.z));
-    let state = RodState {
+    // The clamp nodes continue the rod's rest shape: the nearest interior node's (none for a
+    // single element, which is taken straight unless a uniform shape is given).
+    let end_rest = |end: usize| match spec.rest_shape {
+        RestShape::Uniform(u) => Vec3::from(u),
+        RestShape::Initial if n >= 2 => rest_darboux[if end == 0 { 0 } else { n - 2 }],
+        RestShape::Initial => Vec3::zeros(),
+    };
+    let end_nodes = [0, 1].map(|end| EndNode {
+        stiffness: Vec3::new(t(k[0]), t(k[1]), t(k[2])),
+        rest_darboux: v3(end_rest(end)),
+        damping: t(spec.bend_damping),
+    });
+    let mut state = RodState {
         positions: p.iter().map(|x| v3(*x)).collect(),
         velocities: vec![Vec3::zeros(); n + 1],
         frames: frames
@@ -307,6 +395,7 @@ pub fn build_rod<T: Real>(
             .map(|q| Quat::new(t(q.w), t(q.i), t(q.j), t(q.k)))
             .collect(),
         angular_velocities: vec![Vec3::zeros(); n],
+        clamp_frames: [Quat::identity(); 2],
     };
     let params = RodParams {
         rest_lengths: lengths.iter().map(|&l| t(l)).collect(),
@@ -324,7 +413,10 @@ pub fn build_rod<T: Real>(
         stretch_damping: vec![t(spec.stretch_damping); n],
         drag: t(spec.drag),
         radius: t(m.radius),
+        end_nodes,
     };
+    state.seat_clamp(&params, 0);
+    state.seat_clamp(&params, 1);
     Ok((state, params))
 }
 

@@ -288,7 +288,8 @@ pub trait Stepper: Send {
         values: &[[f64; 3]],
     ) -> Result<(), ControlError>;
 
-    /// Overwrites the frames of rod `rod` (`[w, x, y, z]`, normalised here).
+    /// Overwrites the frames of rod `rod` (`[w, x, y, z]`, normalised here). The clamp of a
+    /// clamped end closes on the written end frame (its node at rest).
     fn write_frames(&mut self, rod: usize, values: &[[f64; 4]]) -> Result<(), ControlError>;
 
     /// The condition at end `end` of rod `rod`.

@@ -54,6 +54,7 @@
 //! does not apply internal damping. Drag is applied to the solved velocities.
 
 mod binding;
+mod clamp;
 pub mod constraints;
 mod contact;
 mod direct;
@@ -66,7 +67,7 @@ use crate::stepper::{
     CpuRod, DivergedQuantity, Divergence, Par, SolverSettings, StepStats, step_each,
 };
 use contact::StiffContacts;
-use cosserat_model::quat::exp_rotation;
+use cosserat_model::quat::{exp_rotation, rotate};
 use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::ends::EndKind;
 use direct::{Assembled, BlockTridiagonal};
@@ -86,8 +87,10 @@ pub(crate) struct Consts {
     pub(crate) lbar: Vec<f64>,
     pub(crate) rest_u: Vec<Vec3<f64>>,
     pub(crate) inv_mass: Vec<f64>,
-    /// Inverse inertias of the frames, zero for held frames.
+    /// Inverse inertias of the frames.
     pub(crate) inv_inertia: Vec<Vec3<f64>>,
+    /// The clamps (`clamp.rs`), none for a rod without a clamped end.
+    pub(crate) clamps: Vec<clamp::ClampConst>,
     /// Compliances `α̃` of the stretch–shear and bend–twist rows.
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
@@ -314,6 +317,13 @@ fn shadow_matches<T: Real>(rod: &CpuRod<T>, w: &Work) -> bool {
         && w.v.rounds_to(&s.velocities)
         && w.q.rounds_to(&s.frames)
         && w.omega.rounds_to(&s.angular_velocities)
+        && (0..2).all(|e| {
+            let (a, b) = (&w.clamp_frames[e], &s.clamp_frames[e]);
+            [a.w, a.i, a.j, a.k]
+                .iter()
+                .zip([b.w, b.i, b.j, b.k])
+                .all(|(x, y)| T::lit(*x) == y)
+        })
 }
 
 impl Consts {
@@ -351,11 +361,19 @@ impl Consts {
             .collect();
         let inv_inertia_own: Vec<Vec3<f64>> = inertia.iter().map(|i| i.map(|x| 1.0 / x)).collect();
         self.inv_inertia = inv_inertia_own.clone();
-        if rod.ends[0].holds_frame() {
-            self.inv_inertia[0] = Vec3::zeros();
-        }
-        if rod.ends[1].holds_frame() {
-            self.inv_inertia[n - 1] = Vec3::zeros();
+        self.clamps.clear();
+        for (end, frame) in [(0, 0), (1, n - 1)] {
+            if rod.ends[end].holds_frame() {
+                let node = &p.end_nodes[end];
+                self.clamps.push(clamp::ClampConst {
+                    end,
+                    frame,
+                    stiffness: v64(&node.stiffness),
+                    rest: v64(&node.rest_darboux),
+                    damping: node.damping.to_f64(),
+                    length: p.end_node_length(end).to_f64(),
+                });
+            }
         }
         self.alpha_gamma = (0..n)
             .map(|j| {
@@ -427,8 +445,10 @@ impl Consts {
             inertia.set(i, &Vec3::repeat(1.0));
         }
         let mut free = vec![0.0; padded(n)];
-        for (f, w) in free.iter_mut().zip(&self.inv_inertia) {
-            *f = if w.x == 0.0 { 0.0 } else { 1.0 };
+        // A clamped end frame is solved outside the lanes (`clamp.rs`).
+        for (j, (f, w)) in free.iter_mut().zip(&self.inv_inertia).enumerate() {
+            let clamped = self.clamps.iter().any(|c| c.frame == j);
+            *f = if w.x == 0.0 || clamped { 0.0 } else { 1.0 };
         }
         let inv = |v: &[f64]| v.iter().map(|l| 1.0 / l).collect::<Vec<_>>();
         let inv_l0 = inv(&self.l0);
@@ -671,6 +691,10 @@ fn step_fixed<T: Real>(
             w.q.set(j, &q);
             w.omega.set(j, &v64(&rod.state.angular_velocities[j]));
         }
+        w.clamp_frames = rod
+            .state
+            .clamp_frames
+            .map(|q| Quat::new(q.w.to_f64(), q.i.to_f64(), q.j.to_f64(), q.k.to_f64()));
     }
     let gravity = v64(&settings.gravity);
     let precision = T::default_epsilon().to_f64();
@@ -713,6 +737,7 @@ fn step_fixed<T: Real>(
             rod,
             stiff,
             h: hs,
+            advance: h,
             t,
             gravity: &gravity,
             precision,
@@ -779,6 +804,7 @@ fn step_fixed<T: Real>(
         if let Some(c) = contacts.as_deref_mut() {
             c.end_step(w, k);
         }
+        w.clamp_finish(k);
         kept.steps += 1;
         if stiff.tolerance > 0.0 && !(residual <= tolerance) {
             kept.unconverged_steps += 1;
@@ -849,6 +875,9 @@ fn step_fixed<T: Real>(
     w.v.write_to(&mut rod.state.velocities);
     w.q.write_to(&mut rod.state.frames);
     w.omega.write_to(&mut rod.state.angular_velocities);
+    for (out, q) in rod.state.clamp_frames.iter_mut().zip(&w.clamp_frames) {
+        *out = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
+    }
     w.shadow = true;
     if let (Some(c), Some(mesh)) = (contacts, rod.mesh.as_mut()) {
         mesh.stats = c.stats;
@@ -876,24 +905,6 @@ fn record_reactions<T: Real>(
     let lam = &w.lambda_prev;
     let lit = |v: Vec3<f64>| Vec3::new(T::lit(v.x), T::lit(v.y), T::lit(v.z));
     let h2 = h * h;
-    // J_θᵀ λ on an end frame: its stretch–shear term and that of its one bend–twist node.
-    let frame_impulse = |j: usize| {
-        let g = w.gamma.get(j) + Vec3::z();
-        let mut t = lam[0].get(j).cross(&g);
-        if n >= 2 {
-            let node = if j == 0 { 0 } else { j - 1 };
-            let s = w.rel.get(node);
-            let mu = lam[1].get(node);
-            let il = 1.0 / k.lbar[node];
-            let (sw_mu, sv_mu) = (mu * s.w, s.imag().cross(&mu));
-            t += if j == 0 {
-                -(sw_mu + sv_mu) * il
-            } else {
-                (sw_mu - sv_mu) * il
-            };
-        }
-        t
-    };
     let loads: [Vec3<f64>; 2] = [0, n].map(|p| {
         let own = rod
             .loads
@@ -925,21 +936,11 @@ fn record_reactions<T: Real>(
             lit(w.v.get(point)),
             ht,
         );
-        if rx.clamped[e] {
-            let inertia = v64(&rod.params.inertias[frame]);
-            // The body angular velocity the constraint torques alone would have given it.
-            let integrated =
-                w.omega_start.get(frame) + (frame_impulse(frame) / h2).component_div(&inertia) * h;
+        if rx.clamped[e]
+            && let Some(i) = k.clamps.iter().position(|c| c.end == e)
+        {
             let q = w.q.get(frame);
-            let q = Quat::new(T::lit(q.w), T::lit(q.i), T::lit(q.j), T::lit(q.k));
-            rx.record_frame(
-                e,
-                &q,
-                lit(inertia),
-                lit(integrated),
-                lit(w.omega.get(frame)),
-                ht,
-            );
+            rx.record_torque(e, lit(rotate(&q, &w.clamp_torque(k, i))));
         }
     }
     rx.finish([Vec3::zeros(); 2], [Vec3::zeros(); 2], T::lit(advance));
@@ -956,13 +957,6 @@ fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, lead: f64) {
         if end.holds_point() {
             let v = v64(&end.velocities_at(t).0);
             w.x.set(i, &(w.x_prev.get(i) + v * lead));
-        }
-    }
-    for (j, end) in [(0, &rod.ends[0]), (n - 1, &rod.ends[1])] {
-        if end.holds_frame() {
-            let omega = v64(&end.velocities_at(t).1);
-            let r = exp_rotation(&(omega * lead)) * w.q_prev.get(j);
-            w.q.set(j, &(r / r.norm()));
         }
     }
 }
@@ -997,6 +991,8 @@ struct StepContext<'a, T: Real> {
     rod: &'a CpuRod<T>,
     stiff: &'a StiffSettings,
     h: f64,
+    /// The time the step advances the clock by (`h` but for BDF2's steps of `2h/3`).
+    advance: f64,
     /// Time at the start of the step.
     t: f64,
     gravity: &'a Vec3<f64>,
@@ -1058,6 +1054,10 @@ fn solve_step<T: Real>(
         .map(|l| (l.point, v64(&l.force)))
         .chain(ctx.loads.iter().copied());
     let ends = &rod.ends;
+    if !k.clamps.is_empty() {
+        let omega = [0, 1].map(|e| v64(&ends[e].velocities_at(t).1));
+        w.clamp_begin(k, h, ctx.advance, omega);
+    }
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
@@ -1069,13 +1069,6 @@ fn solve_step<T: Real>(
                 if direct {
                     w.x.set(i, &(w.x_old.get(i) + v * h));
                 }
-            }
-        }
-        for (j, end) in [(0, &ends[0]), (n - 1, &ends[1])] {
-            if end.holds_frame() {
-                let omega = v64(&end.velocities_at(t).1);
-                let r = exp_rotation(&(omega * h)) * w.q_old.get(j);
-                w.q.set(j, &(r / r.norm()));
             }
         }
     });
@@ -1204,6 +1197,9 @@ fn direct_solve(
             w.assemble(k, assembled);
             if !w.pinned.is_empty() {
                 w.pin_blocks(k, assembled);
+            }
+            if !w.clamps.is_empty() {
+                w.clamp_blocks(k, assembled);
             }
             factor.factor(assembled);
             *factor_valid = true;

@@ -28,9 +28,9 @@ pub(crate) struct Work {
     pub(crate) q_pred: Q4s,
     /// `M⁻¹ g`-corrected displacements towards the targets (see [`Work::rhs`]).
     u_x: V3s,
-    u_th: V3s,
+    pub(crate) u_th: V3s,
     /// `J_θᵀ μ` per frame.
-    dtheta: V3s,
+    pub(crate) dtheta: V3s,
     /// `K_θ⁻¹` per frame (see [`Work::precondition`]).
     pub(crate) inv_k: V3s,
     /// Per element at the current iterate: `Γ`, the directors (rows of `Rᵀ`), `Ω − û` and the
@@ -70,6 +70,10 @@ pub(crate) struct Work {
     /// the Newton matrix is assembled with the same projected inverse masses
     /// ([`pin_blocks`](Self::pin_blocks)). Empty without a mesh.
     pub(crate) pinned: Vec<Pinned>,
+    /// The clamp frames at the start of the step (`RodState::clamp_frames` in `f64`), and what
+    /// each clamp carries through the step (`clamp.rs`; empty without clamps).
+    pub(crate) clamp_frames: [cosserat_model::Quat<f64>; 2],
+    pub(crate) clamps: Vec<super::clamp::ClampStep>,
 }
 
 /// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
@@ -235,6 +239,7 @@ impl Work {
         } else {
             &self.lambda
         };
+        let geometric_scalar = geometric;
         let geometric = F::splat(geometric);
         // The bend–twist bound of node j, |λ_Ω| / l̄, stored at j + 1 (zero for the last
         // element, whose λ_Ω is zero).
@@ -267,6 +272,21 @@ impl Work {
                     z: d.x * d.y * inv,
                 },
             );
+        }
+        if !self.clamps.is_empty() {
+            // The lanes' bound, in scalar, for the clamped end frames.
+            let mut sigmas = [(usize::MAX, 0.0); 2];
+            for (slot, cl) in sigmas.iter_mut().zip(&k.clamps) {
+                let j = cl.frame;
+                let g = self.gamma.get(j) + Vec3::z();
+                let g_bound = 0.5 * (1.0 + g.norm_squared());
+                let before = self.bound_before[j] + self.bound_before[j + 1];
+                *slot = (
+                    j,
+                    geometric_scalar * (2.0 * lam[0].get(j).norm() * g_bound + before),
+                );
+            }
+            self.clamp_precondition(k, |f| sigmas.iter().find(|s| s.0 == f).map_or(0.0, |s| s.1));
         }
     }
 
@@ -375,6 +395,9 @@ impl Work {
                 self.u_th.set(e, &u);
             });
         }
+        if !self.clamps.is_empty() {
+            self.clamp_rhs(k);
+        }
         // One pass per element; the largest residual per lane.
         let mut worst = F::ZERO;
         let e3 = V::splat(&Vec3::z());
@@ -432,6 +455,9 @@ impl Work {
         let mut rhs = std::mem::take(&mut self.rhs);
         self.add_jt(k, &rhs);
         self.project_pinned();
+        if !self.clamps.is_empty() {
+            self.clamp_apply(k);
+        }
         self.lambda_zero = false;
         let longest = (0..=n)
             .map(|i| self.u_x.get(i).norm_squared())

@@ -26,7 +26,7 @@ fn awat(a: &Matrix3<f64>, w: &nalgebra::Vector3<f64>) -> Matrix3<f64> {
 /// `Work::rhs`) before the sweep corrected it.
 pub(crate) fn sweep(w: &mut Work, k: &Consts) -> f64 {
     let n = k.l0.len();
-    let mut worst: f64 = 0.0;
+    let mut worst: f64 = w.clamp_sweep(k);
     for j in 0..n {
         // Stretch–shear of element j.
         let (xa, xb, mut q) = (w.x.get(j), w.x.get(j + 1), w.q.get(j));
