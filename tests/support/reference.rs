@@ -91,6 +91,12 @@ fn bisect(g: impl Fn(f64) -> f64, mut a: f64, mut b: f64, tol: f64) -> f64 {
 /// `σ = EI/(K_p L²)`; `σ = 0` is the classical elastica `θ'' = −α cos θ`. Boundary conditions
 /// `φ(0) = 0`, `φ'(1) = 0`; solved by shooting on `φ'(0)` (bisection) with RK4 on `steps` steps.
 pub fn elastica_tip(alpha: f64, sigma: f64, steps: usize) -> (f64, f64) {
+    let (x, y, _) = elastica_end(alpha, sigma, steps);
+    (x, y)
+}
+
+/// [`elastica_tip`] and the tip's tangent angle `ψ(1)` [rad] below the horizontal.
+pub fn elastica_end(alpha: f64, sigma: f64, steps: usize) -> (f64, f64, f64) {
     let tangent = |phi: f64| {
         // Newton on g(ψ) = sin(ψ − φ) − ασ cos ψ from ψ = φ (σ small: 2–3 iterations).
         let mut psi = phi;
@@ -117,7 +123,7 @@ pub fn elastica_tip(alpha: f64, sigma: f64, steps: usize) -> (f64, f64) {
     }
     let k = bisect(|k| end(k)[1], 0.0, hi, 1e-15 * hi);
     let y = end(k);
-    (y[2], y[3])
+    (y[2], y[3], tangent(y[0]))
 }
 
 /// The first three bending frequencies [rad/s] of a clamped–free Timoshenko beam (shear

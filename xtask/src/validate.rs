@@ -53,6 +53,7 @@ pub(crate) fn table(rows: &[Row]) -> String {
         let (err, reference) = match r.check {
             Check::Relative => (format!("{:.2e}", r.error()), fmt_num(r.reference)),
             Check::Bound => ("(bound)".into(), fmt_num(r.reference)),
+            Check::AtLeast => ("(at least)".into(), fmt_num(r.reference)),
             // A reported quantity with a reference shows its error.
             Check::Info if r.reference.is_finite() && r.reference != 0.0 => {
                 (format!("{:.2e}", r.error()), fmt_num(r.reference))

@@ -62,18 +62,27 @@ impl<T: Real> RodState<T> {
         }
     }
 
-    /// Puts the clamp of end `end` (0: first, 1: last) where it holds the end frame at rest:
-    /// what a clamp closed on the rod as it is does (see [`clamp_frame_at_rest`]).
+    /// Closes the clamp of end `end` (0: first, 1: last) on the rod as it is: the clamp frame
+    /// continues the rod's current shape to its end point, turned back from the end frame by
+    /// the nearest interior node's Darboux vector over the clamp node's length (for a rod of
+    /// one element, by the clamp node's rest Darboux vector). A straight rod's clamp is its end
+    /// frame; a rod built along a curve is clamped along the curve's tangent at its end point,
+    /// to second order.
     pub fn seat_clamp(&mut self, params: &RodParams<T>, end: usize) {
         let n = self.elements();
+        let end = end.min(1);
         let (frame, l) = if end == 0 {
             (self.frames[0], params.rest_lengths[0])
         } else {
             (self.frames[n - 1], params.rest_lengths[n - 1])
         };
-        let node = &params.end_nodes[end.min(1)];
-        self.clamp_frames[end.min(1)] =
-            clamp_frame_at_rest(&frame, &node.rest_darboux, l * T::lit(0.5), end);
+        let u = if n >= 2 {
+            let j = if end == 0 { 0 } else { n - 2 };
+            darboux(&self.frames[j], &self.frames[j + 1], params.node_length(j))
+        } else {
+            params.end_nodes[end].rest_darboux
+        };
+        self.clamp_frames[end] = clamp_frame_at_rest(&frame, &u, l * T::lit(0.5), end);
     }
 }
 
@@ -87,9 +96,9 @@ fn cast_quat<T: Real, U: Real>(q: &Quat<T>) -> Quat<U> {
     )
 }
 
-/// The frame of a clamp at rest against the rod's end frame `frame`, for the end node's rest
-/// Darboux vector `rest` over its length `l` (half the end element): the clamp frame `q_c`
-/// with `(2/l) Im(q̄_c q_0) = û` at the first end and `(2/l) Im(q̄_{n−1} q_c) = û` at the last.
+/// The frame of a clamp whose node, of length `l` (half the end element), has the Darboux
+/// vector `rest` against the rod's end frame `frame`: the clamp frame `q_c` with
+/// `(2/l) Im(q̄_c q_0) = û` at the first end and `(2/l) Im(q̄_{n−1} q_c) = û` at the last.
 pub fn clamp_frame_at_rest<T: Real>(frame: &Quat<T>, rest: &Vec3<T>, l: T, end: usize) -> Quat<T> {
     let v = rest * (l * T::lit(0.5));
     let w = (T::one() - v.norm_squared()).max(T::zero()).sqrt();

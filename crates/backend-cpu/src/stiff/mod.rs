@@ -1054,10 +1054,9 @@ fn solve_step<T: Real>(
         .map(|l| (l.point, v64(&l.force)))
         .chain(ctx.loads.iter().copied());
     let ends = &rod.ends;
-    if !k.clamps.is_empty() {
-        let omega = [0, 1].map(|e| v64(&ends[e].velocities_at(t).1));
-        w.clamp_begin(k, h, ctx.advance, omega);
-    }
+    // Also without clamps: a clamp released since the last step leaves none behind.
+    let omega = [0, 1].map(|e| v64(&ends[e].velocities_at(t).1));
+    w.clamp_begin(k, h, ctx.advance, omega);
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
