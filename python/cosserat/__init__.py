@@ -1,0 +1,28 @@
+"""Fast, accurate Cosserat rod simulation: guidewires, catheters, sutures, cables.
+
+The package wraps the Rust library ``cosserat`` (CoRdE rods, the stiff scheme, mesh contacts,
+GPU kernels). A simulation is built from a scene (a TOML file or string, the same format as the
+``cosserat`` command's) and is then stepped and steered from Python::
+
+    import cosserat
+    sim = cosserat.Simulation.from_file("scenes/pendulum.toml", {"rod.elements": 100})
+    sim.run(1000)                 # the GIL is released while stepping
+    tip = sim.positions()[-1]     # NumPy arrays, shape (n + 1, 3)
+
+Rods are addressed by index (``rod=0`` by default), ends as 0 (first point) and 1 (last point).
+Errors are exceptions carrying the library's messages: :class:`SceneError` (a scene that
+cannot be built; the message names the file, field and value), :class:`StepError` (a run that
+diverged, naming the rod, element and step), :class:`ControlError` (a refused control call;
+nothing was changed).
+"""
+
+from ._cosserat import ControlError, SceneError, Simulation, Snapshot, StepError, __version__
+
+__all__ = [
+    "ControlError",
+    "SceneError",
+    "Simulation",
+    "Snapshot",
+    "StepError",
+    "__version__",
+]

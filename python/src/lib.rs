@@ -1,0 +1,634 @@
+//! The `cosserat` Python package's native module (`cosserat._cosserat`).
+//!
+//! One class, [`PySimulation`] (`cosserat.Simulation`), wraps the library's `Simulation`: scenes
+//! from a TOML file or string with overrides, stepping with the GIL released, the whole control
+//! API (end motions and holds, loads, snapshots, reactions, writing state) and the state read
+//! straight into new NumPy arrays (one copy, from the stepper's layout into the array). Errors
+//! become Python exceptions carrying the library's messages: `SceneError` for a scene that
+//! cannot be built, `StepError` for a run that diverged or was refused, `ControlError` for a
+//! control call that was refused.
+//!
+//! The simulation lives behind a mutex (a `Stepper` is `Send` but not `Sync`, and Python may
+//! call from any thread). A call that steps releases the GIL first and takes the mutex inside,
+//! so it never waits for the GIL while holding the mutex.
+
+use cosserat::scene::parse_scene;
+use cosserat::{
+    Backend, ControlError as LibControlError, EndKind, RodHandle, Simulation, SimulationSnapshot,
+    StateField,
+};
+use numpy::{
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+
+pyo3::create_exception!(
+    cosserat,
+    SceneError,
+    PyValueError,
+    "A scene that cannot be read or built; the message names the file, field and value."
+);
+pyo3::create_exception!(
+    cosserat,
+    StepError,
+    PyRuntimeError,
+    "A run that diverged (the message names the rod, element and step) or was refused."
+);
+pyo3::create_exception!(
+    cosserat,
+    ControlError,
+    PyValueError,
+    "A control call that was refused (no such rod, end or point, a wrong length, a value out of range); nothing was changed."
+);
+
+/// `(force, torque)` arrays of an end reaction.
+type Wrench<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+/// `(points, normals, forces)` arrays of a rod's contacts.
+type Contacts<'py> = (
+    Bound<'py, PyArray1<u64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+);
+
+fn control_err(e: LibControlError) -> PyErr {
+    ControlError::new_err(e.to_string())
+}
+
+/// A scene override value as the scene reader takes it (a TOML literal).
+fn override_text(value: &Bound<'_, PyAny>) -> PyResult<String> {
+    if value.is_instance_of::<PyBool>() {
+        Ok(if value.extract::<bool>()? {
+            "true"
+        } else {
+            "false"
+        }
+        .into())
+    } else if value.is_instance_of::<PyInt>() {
+        Ok(value.extract::<i64>()?.to_string())
+    } else if value.is_instance_of::<PyFloat>() {
+        let x: f64 = value.extract()?;
+        // `{:?}` keeps a decimal point or exponent, so TOML reads a float.
+        Ok(format!("{x:?}"))
+    } else if value.is_instance_of::<PyString>() {
+        value.extract()
+    } else {
+        Ok(value.str()?.to_string())
+    }
+}
+
+fn overrides_of(overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    if let Some(d) = overrides {
+        for (k, v) in d.iter() {
+            out.push((k.extract::<String>()?, override_text(&v)?));
+        }
+    }
+    Ok(out)
+}
+
+fn backend_of(name: &str) -> PyResult<Backend> {
+    match name {
+        "cpu" => Ok(Backend::Cpu),
+        "cpu-rayon" => Ok(Backend::CpuRayon),
+        "gpu" => Ok(Backend::Gpu),
+        other => Err(SceneError::new_err(format!(
+            "backend = {other:?}: expected \"cpu\", \"cpu-rayon\" or \"gpu\""
+        ))),
+    }
+}
+
+fn end_kind_of(kind: &str) -> PyResult<EndKind> {
+    match kind {
+        "free" => Ok(EndKind::Free),
+        "pinned" => Ok(EndKind::Pinned),
+        "clamped" => Ok(EndKind::Clamped),
+        other => Err(ControlError::new_err(format!(
+            "kind = {other:?}: expected \"free\", \"pinned\" or \"clamped\""
+        ))),
+    }
+}
+
+/// `[[f64; N]]` over the memory of a C-contiguous `(k, N)` float64 array.
+fn rows<const N: usize>(slice: &mut [f64]) -> &mut [[f64; N]] {
+    let len = slice.len() / N;
+    // SAFETY: `[f64; N]` has the size of `N` `f64` and their alignment, no padding.
+    unsafe { std::slice::from_raw_parts_mut(slice.as_mut_ptr().cast::<[f64; N]>(), len) }
+}
+
+fn vec3(name: &str, v: &[f64]) -> PyResult<[f64; 3]> {
+    <[f64; 3]>::try_from(v)
+        .map_err(|_| ControlError::new_err(format!("{name}: expected 3 numbers, got {}", v.len())))
+}
+
+/// A state snapshot of a `Simulation` (`Simulation.snapshot()`), to return to with
+/// `Simulation.restore()`.
+#[pyclass(name = "Snapshot", module = "cosserat")]
+struct PySnapshot {
+    inner: Mutex<SimulationSnapshot>,
+    time: f64,
+}
+
+#[pymethods]
+impl PySnapshot {
+    /// Simulated time of the snapshot [s].
+    #[getter]
+    fn time(&self) -> f64 {
+        self.time
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<cosserat.Snapshot at t = {} s>", self.time)
+    }
+}
+
+/// A simulation of one or more Cosserat rods (see the package docstring).
+#[pyclass(name = "Simulation", module = "cosserat")]
+struct PySimulation {
+    sim: Mutex<Simulation>,
+    name: String,
+    scene_steps: u64,
+}
+
+impl PySimulation {
+    fn lock(&self) -> MutexGuard<'_, Simulation> {
+        // A panic while stepping poisons the mutex; the state is then whatever the step left,
+        // as after a divergence.
+        self.sim.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn from_text(
+        path: &Path,
+        text: &str,
+        overrides: Vec<(String, String)>,
+        backend: &str,
+    ) -> PyResult<Self> {
+        let backend = backend_of(backend)?;
+        let (builder, length, name) =
+            parse_scene(path, text, &overrides).map_err(|e| SceneError::new_err(e.to_string()))?;
+        let sim = builder
+            .backend(backend)
+            .build()
+            .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))?;
+        Ok(Self {
+            sim: Mutex::new(sim),
+            name,
+            scene_steps: length.steps,
+        })
+    }
+
+    fn handle(sim: &Simulation, rod: usize) -> PyResult<RodHandle> {
+        let count = sim.rods().count();
+        if rod < count {
+            Ok(RodHandle(rod))
+        } else {
+            Err(ControlError::new_err(format!(
+                "no rod {rod}: the simulation has rods 0..{count}"
+            )))
+        }
+    }
+
+    fn read3<'py>(
+        &self,
+        py: Python<'py>,
+        rod: usize,
+        field: StateField,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let n = sim.stepper().elements(h.0).map_err(control_err)?;
+        let len = field.len(n);
+        let out = PyArray2::<f64>::zeros(py, [len, 3], false);
+        {
+            let mut rw = out.readwrite();
+            let slice = rw
+                .as_slice_mut()
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            sim.read(h, field, rows::<3>(slice)).map_err(control_err)?;
+        }
+        Ok(out)
+    }
+
+    fn write3(
+        &self,
+        rod: usize,
+        field: StateField,
+        values: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<()> {
+        let shape = values.shape();
+        if shape.len() != 2 || shape[1] != 3 {
+            return Err(ControlError::new_err(format!(
+                "{}: expected an array of shape (k, 3), got {shape:?}",
+                field_name(field)
+            )));
+        }
+        let rows: Vec<[f64; 3]> = values
+            .as_array()
+            .rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2]])
+            .collect();
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.write(h, field, &rows).map_err(control_err)
+    }
+}
+
+fn field_name(field: StateField) -> &'static str {
+    match field {
+        StateField::Positions => "positions",
+        StateField::Velocities => "velocities",
+        StateField::AngularVelocities => "angular_velocities",
+        StateField::Director(_) => "directors",
+    }
+}
+
+#[pymethods]
+impl PySimulation {
+    /// Builds the scene in the TOML file `path`.
+    ///
+    /// `overrides` maps dotted scene keys to values (`{"rod.elements": 100, "solver.dt":
+    /// 1e-5}`), as the command line's `--set key=value`; a string value is read as a TOML
+    /// literal. `backend` is `"cpu"`, `"cpu-rayon"` or `"gpu"`.
+    #[staticmethod]
+    #[pyo3(signature = (path, overrides=None, backend="cpu"))]
+    fn from_file(
+        path: PathBuf,
+        overrides: Option<&Bound<'_, PyDict>>,
+        backend: &str,
+    ) -> PyResult<Self> {
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))?;
+        Self::from_text(&path, &text, overrides_of(overrides)?, backend)
+    }
+
+    /// Builds a scene from TOML text; `name` names it in messages (relative mesh paths are
+    /// resolved against the working directory).
+    #[staticmethod]
+    #[pyo3(signature = (text, overrides=None, backend="cpu", name="scene.toml"))]
+    fn from_toml(
+        text: &str,
+        overrides: Option<&Bound<'_, PyDict>>,
+        backend: &str,
+        name: &str,
+    ) -> PyResult<Self> {
+        Self::from_text(Path::new(name), text, overrides_of(overrides)?, backend)
+    }
+
+    /// Takes one step.
+    fn step(&self, py: Python<'_>) -> PyResult<()> {
+        py.detach(|| self.lock().step())
+            .map_err(|e| StepError::new_err(e.to_string()))
+    }
+
+    /// Takes `steps` steps (the scene's own run length when `None`), with the GIL released.
+    #[pyo3(signature = (steps=None))]
+    fn run(&self, py: Python<'_>, steps: Option<u64>) -> PyResult<()> {
+        let steps = steps.unwrap_or(self.scene_steps);
+        py.detach(|| self.lock().run(steps))
+            .map_err(|e| StepError::new_err(e.to_string()))
+    }
+
+    /// The scene's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    /// Simulated time [s].
+    #[getter]
+    fn time(&self) -> f64 {
+        self.lock().time()
+    }
+
+    /// The time step [s].
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.lock().dt()
+    }
+
+    /// Steps taken so far.
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.lock().steps()
+    }
+
+    /// The scene's run length in steps (what `run()` takes).
+    #[getter]
+    fn scene_steps(&self) -> u64 {
+        self.scene_steps
+    }
+
+    /// The backend: `"cpu"`, `"cpu-rayon"` or `"gpu"`.
+    #[getter]
+    fn backend(&self) -> &'static str {
+        self.lock().backend().name()
+    }
+
+    /// The rods' names, in order (a rod is addressed by its index).
+    #[getter]
+    fn rod_names(&self) -> Vec<String> {
+        let sim = self.lock();
+        sim.rods().map(|h| sim.rod_name(h).to_string()).collect()
+    }
+
+    /// Warnings the builder gave (e.g. a step near the stability limit).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.lock().warnings().to_vec()
+    }
+
+    /// Elements of rod `rod` (it has one more point).
+    #[pyo3(signature = (rod=0))]
+    fn elements(&self, rod: usize) -> PyResult<usize> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.stepper().elements(h.0).map_err(control_err)
+    }
+
+    /// Centreline points of rod `rod`, shape `(n + 1, 3)` [m].
+    #[pyo3(signature = (rod=0))]
+    fn positions<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.read3(py, rod, StateField::Positions)
+    }
+
+    /// Point velocities of rod `rod`, shape `(n + 1, 3)` [m/s].
+    #[pyo3(signature = (rod=0))]
+    fn velocities<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.read3(py, rod, StateField::Velocities)
+    }
+
+    /// Frame angular velocities of rod `rod` in body axes, shape `(n, 3)` [rad/s].
+    #[pyo3(signature = (rod=0))]
+    fn angular_velocities<'py>(
+        &self,
+        py: Python<'py>,
+        rod: usize,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.read3(py, rod, StateField::AngularVelocities)
+    }
+
+    /// Material frames of rod `rod` as unit quaternions `[w, x, y, z]` (body to world), shape
+    /// `(n, 4)`.
+    #[pyo3(signature = (rod=0))]
+    fn frames<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let n = sim.stepper().elements(h.0).map_err(control_err)?;
+        let out = PyArray2::<f64>::zeros(py, [n, 4], false);
+        {
+            let mut rw = out.readwrite();
+            let slice = rw
+                .as_slice_mut()
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            sim.read_frames(h, rows::<4>(slice)).map_err(control_err)?;
+        }
+        Ok(out)
+    }
+
+    /// All directors of rod `rod` in world axes, shape `(n, 3, 3)`: `[j, k]` is director
+    /// `d_{k+1}` of frame `j` (`d3` follows the tangent).
+    #[pyo3(signature = (rod=0))]
+    fn directors<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let n = sim.stepper().elements(h.0).map_err(control_err)?;
+        let mut d = vec![[0.0; 3]; n];
+        let out = PyArray3::<f64>::zeros(py, [n, 3, 3], false);
+        {
+            let mut rw = out.readwrite();
+            let slice = rw
+                .as_slice_mut()
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            for k in 0..3 {
+                sim.read(h, StateField::Director(k), &mut d)
+                    .map_err(control_err)?;
+                for (j, v) in d.iter().enumerate() {
+                    slice[9 * j + 3 * k..9 * j + 3 * k + 3].copy_from_slice(v);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Overwrites the points of rod `rod` (shape `(n + 1, 3)`); a held end point moves its
+    /// holder with it.
+    #[pyo3(signature = (values, rod=0))]
+    fn set_positions(&self, values: PyReadonlyArray2<'_, f64>, rod: usize) -> PyResult<()> {
+        self.write3(rod, StateField::Positions, values)
+    }
+
+    /// Overwrites the point velocities of rod `rod` (shape `(n + 1, 3)`).
+    #[pyo3(signature = (values, rod=0))]
+    fn set_velocities(&self, values: PyReadonlyArray2<'_, f64>, rod: usize) -> PyResult<()> {
+        self.write3(rod, StateField::Velocities, values)
+    }
+
+    /// Overwrites the frames' body angular velocities of rod `rod` (shape `(n, 3)`).
+    #[pyo3(signature = (values, rod=0))]
+    fn set_angular_velocities(
+        &self,
+        values: PyReadonlyArray2<'_, f64>,
+        rod: usize,
+    ) -> PyResult<()> {
+        self.write3(rod, StateField::AngularVelocities, values)
+    }
+
+    /// Overwrites the frames of rod `rod` (shape `(n, 4)`, `[w, x, y, z]`, normalised here); a
+    /// clamp closes on the written end frame.
+    #[pyo3(signature = (values, rod=0))]
+    fn set_frames(&self, values: PyReadonlyArray2<'_, f64>, rod: usize) -> PyResult<()> {
+        let shape = values.shape();
+        if shape.len() != 2 || shape[1] != 4 {
+            return Err(ControlError::new_err(format!(
+                "frames: expected an array of shape (n, 4), got {shape:?}"
+            )));
+        }
+        let rows: Vec<[f64; 4]> = values
+            .as_array()
+            .rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2], r[3]])
+            .collect();
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.write_frames(h, &rows).map_err(control_err)
+    }
+
+    /// Drives end `end` (0: first point, 1: last) of rod `rod` at a constant `velocity` [m/s]
+    /// and `angular_velocity` [rad/s] (world axes) from now until changed: a hand pushing,
+    /// pulling and twisting. The end must be held (pinned or clamped).
+    #[pyo3(signature = (end, velocity, angular_velocity=vec![0.0; 3], rod=0))]
+    fn set_end_velocity(
+        &self,
+        end: usize,
+        velocity: Vec<f64>,
+        angular_velocity: Vec<f64>,
+        rod: usize,
+    ) -> PyResult<()> {
+        let (v, w) = (
+            vec3("velocity", &velocity)?,
+            vec3("angular_velocity", &angular_velocity)?,
+        );
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.set_end_velocity(h, end, v, w).map_err(control_err)
+    }
+
+    /// Moves held end `end` of rod `rod` to `position` (and, for a clamp, its frame to `frame`,
+    /// `[w, x, y, z]`) in `duration` seconds at constant speed, then holds it there.
+    #[pyo3(signature = (end, position, duration, frame=None, rod=0))]
+    fn move_end_to(
+        &self,
+        end: usize,
+        position: Vec<f64>,
+        duration: f64,
+        frame: Option<Vec<f64>>,
+        rod: usize,
+    ) -> PyResult<()> {
+        let p = vec3("position", &position)?;
+        let q = frame
+            .map(|f| {
+                <[f64; 4]>::try_from(f.as_slice()).map_err(|_| {
+                    ControlError::new_err(format!("frame: expected 4 numbers, got {}", f.len()))
+                })
+            })
+            .transpose()?;
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.move_end_to(h, end, p, q, duration).map_err(control_err)
+    }
+
+    /// Holds end `end` of rod `rod` as `kind` (`"free"`, `"pinned"` or `"clamped"`), at rest,
+    /// from the next step on.
+    #[pyo3(signature = (end, kind, rod=0))]
+    fn hold_end(&self, end: usize, kind: &str, rod: usize) -> PyResult<()> {
+        let kind = end_kind_of(kind)?;
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.hold_end(h, end, kind).map_err(control_err)
+    }
+
+    /// Replaces the point loads of rod `rod`: a list of `(point, (fx, fy, fz))` [N]; an empty
+    /// list removes them.
+    #[pyo3(signature = (loads, rod=0))]
+    fn set_loads(&self, loads: Vec<(usize, Vec<f64>)>, rod: usize) -> PyResult<()> {
+        let loads: Vec<(usize, [f64; 3])> = loads
+            .into_iter()
+            .map(|(p, f)| Ok((p, vec3("load force", &f)?)))
+            .collect::<PyResult<_>>()?;
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        sim.set_loads(h, &loads).map_err(control_err)
+    }
+
+    /// The filtered reaction at held end `end` of rod `rod` after the last step, the wrench the
+    /// holder applies to the rod: `(force [N], torque about the held point [N m])` as arrays in
+    /// world axes (a haptic device renders their negative); `None` for a free end or a backend
+    /// without reactions.
+    #[pyo3(signature = (end, rod=0))]
+    fn end_reaction<'py>(
+        &self,
+        py: Python<'py>,
+        end: usize,
+        rod: usize,
+    ) -> PyResult<Option<Wrench<'py>>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        if end > 1 {
+            return Err(ControlError::new_err(format!(
+                "no end {end}: ends are 0 (first point) and 1 (last point)"
+            )));
+        }
+        Ok(sim.end_reaction(h, end).map(|r| {
+            (
+                PyArray1::from_slice(py, &r.force),
+                PyArray1::from_slice(py, &r.torque),
+            )
+        }))
+    }
+
+    /// The contacts of rod `rod` at the last step: `(points, normals, forces)`, an index array
+    /// of shape `(k,)` and two arrays of shape `(k, 3)` (unit normals, forces on the rod [N]).
+    #[pyo3(signature = (rod=0))]
+    fn contacts<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Contacts<'py>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let mut samples = Vec::new();
+        sim.contacts(h, &mut samples).map_err(control_err)?;
+        let points: Vec<u64> = samples.iter().map(|c| c.point as u64).collect();
+        let normals: Vec<Vec<f64>> = samples.iter().map(|c| c.normal.to_vec()).collect();
+        let forces: Vec<Vec<f64>> = samples.iter().map(|c| c.force.to_vec()).collect();
+        let k = samples.len();
+        let as2 = |rows: Vec<Vec<f64>>| -> PyResult<Bound<'py, PyArray2<f64>>> {
+            if k == 0 {
+                Ok(PyArray2::zeros(py, [0, 3], false))
+            } else {
+                PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))
+            }
+        };
+        Ok((PyArray1::from_vec(py, points), as2(normals)?, as2(forces)?))
+    }
+
+    /// Energies of the current state [J], all rods together: `bend_twist`, `parallel`,
+    /// `stretch`, `gravity`, `kinetic_translation`, `kinetic_rotation`.
+    fn energies<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let e = self.lock().energies();
+        let d = PyDict::new(py);
+        d.set_item("bend_twist", e.bend_twist)?;
+        d.set_item("parallel", e.parallel)?;
+        d.set_item("stretch", e.stretch)?;
+        d.set_item("gravity", e.gravity)?;
+        d.set_item("kinetic_translation", e.kinetic_translation)?;
+        d.set_item("kinetic_rotation", e.kinetic_rotation)?;
+        Ok(d)
+    }
+
+    /// The whole state, to come back to with `restore`.
+    fn snapshot(&self) -> PyResult<PySnapshot> {
+        let mut sim = self.lock();
+        let time = sim.time();
+        let inner = sim
+            .snapshot()
+            .map_err(|e| StepError::new_err(e.to_string()))?;
+        Ok(PySnapshot {
+            inner: Mutex::new(inner),
+            time,
+        })
+    }
+
+    /// Returns to a snapshot of this simulation: the steps that follow are, bit for bit, those
+    /// that followed it.
+    fn restore(&self, snapshot: &PySnapshot) -> PyResult<()> {
+        let snap = snapshot.inner.lock().unwrap_or_else(|p| p.into_inner());
+        self.lock().restore(&snap).map_err(control_err)
+    }
+
+    fn __repr__(&self) -> String {
+        let sim = self.lock();
+        format!(
+            "<cosserat.Simulation {:?}: {} rod(s), {} elements, t = {} s, dt = {} s, {}>",
+            self.name,
+            sim.rods().count(),
+            sim.element_count(),
+            sim.time(),
+            sim.dt(),
+            sim.backend().name()
+        )
+    }
+}
+
+/// The native module; the package `cosserat` re-exports it.
+#[pymodule]
+fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySimulation>()?;
+    m.add_class::<PySnapshot>()?;
+    m.add("SceneError", m.py().get_type::<SceneError>())?;
+    m.add("StepError", m.py().get_type::<StepError>())?;
+    m.add("ControlError", m.py().get_type::<ControlError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
