@@ -234,3 +234,37 @@ fn the_stability_safety_fraction_is_the_users() {
         );
     }
 }
+
+/// `environment.mesh.seed` draws a random vessel: the same seed the same anatomy, another seed
+/// another one, each with its branches' centrelines for placing and scoring rods.
+#[test]
+fn a_seeded_vessel_is_a_reproducible_random_anatomy() {
+    let scene = |seed: u64| {
+        format!(
+            "{GOOD}\n[environment]\nmesh = {{ kind = \"vessel\", triangles = 4000, seed = {seed} }}\n"
+        )
+    };
+    let geometry = |seed: u64| {
+        let (b, _, _) = parse_scene(Path::new("seeded.toml"), &scene(seed), &[]).unwrap();
+        let env = b.environment_ref().expect("an environment").clone();
+        let v = env.vessel.expect("a generated vessel");
+        (v.trunk.expect("a trunk").points, v.branches)
+    };
+    let (trunk, branches) = geometry(3);
+    assert!(
+        (2..=4).contains(&branches.len()),
+        "{} branches",
+        branches.len()
+    );
+    let (again, _) = geometry(3);
+    assert_eq!(trunk, again);
+    let (other, _) = geometry(4);
+    assert_ne!(trunk, other);
+    let err = error_for(&format!(
+        "{GOOD}\n[environment]\nmesh = {{ kind = \"vessel\", seed = -1 }}\n"
+    ));
+    assert!(
+        err.contains("environment.mesh") && err.contains("-1"),
+        "{err}"
+    );
+}

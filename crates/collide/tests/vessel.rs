@@ -241,3 +241,40 @@ fn bulges_narrow_and_widen_the_trunk_where_they_are() {
         );
     }
 }
+
+/// Random vessels: every seed of a sample gives a valid tree (consistent winding, normals into
+/// the lumen, open only at the inlet, the outlet and each branch's end), the same seed the same
+/// mesh, and different seeds different anatomies; the centreline of every branch runs inside
+/// its own lumen.
+#[test]
+fn random_vessels_are_valid_and_reproducible() {
+    use cosserat_collide::vessel::generate_random;
+    let mut shapes = std::collections::HashSet::new();
+    for seed in 0..12u64 {
+        let (v, p) = generate_random(seed, 6_000).expect("a valid draw");
+        assert_eq!(v.report.misoriented_edges, 0, "seed {seed}");
+        assert_eq!(v.report.degenerate_dropped, 0, "seed {seed}");
+        assert!(
+            v.mesh.signed_volume() < 0.0,
+            "seed {seed}: normals into the lumen"
+        );
+        assert_eq!(v.branches.len(), p.branches.len());
+        assert!((2..=4).contains(&p.branches.len()), "seed {seed}");
+        let c = MeshCollider::new(v.mesh.clone());
+        c.bvh().check_invariants(&v.mesh).unwrap();
+        // A branch's far centreline point is inside the wall: its distance to the mesh is about
+        // its radius.
+        for (b, line) in v.branches.iter().enumerate() {
+            let (end, r) = line.sample(0.9);
+            let nearest = c.nearest(&end, 1.0).expect("a nearest triangle").distance;
+            assert!(
+                (nearest / r - 1.0).abs() < 0.2,
+                "seed {seed} branch {b}: wall {nearest:e} m from the axis, radius {r:e} m"
+            );
+        }
+        let (again, _) = generate_random(seed, 6_000).unwrap();
+        assert_eq!(again.mesh.vertices(), v.mesh.vertices());
+        shapes.insert(format!("{:.6}", p.trunk_length));
+    }
+    assert_eq!(shapes.len(), 12, "twelve seeds, twelve trunks");
+}

@@ -23,6 +23,8 @@ pub struct VesselGeometry {
     pub entry_direction: [f64; 3],
     /// The trunk's centreline (known for generated vessels only).
     pub trunk: Option<Centreline>,
+    /// The branches' centrelines, each from the trunk's axis outward (generated vessels only).
+    pub branches: Vec<Centreline>,
     /// Where along the entry's axis the wire reaches the lumen, and the hole opened for it in a
     /// closed wall (`cosserat_collide::port`); `None` when the axis never reaches the lumen
     /// ([`Environment::entry_problem`] says so).
@@ -93,6 +95,7 @@ impl Environment {
         mesh: TriMesh,
         entry: Entry,
         trunk: Option<Centreline>,
+        branches: Vec<Centreline>,
     ) -> Result<Self, MeshError> {
         let name = mesh.name().to_string();
         let direction: [f64; 3] = nalgebra::Vector3::from(entry.direction).normalize().into();
@@ -100,6 +103,7 @@ impl Environment {
             entry_point: entry.point,
             entry_direction: direction,
             trunk: trunk.clone(),
+            branches: branches.clone(),
             port,
         };
         match open_port(mesh.clone(), entry.point, direction, entry.radius) {
@@ -150,13 +154,22 @@ impl Environment {
     /// A procedural vessel tree of any shape (`cosserat_collide::vessel::VesselParams`: trunk
     /// length, radii, bow, branches), entered at its inlet through a port of the inlet's radius.
     pub fn vessel_with(params: &VesselParams) -> Result<Self, MeshError> {
-        let v: Vessel = cosserat_collide::vessel::generate(params)?;
+        Self::of_vessel(cosserat_collide::vessel::generate(params)?)
+    }
+
+    /// A random vessel tree (`cosserat_collide::vessel::VesselParams::random`): the same `seed`
+    /// gives the same anatomy, with about `triangles` triangles.
+    pub fn random_vessel(seed: u64, triangles: usize) -> Result<Self, MeshError> {
+        Self::of_vessel(cosserat_collide::vessel::generate_random(seed, triangles)?.0)
+    }
+
+    fn of_vessel(v: Vessel) -> Result<Self, MeshError> {
         let entry = Entry {
             point: v.entry_point,
             direction: v.entry_direction,
             radius: Some(v.trunk.sample(0.0).1),
         };
-        Self::with_entry(v.mesh, entry, Some(v.trunk.clone()))
+        Self::with_entry(v.mesh, entry, Some(v.trunk.clone()), v.branches.clone())
     }
 
     /// A mesh file (OBJ or STL) with coordinates multiplied by `scale` (0.001 for millimetres),
@@ -169,7 +182,7 @@ impl Environment {
         let repair = mesh.repair_orientation();
         let notes = intake_notes(&path.display().to_string(), &report, &repair);
         let mut env = match entry {
-            Some(entry) => Self::with_entry(mesh, entry, None)?,
+            Some(entry) => Self::with_entry(mesh, entry, None, Vec::new())?,
             None => Self::with_mesh(mesh, None),
         };
         env.intake.splice(0..0, notes);

@@ -142,6 +142,9 @@ pub enum MeshSection {
     Vessel {
         /// Approximate number of triangles (default 26 000, like the paper's phantom).
         triangles: Option<usize>,
+        /// A random anatomy of the same kind (trunk, bow, two to four branches) drawn from this
+        /// seed; none gives the default tree.
+        seed: Option<u64>,
     },
     /// An OBJ or STL file, relative to the scene file.
     File {
@@ -842,7 +845,7 @@ impl Checker<'_> {
             self.invalid(field, err.to_string(), "a readable, valid triangle mesh")
         };
         let mut env = match &e.mesh {
-            MeshSection::Vessel { triangles } => {
+            MeshSection::Vessel { triangles, seed } => {
                 let t = triangles.unwrap_or(26_000);
                 if !(100..=5_000_000).contains(&t) {
                     return Err(self.invalid(
@@ -851,7 +854,11 @@ impl Checker<'_> {
                         "expected 100 ..= 5 000 000",
                     ));
                 }
-                Environment::vessel(t).map_err(|err| mesh_err("environment.mesh", err))?
+                match seed {
+                    None => Environment::vessel(t),
+                    Some(seed) => Environment::random_vessel(*seed, t),
+                }
+                .map_err(|err| mesh_err("environment.mesh", err))?
             }
             MeshSection::File { path, scale, entry } => {
                 let scale = self.positive("environment.mesh.scale", *scale)?;
