@@ -607,6 +607,56 @@ impl PySimulation {
         self.lock().restore(&snap).map_err(control_err)
     }
 
+    /// Contact measurements of rod `rod` since the start, `None` without mesh contact:
+    /// `max_penetration` [m], `escaped_points` (points found beyond a wall), `contacts` (at the
+    /// last step), `max_contacts`, `steps`, `detection_seconds`.
+    #[pyo3(signature = (rod=0))]
+    fn collision_stats<'py>(
+        &self,
+        py: Python<'py>,
+        rod: usize,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let Some(c) = sim.stepper().collision_stats(h.0) else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("max_penetration", c.max_penetration)?;
+        d.set_item("escaped_points", c.escaped_points)?;
+        d.set_item("contacts", c.contacts)?;
+        d.set_item("max_contacts", c.max_contacts)?;
+        d.set_item("steps", c.steps)?;
+        d.set_item("detection_seconds", c.detection_seconds)?;
+        Ok(Some(d))
+    }
+
+    /// The generated vessel of the scene's environment, `None` for other meshes or none:
+    /// `entry_point`, `entry_direction` (arrays), `trunk` (`(points (k, 3), radii (k,))` from
+    /// the inlet) and `branches` (a list of such pairs, each from the trunk's axis outward) [m].
+    fn vessel<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let sim = self.lock();
+        let Some(v) = sim.environment().and_then(|e| e.vessel.as_ref()) else {
+            return Ok(None);
+        };
+        let line = |c: &cosserat::cosserat_collide::vessel::Centreline| -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+            let rows: Vec<Vec<f64>> = c.points.iter().map(|p| p.to_vec()).collect();
+            let points = PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let radii = PyArray1::from_slice(py, &c.radii);
+            pyo3::types::PyTuple::new(py, [points.into_any(), radii.into_any()])
+        };
+        let d = PyDict::new(py);
+        d.set_item("entry_point", PyArray1::from_slice(py, &v.entry_point))?;
+        d.set_item(
+            "entry_direction",
+            PyArray1::from_slice(py, &v.entry_direction),
+        )?;
+        d.set_item("trunk", v.trunk.as_ref().map(&line).transpose()?)?;
+        let branches = v.branches.iter().map(&line).collect::<PyResult<Vec<_>>>()?;
+        d.set_item("branches", branches)?;
+        Ok(Some(d))
+    }
+
     fn __repr__(&self) -> String {
         let sim = self.lock();
         format!(
