@@ -9,6 +9,9 @@ GPU kernels). A simulation is built from a scene (a TOML file or string, the sam
     sim.run(1000)                 # the GIL is released while stepping
     tip = sim.positions()[-1]     # NumPy arrays, shape (n + 1, 3)
 
+:class:`Batch` holds copies of one scene (sharing its mesh), steps them in parallel and reads
+and steers them as arrays with a leading copy axis.
+
 Rods are addressed by index (``rod=0`` by default), ends as 0 (first point) and 1 (last point).
 Errors are exceptions carrying the library's messages: :class:`SceneError` (a scene that
 cannot be built; the message names the file, field and value), :class:`StepError` (a run that
@@ -16,9 +19,18 @@ diverged, naming the rod, element and step), :class:`ControlError` (a refused co
 nothing was changed).
 """
 
-from ._cosserat import ControlError, SceneError, Simulation, Snapshot, StepError, __version__
+from ._cosserat import (
+    Batch,
+    ControlError,
+    SceneError,
+    Simulation,
+    Snapshot,
+    StepError,
+    __version__,
+)
 
 __all__ = [
+    "Batch",
     "ControlError",
     "SceneError",
     "Simulation",

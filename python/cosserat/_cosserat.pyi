@@ -109,3 +109,55 @@ class Simulation:
     def energies(self) -> dict[str, float]: ...
     def snapshot(self) -> Snapshot: ...
     def restore(self, snapshot: Snapshot) -> None: ...
+    def collision_stats(self, rod: int = 0) -> Optional[dict[str, float]]:
+        """Contact measurements since the start; ``None`` without mesh contact."""
+    def vessel(self) -> Optional[dict[str, Any]]:
+        """The generated vessel: ``entry_point``, ``entry_direction``, ``trunk`` and
+        ``branches`` as ``(points, radii)``; ``None`` for other environments."""
+
+class Batch:
+    """Copies of one scene stepped together in parallel (GIL released), as arrays with a
+    leading copy axis."""
+
+    @staticmethod
+    def from_file(
+        path: str | PathLike[str],
+        copies: int,
+        overrides: Optional[Mapping[str, Any]] = None,
+        backend: str = "cpu",
+    ) -> Batch: ...
+    @staticmethod
+    def from_toml(
+        text: str,
+        copies: int,
+        overrides: Optional[Mapping[str, Any]] = None,
+        backend: str = "cpu",
+        name: str = "scene.toml",
+    ) -> Batch: ...
+    def __len__(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def scene_steps(self) -> int: ...
+    @property
+    def times(self) -> list[float]: ...
+    def run(self, steps: Optional[int] = None) -> list[Optional[str]]:
+        """Steps every copy; one entry per copy: ``None`` or the error that stopped it."""
+    def positions(self, rod: int = 0) -> npt.NDArray[np.float64]:
+        """Shape ``(copies, n + 1, 3)`` [m]."""
+    def velocities(self, rod: int = 0) -> npt.NDArray[np.float64]:
+        """Shape ``(copies, n + 1, 3)`` [m/s]."""
+    def set_end_velocity(
+        self,
+        end: int,
+        velocity: npt.ArrayLike,
+        angular_velocity: Optional[npt.ArrayLike] = None,
+        rod: int = 0,
+    ) -> None:
+        """Rows per copy, shape ``(copies, 3)`` or ``(1, 3)``."""
+    def end_reactions(
+        self, end: int, rod: int = 0
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """``(forces, torques)``, each ``(copies, 3)``; NaN where there is none."""
+    def snapshot(self, copy: int) -> Snapshot: ...
+    def restore(self, copy: int, snapshot: Snapshot) -> None: ...

@@ -671,11 +671,279 @@ impl PySimulation {
     }
 }
 
+/// Copies of one scene stepped together (`cosserat.Batch`), for learning and Monte-Carlo loops:
+/// built once and cloned (a mesh is shared, not rebuilt), stepped in parallel on rayon's pool
+/// with the GIL released, read and steered as arrays with a leading copy axis.
+#[pyclass(name = "Batch", module = "cosserat")]
+struct PyBatch {
+    sims: Vec<Mutex<Simulation>>,
+    name: String,
+    scene_steps: u64,
+}
+
+impl PyBatch {
+    fn from_text(
+        path: &Path,
+        text: &str,
+        copies: usize,
+        overrides: Vec<(String, String)>,
+        backend: &str,
+    ) -> PyResult<Self> {
+        if copies == 0 {
+            return Err(SceneError::new_err(
+                "copies = 0: expected at least one copy",
+            ));
+        }
+        let backend = backend_of(backend)?;
+        let (builder, length, name) =
+            parse_scene(path, text, &overrides).map_err(|e| SceneError::new_err(e.to_string()))?;
+        let builder = builder.backend(backend);
+        let sims = (0..copies)
+            .map(|_| {
+                builder
+                    .clone()
+                    .build()
+                    .map(Mutex::new)
+                    .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))
+            })
+            .collect::<PyResult<_>>()?;
+        Ok(Self {
+            sims,
+            name,
+            scene_steps: length.steps,
+        })
+    }
+
+    fn lock(&self, copy: usize) -> MutexGuard<'_, Simulation> {
+        self.sims[copy].lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// `(copies, k, 3)` of a field of rod `rod` of every copy.
+    fn read3<'py>(
+        &self,
+        py: Python<'py>,
+        rod: usize,
+        field: StateField,
+    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let n = {
+            let sim = self.lock(0);
+            let h = PySimulation::handle(&sim, rod)?;
+            sim.stepper().elements(h.0).map_err(control_err)?
+        };
+        let len = field.len(n);
+        let out = PyArray3::<f64>::zeros(py, [self.sims.len(), len, 3], false);
+        {
+            let mut rw = out.readwrite();
+            let slice = rw
+                .as_slice_mut()
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            for (c, chunk) in slice.chunks_exact_mut(3 * len).enumerate() {
+                self.lock(c)
+                    .read(RodHandle(rod), field, rows::<3>(chunk))
+                    .map_err(control_err)?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Rows of a `(copies, 3)` array, or one row for every copy.
+    fn per_copy(&self, name: &str, values: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
+        let a = values.as_array();
+        let copies = self.sims.len();
+        if a.ncols() != 3 || !(a.nrows() == copies || a.nrows() == 1) {
+            return Err(ControlError::new_err(format!(
+                "{name}: expected shape ({copies}, 3) or (1, 3), got {:?}",
+                a.shape()
+            )));
+        }
+        Ok((0..copies)
+            .map(|c| {
+                let r = a.row(if a.nrows() == 1 { 0 } else { c });
+                [r[0], r[1], r[2]]
+            })
+            .collect())
+    }
+}
+
+#[pymethods]
+impl PyBatch {
+    /// `copies` copies of the scene in the TOML file `path` (overrides and backend as for
+    /// `Simulation.from_file`).
+    #[staticmethod]
+    #[pyo3(signature = (path, copies, overrides=None, backend="cpu"))]
+    fn from_file(
+        path: PathBuf,
+        copies: usize,
+        overrides: Option<&Bound<'_, PyDict>>,
+        backend: &str,
+    ) -> PyResult<Self> {
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))?;
+        Self::from_text(&path, &text, copies, overrides_of(overrides)?, backend)
+    }
+
+    /// `copies` copies of a scene given as TOML text.
+    #[staticmethod]
+    #[pyo3(signature = (text, copies, overrides=None, backend="cpu", name="scene.toml"))]
+    fn from_toml(
+        text: &str,
+        copies: usize,
+        overrides: Option<&Bound<'_, PyDict>>,
+        backend: &str,
+        name: &str,
+    ) -> PyResult<Self> {
+        Self::from_text(
+            Path::new(name),
+            text,
+            copies,
+            overrides_of(overrides)?,
+            backend,
+        )
+    }
+
+    /// Number of copies.
+    fn __len__(&self) -> usize {
+        self.sims.len()
+    }
+
+    /// The scene's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    /// The scene's run length in steps.
+    #[getter]
+    fn scene_steps(&self) -> u64 {
+        self.scene_steps
+    }
+
+    /// Simulated time of each copy [s] (they differ only after a copy failed).
+    #[getter]
+    fn times(&self) -> Vec<f64> {
+        (0..self.sims.len()).map(|c| self.lock(c).time()).collect()
+    }
+
+    /// Takes `steps` steps (the scene's run length when `None`) in every copy, in parallel with
+    /// the GIL released. Returns one entry per copy: `None`, or the message of the error that
+    /// stopped that copy (a copy that failed stays where it failed; the others go on).
+    #[pyo3(signature = (steps=None))]
+    fn run(&self, py: Python<'_>, steps: Option<u64>) -> Vec<Option<String>> {
+        use rayon::prelude::*;
+        let steps = steps.unwrap_or(self.scene_steps);
+        py.detach(|| {
+            self.sims
+                .par_iter()
+                .map(|m| {
+                    let mut sim = m.lock().unwrap_or_else(|p| p.into_inner());
+                    sim.run(steps).err().map(|e| e.to_string())
+                })
+                .collect()
+        })
+    }
+
+    /// Points of rod `rod` of every copy, shape `(copies, n + 1, 3)` [m].
+    #[pyo3(signature = (rod=0))]
+    fn positions<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        self.read3(py, rod, StateField::Positions)
+    }
+
+    /// Point velocities of rod `rod` of every copy, shape `(copies, n + 1, 3)` [m/s].
+    #[pyo3(signature = (rod=0))]
+    fn velocities<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        self.read3(py, rod, StateField::Velocities)
+    }
+
+    /// Drives end `end` of rod `rod` of every copy: `velocity` and `angular_velocity` of shape
+    /// `(copies, 3)` (one row per copy) or `(1, 3)` (the same for all) [m/s, rad/s, world
+    /// axes]: one call per tick for the whole batch.
+    #[pyo3(signature = (end, velocity, angular_velocity=None, rod=0))]
+    fn set_end_velocity(
+        &self,
+        end: usize,
+        velocity: PyReadonlyArray2<'_, f64>,
+        angular_velocity: Option<PyReadonlyArray2<'_, f64>>,
+        rod: usize,
+    ) -> PyResult<()> {
+        let v = self.per_copy("velocity", &velocity)?;
+        let w = match angular_velocity {
+            Some(a) => self.per_copy("angular_velocity", &a)?,
+            None => vec![[0.0; 3]; self.sims.len()],
+        };
+        for (c, (v, w)) in v.into_iter().zip(w).enumerate() {
+            let mut sim = self.lock(c);
+            let h = PySimulation::handle(&sim, rod)?;
+            sim.set_end_velocity(h, end, v, w).map_err(control_err)?;
+        }
+        Ok(())
+    }
+
+    /// The filtered reaction at end `end` of rod `rod` of every copy: `(forces, torques)`, each
+    /// of shape `(copies, 3)` (NaN rows where the end is free or the backend has none).
+    #[pyo3(signature = (end, rod=0))]
+    fn end_reactions<'py>(
+        &self,
+        py: Python<'py>,
+        end: usize,
+        rod: usize,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+        if end > 1 {
+            return Err(ControlError::new_err(format!(
+                "no end {end}: ends are 0 (first point) and 1 (last point)"
+            )));
+        }
+        let (mut f, mut t) = (Vec::new(), Vec::new());
+        for c in 0..self.sims.len() {
+            let sim = self.lock(c);
+            let h = PySimulation::handle(&sim, rod)?;
+            let r = sim.end_reaction(h, end);
+            f.push(r.map_or(vec![f64::NAN; 3], |r| r.force.to_vec()));
+            t.push(r.map_or(vec![f64::NAN; 3], |r| r.torque.to_vec()));
+        }
+        let as2 = |rows: Vec<Vec<f64>>| {
+            PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))
+        };
+        Ok((as2(f)?, as2(t)?))
+    }
+
+    /// Copy `copy` as its own state snapshot (to inspect or restore one copy).
+    fn snapshot(&self, copy: usize) -> PyResult<PySnapshot> {
+        if copy >= self.sims.len() {
+            return Err(ControlError::new_err(format!(
+                "no copy {copy}: the batch has copies 0..{}",
+                self.sims.len()
+            )));
+        }
+        let mut sim = self.lock(copy);
+        let time = sim.time();
+        let inner = sim
+            .snapshot()
+            .map_err(|e| StepError::new_err(e.to_string()))?;
+        Ok(PySnapshot {
+            inner: Mutex::new(inner),
+            time,
+        })
+    }
+
+    /// Returns copy `copy` to a snapshot taken of any copy of this batch.
+    fn restore(&self, copy: usize, snapshot: &PySnapshot) -> PyResult<()> {
+        if copy >= self.sims.len() {
+            return Err(ControlError::new_err(format!(
+                "no copy {copy}: the batch has copies 0..{}",
+                self.sims.len()
+            )));
+        }
+        let snap = snapshot.inner.lock().unwrap_or_else(|p| p.into_inner());
+        self.lock(copy).restore(&snap).map_err(control_err)
+    }
+}
+
 /// The native module; the package `cosserat` re-exports it.
 #[pymodule]
 fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySimulation>()?;
     m.add_class::<PySnapshot>()?;
+    m.add_class::<PyBatch>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("StepError", m.py().get_type::<StepError>())?;
     m.add("ControlError", m.py().get_type::<ControlError>())?;

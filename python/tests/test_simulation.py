@@ -184,3 +184,26 @@ def test_stepping_releases_the_gil():
         t.join()
     # A thread that held the GIL for the whole run would leave the counter near zero.
     assert ticks > 1000
+
+
+def test_a_batch_steps_its_copies_as_separate_simulations_would():
+    copies = 4
+    batch = cosserat.Batch.from_file(PENDULUM, copies, {"rod.0.elements": 20})
+    assert len(batch) == copies
+    pushes = np.array([[0.0, 0.02 * c, 0.0] for c in range(copies)])
+    batch.set_end_velocity(0, pushes)
+    assert batch.run(500) == [None] * copies
+    p = batch.positions()
+    assert p.shape == (copies, 21, 3)
+    for c in range(copies):
+        one = cosserat.Simulation.from_file(PENDULUM, {"rod.0.elements": 20})
+        one.set_end_velocity(0, pushes[c])
+        one.run(500)
+        assert np.array_equal(one.positions(), p[c])
+    forces, torques = batch.end_reactions(0)
+    assert forces.shape == (copies, 3) and np.all(np.isfinite(forces))
+    # A snapshot of one copy restores another: copy 3 becomes copy 0.
+    batch.restore(3, batch.snapshot(0))
+    assert np.array_equal(batch.positions()[3], batch.positions()[0])
+    with pytest.raises(cosserat.ControlError, match="expected shape"):
+        batch.set_end_velocity(0, np.zeros((3, 3)))
