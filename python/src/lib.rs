@@ -47,6 +47,8 @@ pyo3::create_exception!(
 
 /// `(force, torque)` arrays of an end reaction.
 type Wrench<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+/// `(forces, torques)` of a batch's end reactions, `(copies, 3)` each.
+type Wrenches<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
 /// `(points, normals, forces)` arrays of a rod's contacts.
 type Contacts<'py> = (
     Bound<'py, PyArray1<u64>>,
@@ -886,7 +888,7 @@ impl PyBatch {
         py: Python<'py>,
         end: usize,
         rod: usize,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+    ) -> PyResult<Wrenches<'py>> {
         if end > 1 {
             return Err(ControlError::new_err(format!(
                 "no end {end}: ends are 0 (first point) and 1 (last point)"
