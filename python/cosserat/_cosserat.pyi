@@ -159,5 +159,11 @@ class Batch:
         self, end: int, rod: int = 0
     ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """``(forces, torques)``, each ``(copies, 3)``; NaN where there is none."""
+    def wall_contact(
+        self, rod: int = 0
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.uint64]]:
+        """Per copy: summed contact force magnitude [N], points found beyond a wall."""
     def snapshot(self, copy: int) -> Snapshot: ...
     def restore(self, copy: int, snapshot: Snapshot) -> None: ...
+    def vessel(self) -> Optional[dict[str, Any]]:
+        """The generated vessel all copies share (as ``Simulation.vessel``)."""

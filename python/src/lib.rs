@@ -49,6 +49,8 @@ pyo3::create_exception!(
 type Wrench<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
 /// `(forces, torques)` of a batch's end reactions, `(copies, 3)` each.
 type Wrenches<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+/// `(forces, escaped points)` per copy of a batch.
+type WallContact<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<u64>>);
 /// `(points, normals, forces)` arrays of a rod's contacts.
 type Contacts<'py> = (
     Bound<'py, PyArray1<u64>>,
@@ -637,26 +639,7 @@ impl PySimulation {
     /// `entry_point`, `entry_direction` (arrays), `trunk` (`(points (k, 3), radii (k,))` from
     /// the inlet) and `branches` (a list of such pairs, each from the trunk's axis outward) [m].
     fn vessel<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let sim = self.lock();
-        let Some(v) = sim.environment().and_then(|e| e.vessel.as_ref()) else {
-            return Ok(None);
-        };
-        let line = |c: &cosserat::cosserat_collide::vessel::Centreline| -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-            let rows: Vec<Vec<f64>> = c.points.iter().map(|p| p.to_vec()).collect();
-            let points = PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))?;
-            let radii = PyArray1::from_slice(py, &c.radii);
-            pyo3::types::PyTuple::new(py, [points.into_any(), radii.into_any()])
-        };
-        let d = PyDict::new(py);
-        d.set_item("entry_point", PyArray1::from_slice(py, &v.entry_point))?;
-        d.set_item(
-            "entry_direction",
-            PyArray1::from_slice(py, &v.entry_direction),
-        )?;
-        d.set_item("trunk", v.trunk.as_ref().map(&line).transpose()?)?;
-        let branches = v.branches.iter().map(&line).collect::<PyResult<Vec<_>>>()?;
-        d.set_item("branches", branches)?;
-        Ok(Some(d))
+        vessel_dict(py, &self.lock())
     }
 
     fn __repr__(&self) -> String {
@@ -671,6 +654,29 @@ impl PySimulation {
             sim.backend().name()
         )
     }
+}
+
+/// The generated vessel of `sim`'s environment as a dict (`Simulation.vessel`).
+fn vessel_dict<'py>(py: Python<'py>, sim: &Simulation) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let Some(v) = sim.environment().and_then(|e| e.vessel.as_ref()) else {
+        return Ok(None);
+    };
+    let line = |c: &cosserat::cosserat_collide::vessel::Centreline| -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+            let rows: Vec<Vec<f64>> = c.points.iter().map(|p| p.to_vec()).collect();
+            let points = PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let radii = PyArray1::from_slice(py, &c.radii);
+            pyo3::types::PyTuple::new(py, [points.into_any(), radii.into_any()])
+        };
+    let d = PyDict::new(py);
+    d.set_item("entry_point", PyArray1::from_slice(py, &v.entry_point))?;
+    d.set_item(
+        "entry_direction",
+        PyArray1::from_slice(py, &v.entry_direction),
+    )?;
+    d.set_item("trunk", v.trunk.as_ref().map(&line).transpose()?)?;
+    let branches = v.branches.iter().map(&line).collect::<PyResult<Vec<_>>>()?;
+    d.set_item("branches", branches)?;
+    Ok(Some(d))
 }
 
 /// Copies of one scene stepped together (`cosserat.Batch`), for learning and Monte-Carlo loops:
@@ -906,6 +912,40 @@ impl PyBatch {
             PyArray2::from_vec2(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))
         };
         Ok((as2(f)?, as2(t)?))
+    }
+
+    /// Per copy, the summed magnitude of the contact forces on rod `rod` at the last step [N]
+    /// and the points of it found beyond a wall since the start: `(forces (copies,), escaped
+    /// (copies,))` (zeros without mesh contact).
+    #[pyo3(signature = (rod=0))]
+    fn wall_contact<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<WallContact<'py>> {
+        let (mut forces, mut escaped) = (Vec::new(), Vec::new());
+        let mut samples = Vec::new();
+        for c in 0..self.sims.len() {
+            let sim = self.lock(c);
+            let h = PySimulation::handle(&sim, rod)?;
+            sim.contacts(h, &mut samples).map_err(control_err)?;
+            forces.push(
+                samples
+                    .iter()
+                    .map(|s| s.force.iter().map(|x| x * x).sum::<f64>().sqrt())
+                    .sum(),
+            );
+            escaped.push(
+                sim.stepper()
+                    .collision_stats(h.0)
+                    .map_or(0, |st| st.escaped_points as u64),
+            );
+        }
+        Ok((
+            PyArray1::from_vec(py, forces),
+            PyArray1::from_vec(py, escaped),
+        ))
+    }
+
+    /// The generated vessel all copies share (as `Simulation.vessel`).
+    fn vessel<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        vessel_dict(py, &self.lock(0))
     }
 
     /// Copy `copy` as its own state snapshot (to inspect or restore one copy).

@@ -54,3 +54,23 @@ def test_pushing_makes_progress_along_the_path():
     assert info["progress"] > 0.04, info
     assert total > 2.0
     assert "failure" not in info, info
+
+
+def test_the_vector_environment_steps_its_copies_as_single_environments_would():
+    kw = dict(elements=48, triangles=4000)
+    vec = gym.make_vec(cosserat.gym.ENV_ID, num_envs=3, vectorization_mode="vector_entry_point",
+                       vessel_seed=5, target_branch=0, **kw)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (3,) + vec.single_observation_space.shape
+    single = cosserat.gym.GuidewireNavigationEnv(vessel_seed=5, target_branch=0, **kw)
+    first, _ = single.reset(seed=0)
+    assert np.array_equal(obs[0], first)
+    actions = np.array([[1.0, 0.0], [0.5, 1.0], [1.0, -1.0]], np.float32)
+    for _ in range(10):
+        obs, rewards, terminated, truncated, _ = vec.step(actions)
+        one, reward, *_ = single.step(actions[0])
+    assert np.array_equal(obs[0], one)
+    assert rewards[0] == pytest.approx(reward)
+    # Different hands, different wires.
+    assert not np.array_equal(obs[0], obs[1])
+    assert not terminated.any() and not truncated.any()
