@@ -99,6 +99,11 @@ struct RunArgs {
     /// median, 99th percentile and largest step time.
     #[arg(long)]
     step_times: bool,
+    /// Stop once the rods have settled: when, over two successive batches of steps (1000, or
+    /// one frame's with --out), no point moved faster than TOL [m/s] on average. The report
+    /// gives the time (`settled_at_s`); a run that does not settle runs to its end and says so.
+    #[arg(long, value_name = "TOL")]
+    until_static: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -233,6 +238,10 @@ struct RunOutcome {
     divergence: Option<String>,
     /// With `--step-times`: the steps' wall times.
     step_times: Option<StepTimes>,
+    /// With `--until-static`: when the rods were found settled.
+    settled_at: Option<f64>,
+    /// With `--until-static`: the largest mean point speed over the last batch [m/s].
+    last_speed: Option<f64>,
 }
 
 /// Steps `sim` by `steps` steps, in batches (or one at a time with `time_each`), recording
@@ -243,6 +252,7 @@ fn step_for(
     record: &mut Option<Recorder>,
     show_progress: bool,
     time_each: bool,
+    until_static: Option<f64>,
 ) -> RunOutcome {
     let bar = (show_progress && steps >= 20_000).then(|| {
         let b = indicatif::ProgressBar::new(steps);
@@ -270,6 +280,12 @@ fn step_for(
     capture(sim, record);
     let mut times = Vec::new();
     let mut interrupted = false;
+    // `--until-static`: the points at the last check, the time then, and how many batches in a
+    // row were calm.
+    let positions =
+        |sim: &Simulation| -> Vec<[f64; 3]> { sim.rods().flat_map(|h| sim.positions(h)).collect() };
+    let mut calm = (until_static.map(|_| (positions(sim), sim.time())), 0);
+    let (mut settled_at, mut last_speed) = (None, None);
     while done < steps {
         if STOP.load(std::sync::atomic::Ordering::Relaxed) {
             interrupted = true;
@@ -311,6 +327,24 @@ fn step_for(
         if let Some(b) = &bar {
             b.set_position(done);
         }
+        if let (Some(tol), (Some((before, t0)), calm_batches)) = (until_static, &mut calm)
+            && sim.time() > *t0
+        {
+            let now = positions(sim);
+            let moved = before
+                .iter()
+                .zip(&now)
+                .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt())
+                .fold(0.0, f64::max);
+            let speed = moved / (sim.time() - *t0);
+            last_speed = Some(speed);
+            *calm_batches = if speed <= tol { *calm_batches + 1 } else { 0 };
+            (*before, *t0) = (now, sim.time());
+            if *calm_batches >= 2 {
+                settled_at = Some(sim.time());
+                break;
+            }
+        }
     }
     if let Some(b) = bar {
         b.finish_and_clear();
@@ -328,6 +362,8 @@ fn step_for(
         wall_s: wall,
         divergence,
         step_times: StepTimes::of(&times),
+        settled_at,
+        last_speed,
     }
 }
 
@@ -446,6 +482,13 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
         name,
         steps,
     } = load(args, &[])?;
+    if let Some(tol) = run_args.until_static
+        && !(tol.is_finite() && tol > 0.0)
+    {
+        return Err(format!(
+            "--until-static {tol} is invalid: expected a positive speed in m/s"
+        ));
+    }
     // An unwritable output directory is found before the run, not after it.
     let series = run_args
         .out
@@ -469,6 +512,7 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
         &mut recorder,
         !args.json,
         run_args.step_times,
+        run_args.until_static,
     );
     if let (Some(dir), Some(rec)) = (&run_args.out, &recorder) {
         write_output(dir, rec)?;
@@ -736,6 +780,12 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         o.step_times,
     );
     r.interrupted = o.interrupted;
+    r.settled_at_s = o.settled_at;
+    if let (None, Some(speed), None) = (o.settled_at, o.last_speed, &o.divergence) {
+        r.run_warnings.push(format!(
+            "the run did not settle (--until-static): points still moved at {speed:.3e} m/s on average over the last batch of steps"
+        ));
+    }
     if json {
         match serde_json::to_string(&r) {
             Ok(text) => println!("{text}"),
@@ -780,6 +830,15 @@ fn report(sim: &Simulation, name: &str, o: &RunOutcome, json: bool) {
         "tip        [{:.6}, {:.6}, {:.6}] m",
         r.tip[0], r.tip[1], r.tip[2]
     );
+    if let Some(t) = r.settled_at_s {
+        println!("settled    at t = {t:.6} s (--until-static)");
+    }
+    for e in &r.reactions {
+        println!(
+            "reaction   {} end {}: force [{:.6e}, {:.6e}, {:.6e}] N, torque [{:.6e}, {:.6e}, {:.6e}] N m",
+            e.rod, e.end, e.force[0], e.force[1], e.force[2], e.torque[0], e.torque[1], e.torque[2]
+        );
+    }
     if let Some(c) = r.contact {
         println!(
             "contact    {} points in contact, max penetration {:.3e} m, {} escaped, detection {:.2} µs/step",
@@ -823,7 +882,7 @@ fn demo() -> Result<ExitCode, String> {
         "Try `cosserat run scenes/pendulum.toml --elements 1000 --json` or `cosserat --help`.\n"
     );
     let mut sim = builder.build().map_err(|e| e.to_string())?;
-    let outcome = step_for(&mut sim, length.steps, &mut None, true, false);
+    let outcome = step_for(&mut sim, length.steps, &mut None, true, false, None);
     report(&sim, &name, &outcome, false);
     Ok(if outcome.divergence.is_some() {
         ExitCode::from(1)

@@ -752,3 +752,60 @@ fn converge_reports_each_run_and_its_estimated_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--refine `sideways`"), "{err}");
 }
+
+/// `--until-static` stops a damped cantilever once it has settled and says when; the report
+/// then holds the statics: the clamp's force balances the weight, its torque the weight's
+/// moment, and the tip's tangent is a unit vector bent downward. A bad tolerance is refused.
+#[test]
+fn until_static_stops_a_settled_cantilever_and_reports_its_clamp() {
+    use cosserat::report::RunReport;
+    let args = [
+        "run",
+        "scenes/nitinol-pendulum.toml",
+        "--set",
+        "rod.0.start.kind=\"clamped\"",
+        "--set",
+        "rod.0.damping.drag=20",
+        "--elements",
+        "50",
+        "--duration",
+        "60",
+        "--until-static",
+        "1e-6",
+        "--json",
+    ];
+    let r: RunReport = serde_json::from_value(run_json(&args)).expect("a RunReport");
+    let settled = r.settled_at_s.expect("it settles");
+    assert!(
+        settled < 59.0 && (settled - r.simulated_s).abs() < 1e-9,
+        "{settled}"
+    );
+    let m = cosserat::cosserat_model::presets::preset("nitinol")
+        .unwrap()
+        .material();
+    let weight = m.linear_density() * 1.0 * 9.81;
+    let clamp = r
+        .reactions
+        .iter()
+        .find(|e| e.end == 0)
+        .expect("the clamp's reaction");
+    assert!(
+        (clamp.force[2] / weight - 1.0).abs() < 1e-3,
+        "{clamp:?} vs {weight}"
+    );
+    // The weight's moment about the clamp: W times the centre of mass's x.
+    assert!(
+        clamp.torque[1] < 0.0 && clamp.torque[1].abs() < 0.5 * weight,
+        "{clamp:?}"
+    );
+    let t = r.tip_tangents["guidewire"];
+    assert!(((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() - 1.0).abs() < 1e-9);
+    assert!(t[2] < 0.0, "{t:?}");
+    let out = cosserat()
+        .args(["run", "scenes/pendulum.toml", "--until-static", "0"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--until-static 0 is invalid"));
+}

@@ -268,3 +268,34 @@ fn a_seeded_vessel_is_a_reproducible_random_anatomy() {
         "{err}"
     );
 }
+
+/// A load placed `at` a fraction of the rod acts on the nearest point, whatever the number of
+/// elements; `point` and `at` together, or a fraction outside 0..=1, are refused by name.
+#[test]
+fn a_load_at_a_fraction_follows_the_elements() {
+    let with_load = |load: &str, elements: usize| {
+        let text = format!("{GOOD}\n[[rod.load]]\n{load}\nforce = [0.0, 0.0, -0.01]\n");
+        let over = [("rod.0.elements".to_string(), elements.to_string())];
+        let (b, _, _) = parse_scene(Path::new("load.toml"), &text, &over).unwrap();
+        let mut sim = b.build().unwrap();
+        sim.run(50).unwrap();
+        sim.positions(cosserat::RodHandle(0))
+    };
+    assert_eq!(with_load("at = 1.0", 8), with_load("point = -1", 8));
+    assert_eq!(with_load("at = 0.5", 8), with_load("point = 4", 8));
+    assert_eq!(with_load("at = 0.5", 16), with_load("point = 8", 16));
+    let both = error_for(&format!(
+        "{GOOD}\n[[rod.load]]\npoint = 2\nat = 0.5\nforce = [0.0, 0.0, -0.01]\n"
+    ));
+    assert!(
+        both.contains("rod[0].load[0]") && both.contains("exactly one"),
+        "{both}"
+    );
+    let outside = error_for(&format!(
+        "{GOOD}\n[[rod.load]]\nat = 1.5\nforce = [0.0, 0.0, -0.01]\n"
+    ));
+    assert!(
+        outside.contains("load[0].at") && outside.contains("1.5"),
+        "{outside}"
+    );
+}

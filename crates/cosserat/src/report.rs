@@ -44,6 +44,14 @@ pub struct RunReport {
     pub tip: [f64; 3],
     /// Last point of every rod, by name [m].
     pub tips: BTreeMap<String, [f64; 3]>,
+    /// Unit tangent at each rod's last point (the direction of its last element), by name.
+    pub tip_tangents: BTreeMap<String, [f64; 3]>,
+    /// The filtered reaction at every held end at the end of the run (the wrench the holder
+    /// applies to the rod; steppers without reactions give none).
+    pub reactions: Vec<EndReactionFigures>,
+    /// With `cosserat run --until-static TOL`: the simulated time at which the run was found
+    /// settled (`None` without the option, or when it did not settle within the run).
+    pub settled_at_s: Option<f64>,
     /// Whether the run stopped on a divergence.
     pub diverged: bool,
     /// Whether the run was stopped from outside (Ctrl-C, SIGTERM) before its last step; the
@@ -167,6 +175,19 @@ pub struct CouplingFigures {
     pub coupling_detection_us_per_step: f64,
 }
 
+/// The reaction at one held end of one rod.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EndReactionFigures {
+    /// The rod's name.
+    pub rod: String,
+    /// 0: first point, 1: last point.
+    pub end: usize,
+    /// Force on the rod [N], world axes.
+    pub force: [f64; 3],
+    /// Torque on the rod about the held point [N m], world axes (zero at a pinned end).
+    pub torque: [f64; 3],
+}
+
 impl RunReport {
     /// The report of `sim` after a run of `steps` steps in `wall_s` seconds.
     pub fn new(
@@ -210,6 +231,30 @@ impl RunReport {
                 .rods()
                 .map(|h| (sim.rod_name(h).to_string(), last(h)))
                 .collect(),
+            tip_tangents: sim
+                .rods()
+                .map(|h| {
+                    let p = sim.positions(h);
+                    let (a, b) = (p[p.len() - 2], p[p.len() - 1]);
+                    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+                    let norm = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    (sim.rod_name(h).to_string(), d.map(|x| x / norm))
+                })
+                .collect(),
+            reactions: sim
+                .rods()
+                .flat_map(|h| {
+                    (0..2).filter_map(move |end| {
+                        sim.end_reaction(h, end).map(|r| EndReactionFigures {
+                            rod: sim.rod_name(h).to_string(),
+                            end,
+                            force: r.force,
+                            torque: r.torque,
+                        })
+                    })
+                })
+                .collect(),
+            settled_at_s: None,
             diverged: divergence.is_some(),
             interrupted: false,
             divergence,

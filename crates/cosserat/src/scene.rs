@@ -426,7 +426,11 @@ pub struct EndSection {
 #[serde(deny_unknown_fields)]
 pub struct LoadSection {
     /// Point index; negative counts from the end (`-1` is the last point).
-    pub point: i64,
+    pub point: Option<i64>,
+    /// Or where along the rod, as a fraction `0..=1` of its elements (of its length when the
+    /// elements are equal): the nearest point, so the load stays in place when `--elements`
+    /// changes.
+    pub at: Option<f64>,
     /// Force [N].
     pub force: [f64; 3],
 }
@@ -1189,18 +1193,36 @@ impl Checker<'_> {
         }
         let n = rb.element_count() as i64;
         for (k, load) in r.loads.iter().enumerate() {
-            let idx = if load.point < 0 {
-                n + 1 + load.point
-            } else {
-                load.point
+            let idx = match (load.point, load.at) {
+                (Some(point), None) => {
+                    let idx = if point < 0 { n + 1 + point } else { point };
+                    if !(0..=n).contains(&idx) {
+                        return Err(self.invalid(
+                            f(&format!("load[{k}].point")),
+                            point,
+                            &format!("expected a point index in -{} ..= {n}", n + 1),
+                        ));
+                    }
+                    idx
+                }
+                (None, Some(at)) => {
+                    if !(0.0..=1.0).contains(&at) {
+                        return Err(self.invalid(
+                            f(&format!("load[{k}].at")),
+                            at,
+                            "expected a fraction of the rod in 0 ..= 1",
+                        ));
+                    }
+                    (at * n as f64).round() as i64
+                }
+                (p, a) => {
+                    return Err(self.invalid(
+                        f(&format!("load[{k}]")),
+                        format!("point = {p:?}, at = {a:?}"),
+                        "expected exactly one of `point` (an index) and `at` (a fraction)",
+                    ));
+                }
             };
-            if !(0..=n).contains(&idx) {
-                return Err(self.invalid(
-                    f(&format!("load[{k}].point")),
-                    load.point,
-                    &format!("expected a point index in -{} ..= {n}", n + 1),
-                ));
-            }
             rb = rb.load(
                 idx as usize,
                 self.finite3(&f(&format!("load[{k}].force")), load.force)?,
