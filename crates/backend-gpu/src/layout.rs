@@ -155,7 +155,8 @@ gpu_struct! {
         base: u32,
         /// Elements of the rod.
         n: u32,
-        /// Bit 0: end 0 holds its point, bit 1 its frame; bits 2 and 3 the same for end 1.
+        /// Bit 0: end 0 holds its point, bit 1 it is clamped (its clamp acts through a
+        /// [`ClampG`]); bits 2 and 3 the same for end 1.
         flags: u32,
         /// Window `[w0, w1)` and owned range `[o0, o1)` of point indices.
         w0: u32,
@@ -183,14 +184,34 @@ gpu_struct! {
     }
 }
 
+gpu_struct! {
+    /// The clamp of one end (`clamps`, binding 17, bound only to kernels built with `CLAMP`),
+    /// two per rod: index `2 · rod + end`. Every rod has both, clamped or not, so that the
+    /// clamp frames are read back and saved the same way for every rod; the kernel reads the
+    /// node and turns `q` only at clamped ends (item flag bits 1 and 3), keeping `q` in a
+    /// register for the dispatch and writing it back at its end. `d` and `e` have the layout of
+    /// a [`SlotG`]'s node.
+    struct ClampG as "Clamp" {
+        /// The clamp frame as `[x, y, z, w]` (`RodState::clamp_frames`): state.
+        q: [f32; 4],
+        /// Rest Darboux vector and length of the clamp's node (`EndNode::rest_darboux`,
+        /// `RodParams::end_node_length`).
+        d: [f32; 4],
+        /// Bend/twist stiffness and damping of the clamp's node (`EndNode::stiffness`,
+        /// `EndNode::damping`).
+        e: [f32; 4],
+    }
+}
+
 /// Every struct the host uploads, for the layout test.
 #[cfg(test)]
-pub(crate) const SHARED: [GpuLayout; 5] = [
+pub(crate) const SHARED: [GpuLayout; 6] = [
     ParamsU::LAYOUT,
     ChunkG::LAYOUT,
     SlotG::LAYOUT,
     ItemG::LAYOUT,
     DriveG::LAYOUT,
+    ClampG::LAYOUT,
 ];
 
 #[cfg(test)]
@@ -279,9 +300,17 @@ mod tests {
             ),
             (
                 1,
-                vec!["GRID", "NBR_SYNC", "COHERENT", "BEND_DAMP", "FAST", "REGC"],
+                vec![
+                    "GRID",
+                    "NBR_SYNC",
+                    "COHERENT",
+                    "BEND_DAMP",
+                    "FAST",
+                    "REGC",
+                    "CLAMP",
+                ],
             ),
-            (1, vec!["PERSTEP", "LOADS", "FAST", "REGC"]),
+            (1, vec!["PERSTEP", "LOADS", "FAST", "REGC", "CLAMP"]),
             (32, vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC"]),
         ] {
             let cfg = KernelConfig {

@@ -1,9 +1,11 @@
 //! GPU time stepping of Cosserat rods with wgpu compute shaders.
 //!
 //! The step is the CPU backend's (`cosserat_backend_cpu::step_rod`, the paper's Fig. 5 without
-//! collisions): forces and torques → integrate velocities and Euler's equations → held ends take
-//! their prescribed velocities → red–black distance-constraint sweeps (inextensible mode) →
-//! integrate positions and frames → NaN / strain check. What differs is where the rod lives
+//! collisions): forces and torques (a clamped end's clamp acting on the end frame through its
+//! bend–twist node) → integrate velocities and Euler's equations → held end points take their
+//! prescribed velocities, clamps turn with their prescribed angular velocities → red–black
+//! distance-constraint sweeps (inextensible mode) → integrate positions and frames → NaN /
+//! strain check. What differs is where the rod lives
 //! while it is stepped, because on a GPU that decides the speed (see `/docs/gpu.md` and the
 //! measurements it cites): a dependent phase costs ~0.1 µs inside a workgroup and ~2 µs
 //! across workgroups, and a launch costs ~50–80 µs as seen from the host. Hence three kernel

@@ -11,7 +11,7 @@
 use crate::device::AdapterSummary;
 use crate::layout::{ItemG, NONE};
 use crate::shader::KernelConfig;
-use crate::{GpuError, GpuOptions, GpuRodInput, KernelPath, SolverSettings};
+use crate::{EndCondition, GpuError, GpuOptions, GpuRodInput, KernelPath, SolverSettings};
 
 /// Loop iterations lavapipe runs per invocation before it silently stops all loops (GPU.md),
 /// with a margin.
@@ -134,6 +134,13 @@ impl Plan {
         }
         if rods.iter().any(|r| !r.loads.is_empty()) {
             flags.push("LOADS");
+        }
+        // Clamps: a clamp frame per clamped end, acting through its node (`layout::ClampG`).
+        if rods
+            .iter()
+            .any(|r| r.ends.iter().any(EndCondition::holds_frame))
+        {
+            flags.push("CLAMP");
         }
         let iterations = if extensible {
             0
@@ -436,6 +443,7 @@ impl Plan {
     }
 }
 
+/// An item's end bits ([`ItemG::flags`]): which ends hold their point and which are clamped.
 fn item_flags(rod: &GpuRodInput) -> u32 {
     let mut f = 0;
     if rod.ends[0].holds_point() {

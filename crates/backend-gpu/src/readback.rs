@@ -12,9 +12,11 @@
 //!
 //! [`GpuOptions::spin_wait_us`]: crate::GpuOptions::spin_wait_us
 
-use crate::layout::DriveG;
+use crate::layout::{ClampG, DriveG};
 use crate::sim::EndTrack;
 use crate::{DivergedQuantity, Divergence, GpuError, GpuSimulation};
+use cosserat_model::rod::clamp_frame_at_rest;
+use cosserat_model::{Quat, Vec3};
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
@@ -28,6 +30,8 @@ enum Part {
     Frames,
     AngularVelocities,
     Status,
+    /// Every rod's clamps ([`ClampG`], two per rod).
+    Clamps,
 }
 
 /// A position read in flight.
@@ -303,6 +307,7 @@ impl GpuSimulation {
                 Part::Frames => &st.frm,
                 Part::AngularVelocities => &st.omg,
                 Part::Status => &self.status_buf,
+                Part::Clamps => &self.clamps_buf,
             };
             enc.copy_buffer_to_buffer(source, 0, staging, offset, size);
             offset += size;
@@ -322,27 +327,42 @@ impl GpuSimulation {
         Ok(bytes)
     }
 
-    /// Positions, velocities, frames, angular velocities (each `16 · slots` bytes) and the
-    /// status words, one after another, in one round trip.
+    /// Bytes of the status words.
+    fn status_bytes(&self) -> usize {
+        16 * self.plan.items.len()
+    }
+
+    /// Bytes of the clamps.
+    fn clamp_bytes(&self) -> usize {
+        std::mem::size_of_val(self.clamps.as_slice())
+    }
+
+    /// Positions, velocities, frames, angular velocities (each `16 · slots` bytes), the status
+    /// words and the clamps, one after another, in one round trip.
     fn read_whole_state(&mut self) -> Result<Vec<u8>, GpuError> {
         let bytes = 16 * self.slots;
-        let status_bytes = 16 * self.plan.items.len() as u64;
         self.read_buffers(&[
             (Part::Positions, bytes),
             (Part::Velocities, bytes),
             (Part::Frames, bytes),
             (Part::AngularVelocities, bytes),
-            (Part::Status, status_bytes),
+            (Part::Status, self.status_bytes() as u64),
+            (Part::Clamps, self.clamp_bytes() as u64),
         ])
     }
 
     /// The full state of every rod (blocking, one round trip). Fails like
     /// [`Self::read_positions`].
     pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
-        use cosserat_model::{Quat, RodState, Vec3};
+        use cosserat_model::RodState;
         let all = self.read_whole_state()?;
         let b = (16 * self.slots) as usize;
-        self.status_error(bytemuck::cast_slice(&all[4 * b..]))?;
+        let clamps_at = 4 * b + self.status_bytes();
+        self.status_error(bytemuck::cast_slice(&all[4 * b..clamps_at]))?;
+        let clamps: Vec<ClampG> = all[clamps_at..]
+            .chunks_exact(std::mem::size_of::<ClampG>())
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
         let floats: &[f32] = bytemuck::cast_slice(&all[..4 * b]);
         let quarter = b / 4;
         let (p, v, q, w) = (
@@ -355,8 +375,13 @@ impl GpuSimulation {
         Ok(self
             .rods
             .iter()
-            .map(|&(base, n)| {
+            .enumerate()
+            .map(|(r, &(base, n))| {
                 let (b, n) = (base as usize, n as usize);
+                let clamp = |end: usize| {
+                    let [x, y, z, w] = clamps[2 * r + end].q;
+                    Quat::new(w, x, y, z)
+                };
                 RodState {
                     positions: (0..=n).map(|i| v3(p, b + i)).collect(),
                     velocities: (0..=n).map(|i| v3(v, b + i)).collect(),
@@ -367,14 +392,15 @@ impl GpuSimulation {
                         })
                         .collect(),
                     angular_velocities: (0..n).map(|i| v3(w, b + i)).collect(),
-                    clamp_frames: [Quat::identity(); 2],
+                    clamp_frames: [clamp(0), clamp(1)],
                 }
             })
             .collect())
     }
 
-    /// The whole device state (points, frames, their velocities, the status words) and the
-    /// host's bookkeeping of held ends, for [`Self::restore`] (blocking, one round trip).
+    /// The whole device state (points, frames, their velocities, the status words, the clamps)
+    /// and the host's bookkeeping of held ends, for [`Self::restore`] (blocking, one round
+    /// trip).
     pub fn snapshot(&mut self) -> Result<GpuSnapshot, GpuError> {
         self.ensure_idle()?;
         let state = self.read_whole_state()?;
@@ -391,8 +417,8 @@ impl GpuSimulation {
     pub fn restore(&mut self, snapshot: &GpuSnapshot) -> Result<(), GpuError> {
         self.ensure_idle()?;
         let bytes = (16 * self.slots) as usize;
-        let status_bytes = 16 * self.plan.items.len();
-        if snapshot.state.len() != 4 * bytes + status_bytes
+        let clamps_at = 4 * bytes + self.status_bytes();
+        if snapshot.state.len() != clamps_at + self.clamp_bytes()
             || snapshot.drives.len() != self.drives.len()
         {
             return Err(GpuError::InvalidInput(
@@ -407,7 +433,10 @@ impl GpuSimulation {
         }
         self.gpu
             .queue
-            .write_buffer(&self.status_buf, 0, &snapshot.state[4 * bytes..]);
+            .write_buffer(&self.status_buf, 0, &snapshot.state[4 * bytes..clamps_at]);
+        self.gpu
+            .queue
+            .write_buffer(&self.clamps_buf, 0, &snapshot.state[clamps_at..]);
         self.steps = snapshot.steps;
         self.drives.clone_from(&snapshot.drives);
         self.tracks.clone_from(&snapshot.tracks);
@@ -417,7 +446,9 @@ impl GpuSimulation {
     }
 
     /// Overwrites one field of rod `rod` (`xyz` of each of its points or frames; frames as
-    /// `[x, y, z, w]`), keeping whatever else the device stores beside them.
+    /// `[x, y, z, w]`), keeping whatever else the device stores beside them. A held end point
+    /// starts its path again from where it is put; the clamp of a clamped end closes on the
+    /// written end frame (its node at rest: `RodState::seat_clamp`), as on the CPU.
     pub fn write_rod_field(
         &mut self,
         rod: usize,
@@ -463,6 +494,24 @@ impl GpuSimulation {
             for end in 0..2 {
                 let p = words[base + if end == 0 { 0 } else { n }];
                 self.restart_end_path(2 * rod + end, [p[0], p[1], p[2]]);
+            }
+        }
+        if field == GpuField::Frames {
+            for end in (0..2).filter(|&e| self.clamped[rod][e]) {
+                let [x, y, z, w] = words[base + if end == 0 { 0 } else { n - 1 }];
+                let node = &self.clamps[2 * rod + end].d;
+                let q = clamp_frame_at_rest(
+                    &Quat::new(w, x, y, z),
+                    &Vec3::new(node[0], node[1], node[2]),
+                    node[3],
+                    end,
+                );
+                let at = std::mem::size_of::<ClampG>() * (2 * rod + end);
+                self.gpu.queue.write_buffer(
+                    &self.clamps_buf,
+                    at as u64,
+                    bytemuck::cast_slice(&[q.i, q.j, q.k, q.w]),
+                );
             }
         }
         self.gpu.queue.submit([]);

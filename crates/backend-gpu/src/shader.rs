@@ -22,12 +22,13 @@ pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 9] = [
+pub(crate) const FLAGS: [&str; 10] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
     "DRAG",
     "LOADS",
+    "CLAMP",
     "GRID",
     "PERSTEP",
     "SUBGROUP",
@@ -347,10 +348,11 @@ mod tests {
             "extensible code compiled into an inextensible kernel"
         );
         assert!(!src.contains("bend_damping_node(qx"));
+        assert!(!src.contains("clamps[") && !src.contains("clamp_torque(qc0"));
         assert!(!src.contains("atomicAdd(&sync"));
         assert!(!src.contains("subgroupShuffle"));
         let cfg = KernelConfig {
-            flags: vec!["EXTENSIBLE", "BEND_DAMP", "GRID"],
+            flags: vec!["EXTENSIBLE", "BEND_DAMP", "GRID", "CLAMP"],
             ..cfg
         };
         let src = cfg.source();
@@ -358,6 +360,7 @@ mod tests {
             src.contains("stretch_element(rx")
                 && src.contains("bend_damping_node(qx")
                 && src.contains("atomicAdd(&sync")
+                && src.contains("clamp_torque(qc0")
         );
         // The subgroup kernel has no workgroup barrier and no workgroup memory at all.
         let cfg = KernelConfig {

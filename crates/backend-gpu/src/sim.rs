@@ -9,7 +9,7 @@
 //! through `readback.rs`.
 
 use crate::device::{AdapterSummary, Gpu};
-use crate::layout::{ChunkG, DriveG, ParamsU, SlotG, TABLE_CAPACITY};
+use crate::layout::{ChunkG, ClampG, DriveG, ParamsU, SlotG, TABLE_CAPACITY};
 use crate::plan::{Plan, Tuning};
 use crate::readback::Readback;
 use crate::{
@@ -58,6 +58,13 @@ pub struct GpuSimulation {
     /// The state buffers holding the current state.
     pub(crate) current: usize,
     pub(crate) status_buf: wgpu::Buffer,
+    /// The clamps, two per rod ([`ClampG`]): one copy on every path, since only the thread
+    /// that steps a clamped end frame reads and writes its clamp.
+    pub(crate) clamps_buf: wgpu::Buffer,
+    /// The clamps as uploaded: their nodes' constants (the frames on the device move on).
+    pub(crate) clamps: Vec<ClampG>,
+    /// Which ends of each rod are clamped (`[first, last]`).
+    pub(crate) clamped: Vec<[bool; 2]>,
     sync_buf: Option<wgpu::Buffer>,
     drives_buf: wgpu::Buffer,
     pub(crate) drives: Vec<DriveG>,
@@ -150,7 +157,7 @@ impl GpuSimulation {
     /// the same way runs the same kernel, bit for bit. Without the optional features the
     /// layouts that need them are not chosen; with lower limits building can fail with
     /// [`GpuError::Wgpu`] (wgpu's default limits allow 8 storage buffers per shader stage, and
-    /// the kernel binds 8 to 13).
+    /// the kernel binds 8 to 14).
     ///
     /// The device's uncaptured-error handler stays its owner's: errors while building are
     /// returned, but a validation error in a later batch reaches that handler instead of the
@@ -243,6 +250,7 @@ impl GpuSimulation {
         let mut loads = vec![[0f32; 4]; slots_n];
         let mut drives = Vec::with_capacity(2 * rods.len());
         let mut tracks = Vec::with_capacity(2 * rods.len());
+        let mut clamps = Vec::with_capacity(2 * rods.len());
         for (rod, &(base, n)) in rods.iter().zip(&rod_layout) {
             let (b, n) = (base as usize, n as usize);
             let p = &rod.params;
@@ -289,6 +297,15 @@ impl GpuSimulation {
                 l[1] += load.force.y;
                 l[2] += load.force.z;
             }
+            for end in 0..2 {
+                let (q, node) = (s.clamp_frames[end], &p.end_nodes[end]);
+                let (u, k) = (node.rest_darboux, node.stiffness);
+                clamps.push(ClampG {
+                    q: [q.i, q.j, q.k, q.w],
+                    d: [u.x, u.y, u.z, p.end_node_length(end)],
+                    e: [k.x, k.y, k.z, node.damping],
+                });
+            }
             for (end, point) in [(0, 0), (1, n)] {
                 let p = s.positions[point];
                 let origin = [f64::from(p.x), f64::from(p.y), f64::from(p.z)];
@@ -301,7 +318,12 @@ impl GpuSimulation {
                 });
             }
         }
+        let clamped = rods
+            .iter()
+            .map(|r| r.ends.map(|e| e.holds_frame()))
+            .collect();
         let has_loads = plan.cfg.flags.contains(&"LOADS");
+        let has_clamps = plan.cfg.flags.contains(&"CLAMP");
         let perstep = plan.path == KernelPath::DispatchPerStep;
         let grid = plan.path == KernelPath::MultiWorkgroup;
 
@@ -360,6 +382,7 @@ impl GpuSimulation {
         if perstep {
             states.push(make_state("b"));
         }
+        let clamps_buf = init("clamps", bytemuck::cast_slice(&clamps), storage);
         let n_items = plan.items.len();
         let status_buf = init("status", &vec![0u8; 16 * n_items], storage);
         // Word 0: the grid-wide arrival counter; words 1..: per-item flags (NBR_SYNC).
@@ -426,6 +449,9 @@ impl GpuSimulation {
         }
         if grid {
             entries.extend([rw(15), rw(16)]);
+        }
+        if has_clamps {
+            entries.push(rw(17));
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -538,6 +564,12 @@ impl GpuSimulation {
                     resource: whole(x),
                 });
             }
+            if has_clamps {
+                e.push(wgpu::BindGroupEntry {
+                    binding: 17,
+                    resource: whole(&clamps_buf),
+                });
+            }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rod step"),
                 layout: &bgl,
@@ -590,6 +622,9 @@ impl GpuSimulation {
             states,
             current: 0,
             status_buf,
+            clamps_buf,
+            clamps,
+            clamped,
             sync_buf,
             drives_buf,
             drives,

@@ -225,6 +225,13 @@ impl Stepper for GpuStepper {
         for (t, w) in self.states[rod].frames.iter_mut().zip(&words) {
             *t = cosserat_model::Quat::new(w[3], w[0], w[1], w[2]);
         }
+        // The device re-seated the clamps of clamped ends on the written frames; so does the
+        // host copy, with the same arithmetic.
+        for end in 0..2 {
+            if self.ends[rod][end].holds_frame() {
+                self.states[rod].seat_clamp(&self.params[rod], end);
+            }
+        }
         Ok(())
     }
 
@@ -305,15 +312,18 @@ impl Stepper for GpuStepper {
     }
 
     fn energies(&self) -> Energies {
-        let model = ForceModel {
-            extensible: self.settings.extensible,
-            gravity: self.settings.gravity,
-            clamped: [false; 2],
-        };
         self.states
             .iter()
             .zip(&self.params)
-            .map(|(s, p)| energies(s, p, &model))
+            .zip(&self.ends)
+            .map(|((s, p), ends)| {
+                let model = ForceModel {
+                    extensible: self.settings.extensible,
+                    gravity: self.settings.gravity,
+                    clamped: ends.map(|e| e.holds_frame()),
+                };
+                energies(s, p, &model)
+            })
             .fold(Energies::default(), Energies::sum)
     }
 

@@ -22,14 +22,22 @@ use cosserat_backend_cpu::{
     CpuRod, EndCondition, Ordering, PointLoad, PrescribedMotion, SolverSettings, step_rod,
 };
 use cosserat_backend_gpu::{
-    GpuError, GpuOptions, GpuRodInput, GpuSimulation, KernelPath, KernelVariant,
+    GpuError, GpuOptions, GpuRodInput, GpuSimulation, GpuStepper, KernelPath, KernelVariant,
 };
-use cosserat_model::Vec3;
+use cosserat_model::energy::{ForceModel, energies};
+use cosserat_model::quat::exp_rotation;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
-use cosserat_model::{Material, RodParams, RodState};
+use cosserat_model::{Material, Quat, RodParams, RodState, Vec3};
+use cosserat_problem::{StateField, Stepper};
 
 /// Relative agreement required (see the module docs).
 const REL_TOL: f64 = 5e-3;
+/// Relative agreement required of a clamped end frame, against its turn. Over 1000 steps the
+/// end frames' rounding grows as the positions' does not: at the last end frame of a
+/// 300-element rod clamped at both ends (`clamped_cantilevers_match_cpu`) the CPU in `f32`
+/// differs from itself in `f64` by 3.1e-3 of the turn and from the GPU by 3.3e-3, while the
+/// GPU differs from `f64` by 7e-4 (measured on lavapipe).
+const FRAME_TOL: f64 = 2e-2;
 /// Absolute floor in `f32` ulps of the rod's extent (see the module docs).
 const FLOOR_ULPS: f64 = 16.0;
 
@@ -112,6 +120,15 @@ impl Case {
     fn cpu_run(&self, settings: &SolverSettings<f32>, steps: u64) -> Vec<StartEnd> {
         self.rods
             .iter()
+            .zip(self.cpu_states(settings, steps))
+            .map(|((s, ..), end)| (s.positions.clone(), end.positions))
+            .collect()
+    }
+
+    /// The rods' whole states after `steps` steps on the CPU.
+    fn cpu_states(&self, settings: &SolverSettings<f32>, steps: u64) -> Vec<RodState<f32>> {
+        self.rods
+            .iter()
             .enumerate()
             .map(|(r, (s, p, e, l))| {
                 let mut rod = CpuRod::new(s.clone(), p.clone(), *e, l.clone());
@@ -119,7 +136,7 @@ impl Case {
                     step_rod(&mut rod, settings, k as f64 * settings.dt as f64, r, k)
                         .expect("the CPU oracle must not diverge");
                 }
-                (s.positions.clone(), rod.state.positions)
+                rod.state
             })
             .collect()
     }
@@ -824,4 +841,329 @@ fn missing_input_is_an_error_not_a_panic() {
     ));
     let msg = GpuError::NoAdapter("none".into()).to_string();
     assert!(msg.contains("--backend cpu"), "{msg}");
+}
+
+/// The paths the clamp tests run: the multi-workgroup path only where the adapter can run it
+/// (a real GPU; lavapipe cannot).
+const CLAMP_PATHS: [KernelPath; 3] = [
+    KernelPath::SingleWorkgroup,
+    KernelPath::DispatchPerStep,
+    KernelPath::MultiWorkgroup,
+];
+
+/// [`gpu`] on `path`, with workgroups of at most 64 threads (several windows for a rod of 300
+/// elements) except on the multi-workgroup path, which keeps its own windows; `None` also where
+/// the adapter cannot run the multi-workgroup path, which it notes.
+fn gpu_on(case: &Case, settings: &SolverSettings<f32>, path: KernelPath) -> Option<GpuSimulation> {
+    let options = GpuOptions {
+        path,
+        max_threads: if path == KernelPath::MultiWorkgroup {
+            256
+        } else {
+            64
+        },
+        ..GpuOptions::default()
+    };
+    if path == KernelPath::MultiWorkgroup
+        && let Err(GpuError::PathUnavailable { reason, .. }) =
+            GpuSimulation::new(case.gpu_input(), settings, options.clone())
+    {
+        eprintln!("note: no {path} path on this adapter: {reason}");
+        return None;
+    }
+    gpu(case, settings, options)
+}
+
+/// The angle-like distance between two unit quaternions, whichever sign they carry.
+fn quat_gap(a: &Quat<f32>, b: &Quat<f32>) -> f64 {
+    let (a, b) = (a.cast::<f64>(), b.cast::<f64>());
+    (a - b).norm().min((a + b).norm())
+}
+
+/// A straight rod of `n` elements of 1 cm along the horizontal direction at `angle`.
+fn straight_rod(n: usize, angle: f64, spec: &RodSpec) -> (RodState<f32>, RodParams<f32>) {
+    let pts = straight_polyline(
+        [0.0; 3],
+        [angle.cos(), angle.sin(), 0.0],
+        0.01 * n as f64,
+        n,
+    );
+    build_rod::<f32>(&pts, spec).expect("valid rod")
+}
+
+/// Cantilevers sagging under gravity, clamped at the first end, at the last, and at both (with
+/// bending damping, so the clamps' damping acts too): they bend hardest at their clamps, so the
+/// end frames turn against the clamps' nodes. Positions, every frame and the clamp frames
+/// against the CPU, on the single-workgroup path and on the windows of the dispatch-per-step
+/// and (on a real GPU) multi-workgroup paths (the 300-element rod's two clamps in different
+/// windows).
+#[test]
+fn clamped_cantilevers_match_cpu() {
+    let (free, clamped) = (EndCondition::free(), EndCondition::clamped());
+    let rods = [
+        (40, [clamped, free], 0.0),
+        (40, [free, clamped], 0.0),
+        (300, [clamped, clamped], 1e-9),
+    ]
+    .into_iter()
+    .enumerate()
+    .map(|(i, (n, ends, damping))| {
+        let mut spec = RodSpec::new(material());
+        spec.bend_damping = damping;
+        let (s, p) = straight_rod(n, 0.9 * i as f64, &spec);
+        (s, p, ends, vec![])
+    })
+    .collect();
+    let case = Case { rods };
+    let s = settings(false);
+    let steps = 1000;
+    let cpu = case.cpu_states(&s, steps);
+    for path in CLAMP_PATHS {
+        let Some(mut sim) = gpu_on(&case, &s, path) else {
+            continue;
+        };
+        let what = format!("clamped cantilevers, {}", sim.kernel_description());
+        assert!(what.contains("CLAMP"), "{what}");
+        for _ in 0..10 {
+            sim.step(steps as u32 / 10).expect("submit");
+        }
+        let g = sim.read_state().unwrap_or_else(|e| panic!("{what}: {e}"));
+        let start_end: Vec<StartEnd> = case
+            .rods
+            .iter()
+            .zip(&cpu)
+            .map(|(r, c)| (r.0.positions.clone(), c.positions.clone()))
+            .collect();
+        let positions: Vec<Vec<[f32; 3]>> = g
+            .iter()
+            .map(|s| s.positions.iter().map(|p| [p.x, p.y, p.z]).collect())
+            .collect();
+        compare(&start_end, &positions, &what);
+        for (r, ((rod, c), g)) in case.rods.iter().zip(&cpu).zip(&g).enumerate() {
+            let n = c.frames.len();
+            for (end, frame) in [(0, 0), (1, n - 1)] {
+                if !rod.2[end].holds_frame() {
+                    continue;
+                }
+                // The clamped end frame turned against its clamp (as on the CPU, within the
+                // tolerance of its turn), and the clamp held still.
+                let turn = quat_gap(&rod.0.frames[frame], &c.frames[frame]);
+                let err = quat_gap(&c.frames[frame], &g.frames[frame]);
+                let allowed = FRAME_TOL * turn + FLOOR_ULPS * f64::from(f32::EPSILON);
+                assert!(
+                    turn > 1e-4,
+                    "{what}, rod {r}: end frame {frame} turned {turn:e}"
+                );
+                assert!(
+                    err <= allowed,
+                    "{what}, rod {r}: end frame {frame} differs by {err:.3e} > {allowed:.3e} (turn {turn:.3e})"
+                );
+                let gap = quat_gap(&c.clamp_frames[end], &g.clamp_frames[end]);
+                let moved = quat_gap(&rod.0.clamp_frames[end], &g.clamp_frames[end]);
+                assert!(
+                    gap < 1e-6 && moved < 1e-6,
+                    "{what}, rod {r}: clamp {end} {gap:e} from the CPU's, moved {moved:e}"
+                );
+                eprintln!(
+                    "{what}, rod {r}: end frame {frame} {:.2e} of its turn {turn:.2e}",
+                    err / turn
+                );
+            }
+        }
+    }
+}
+
+/// Rods of 20 and 300 elements clamped at both ends, the clamps driven with angular velocities
+/// for the first 1 ms of 80 steps: on the device each clamp frame turns by `exp(ω t)` and
+/// `read_state` returns it, as the CPU has it; the end frames follow.
+fn driven_clamps_case() -> Case {
+    let motion = |w: Vec3<f32>| PrescribedMotion {
+        velocity: Vec3::zeros(),
+        angular_velocity: w,
+        start_time: 0.0,
+        end_time: 1e-3,
+    };
+    let ends = [
+        EndCondition::clamped().driven(motion(Vec3::new(15.0, 0.0, 0.0))),
+        EndCondition::clamped().driven(motion(Vec3::new(0.0, 4.0, -8.0))),
+    ];
+    let rods = [20, 300]
+        .into_iter()
+        .map(|n| {
+            let (s, p) = straight_rod(n, 0.3, &RodSpec::new(material()));
+            (s, p, ends, vec![])
+        })
+        .collect();
+    Case { rods }
+}
+
+#[test]
+fn driven_clamps_turn_on_the_device_and_read_back() {
+    let case = driven_clamps_case();
+    let s = settings(false);
+    let steps = 80;
+    let cpu = case.cpu_states(&s, steps);
+    for path in CLAMP_PATHS {
+        let Some(mut sim) = gpu_on(&case, &s, path) else {
+            continue;
+        };
+        let what = sim.kernel_description();
+        // Batches that cut the drive's window.
+        for k in [7, 30, 43] {
+            sim.step(k).expect("submit");
+        }
+        let g = sim.read_state().unwrap_or_else(|e| panic!("{what}: {e}"));
+        for (r, ((rod, c), g)) in case.rods.iter().zip(&cpu).zip(&g).enumerate() {
+            let n = c.frames.len();
+            for (end, frame) in [(0, 0), (1, n - 1)] {
+                let Some(m) = rod.2[end].motion else {
+                    unreachable!("both ends are driven")
+                };
+                // The steps whose time k h (h in f32, as both sides count it) is in the window.
+                let on = (0..steps)
+                    .filter(|&k| (m.start_time..m.end_time).contains(&(k as f64 * f64::from(s.dt))))
+                    .count();
+                let turn = m.angular_velocity.cast::<f64>() * (on as f64 * f64::from(s.dt));
+                let exact = exp_rotation(&turn) * rod.0.clamp_frames[end].cast::<f64>();
+                let exact = Quat::new(
+                    exact.w as f32,
+                    exact.i as f32,
+                    exact.j as f32,
+                    exact.k as f32,
+                );
+                let (to_exact, to_cpu) = (
+                    quat_gap(&g.clamp_frames[end], &exact),
+                    quat_gap(&g.clamp_frames[end], &c.clamp_frames[end]),
+                );
+                assert!(
+                    to_exact < 2e-6 && to_cpu < 2e-6,
+                    "{what}, rod {r}, clamp {end}: {to_exact:e} from exp(ω t), {to_cpu:e} from the CPU's"
+                );
+                // The end frame followed its clamp (the drive turned it by 0.018 rad).
+                let lag = quat_gap(&g.frames[frame], &g.clamp_frames[end]);
+                let cpu_lag = quat_gap(&c.frames[frame], &c.clamp_frames[end]);
+                assert!(
+                    lag < 0.5 * turn.norm() && (lag - cpu_lag).abs() < 1e-2 * cpu_lag + 1e-6,
+                    "{what}, rod {r}, end {end}: end frame {lag:e} from its clamp, {cpu_lag:e} on the CPU"
+                );
+                eprintln!(
+                    "{what}, rod {r}, clamp {end}: {to_exact:.1e} from exp(ω t), {to_cpu:.1e} from the CPU; end frame {lag:.3e} behind ({cpu_lag:.3e} on the CPU)"
+                );
+            }
+        }
+    }
+}
+
+/// The stepper's clamps: its energies count the clamps' nodes (with the clamp frames read
+/// back), a snapshot restores the clamp frames with the rest of the state, and writing frames
+/// closes the clamps on them (at rest: nothing moves afterwards).
+#[test]
+fn the_stepper_keeps_its_clamps_through_snapshots_and_writes() {
+    let case = driven_clamps_case();
+    let mut s = settings(false);
+    s.gravity = Vec3::zeros();
+    let mut st = match GpuStepper::new(case.gpu_input(), &s, GpuOptions::default()) {
+        Ok(st) => st,
+        Err(GpuError::NoAdapter(why)) => {
+            assert!(
+                std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+                "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {why}"
+            );
+            eprintln!("note: skipping GPU test, no adapter: {why}");
+            return;
+        }
+        Err(e) => panic!("GPU stepper could not be created: {e}"),
+    };
+    /// Positions and frames of one rod.
+    type Read = (Vec<[f64; 3]>, Vec<[f64; 4]>);
+    let read_all = |st: &GpuStepper| -> Vec<Read> {
+        (0..st.rod_count())
+            .map(|r| {
+                let n = st.elements(r).expect("rod");
+                let (mut p, mut q) = (vec![[0.0; 3]; n + 1], vec![[0.0; 4]; n]);
+                st.read(r, StateField::Positions, &mut p).expect("read");
+                st.read_frames(r, &mut q).expect("read");
+                (p, q)
+            })
+            .collect()
+    };
+    // Snapshot mid-drive: the clamps must come back too, or the drive's second half differs.
+    st.advance(30).expect("advance");
+    let snap = st.snapshot().expect("snapshot");
+    st.advance(40).expect("advance");
+    let (a, ea) = (read_all(&st), st.energies());
+    st.restore(&snap).expect("restore");
+    st.advance(40).expect("advance");
+    assert_eq!(read_all(&st), a, "restored and stepped again");
+    assert_eq!(st.energies().bend_twist, ea.bend_twist);
+
+    // Bending energy with the clamps' nodes, against the CPU's.
+    let cpu = case.cpu_states(&s, 70);
+    let model = |clamped| ForceModel {
+        extensible: false,
+        gravity: s.gravity,
+        clamped,
+    };
+    let bend = |clamped| -> f64 {
+        case.rods
+            .iter()
+            .zip(&cpu)
+            .map(|(rod, c)| energies(c, &rod.1, &model(clamped)).bend_twist)
+            .sum()
+    };
+    let (with, without) = (bend([true; 2]), bend([false; 2]));
+    assert!(
+        with > 1.5 * without,
+        "the clamps' nodes hold {with:e} - {without:e}"
+    );
+    assert!(
+        (ea.bend_twist - with).abs() < 1e-2 * with,
+        "GPU bending energy {:e}, CPU {with:e}",
+        ea.bend_twist
+    );
+
+    // Put every rod back straight and still: the written end frames re-seat the clamps, so
+    // the rods stay at rest. Measured on lavapipe 10 steps later: frames turning at ≤ 0.06
+    // rad/s and 1.3e-10 J of bending energy (rounding), against 19 rad/s and 1.6e-5 J with the
+    // clamps left where the drive turned them.
+    for (r, rod) in case.rods.iter().enumerate() {
+        let n = rod.0.frames.len();
+        let p: Vec<[f64; 3]> = rod
+            .0
+            .positions
+            .iter()
+            .map(|x| x.cast::<f64>().into())
+            .collect();
+        let q: Vec<[f64; 4]> = rod
+            .0
+            .frames
+            .iter()
+            .map(|q| [q.w, q.i, q.j, q.k].map(f64::from))
+            .collect();
+        st.write(r, StateField::Positions, &p).expect("write");
+        st.write(r, StateField::Velocities, &vec![[0.0; 3]; n + 1])
+            .expect("write");
+        st.write(r, StateField::AngularVelocities, &vec![[0.0; 3]; n])
+            .expect("write");
+        st.write_frames(r, &q).expect("write");
+    }
+    let at_rest = st.energies().bend_twist;
+    assert!(
+        at_rest < 1e-12,
+        "bending energy {at_rest:e} after the write"
+    );
+    st.advance(10).expect("advance");
+    for r in 0..st.rod_count() {
+        let n = st.elements(r).expect("rod");
+        let mut w = vec![[0.0; 3]; n];
+        st.read(r, StateField::AngularVelocities, &mut w)
+            .expect("read");
+        let fastest = w.iter().map(|w| Vec3::from(*w).norm()).fold(0.0, f64::max);
+        assert!(fastest < 1.0, "rod {r}: a frame turns at {fastest:e} rad/s");
+    }
+    let after = st.energies().bend_twist;
+    assert!(
+        after < 1e-8,
+        "bending energy {after:e} 10 steps after the write"
+    );
 }

@@ -114,7 +114,7 @@ fn bits(states: &[RodState<f32>]) -> Vec<u32> {
         {
             out.extend([v.x, v.y, v.z].map(f32::to_bits));
         }
-        for q in &s.frames {
+        for q in s.frames.iter().chain(&s.clamp_frames) {
             out.extend([q.i, q.j, q.k, q.w].map(f32::to_bits));
         }
     }

@@ -105,6 +105,43 @@ fn bend_damping_node(qa: vec4<f32>, qb: vec4<f32>, wa: vec3<f32>, wb: vec3<f32>,
     return NodeTorques(quat_rotate_inv(qa, tw), -quat_rotate_inv(qb, tw));
 }
 
+// The unit quaternion of the rotation vector v (quat::exp_rotation). Below 0.1 rad the sine
+// and cosine come from their series, which are exact in f32 there: a GPU's sin and cos are
+// accurate only absolutely (WGSL allows 2^-11), and sin(|v|/2)/|v| for the small turn of one
+// step would carry that error as a relative one.
+fn exp_rotation(v: vec3<f32>) -> vec4<f32> {
+    let angle = length(v);
+    let half = angle * 0.5;
+    var s: f32;
+    var c: f32;
+    if angle < 0.1 {
+        let a2 = angle * angle;
+        s = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0;
+        c = 1.0 - a2 / 8.0 + a2 * a2 / 384.0;
+    } else {
+        s = sin(half) / angle;
+        c = cos(half);
+    }
+    return vec4<f32>(v * s, c);
+}
+
+// Body torque a clamp gives the rod's end frame q (body angular velocity w) through its
+// bend–twist node (energy::clamp_node, energy::clamp_damping; the CPU's clamp_torque): the node
+// runs from the clamp frame qc to q at the first end, from q to qc at the last (`last`). The
+// clamp turns at the world angular velocity om; damping only where c > 0.
+fn clamp_torque(qc: vec4<f32>, q: vec4<f32>, w: vec3<f32>, om: vec3<f32>, rest: vec3<f32>, k: vec3<f32>, l: f32, c: f32, last: bool) -> vec3<f32> {
+    var t: vec3<f32>;
+    if last {
+        t = bend_twist_node(q, qc, rest, k, l).ta;
+    } else {
+        t = bend_twist_node(qc, q, rest, k, l).tb;
+    }
+    if c > 0.0 {
+        t += bend_damping_node(qc, q, quat_rotate_inv(qc, om), w, c, l).tb;
+    }
+    return t;
+}
+
 // True when x is NaN or infinite. WGSL has no isnan/isinf, and comparisons with NaN may be
 // folded away by a driver that assumes finite math, so look at the exponent bits.
 fn not_finite(x: f32) -> bool {

@@ -9,6 +9,9 @@
 //   BEND_DAMP     relative-angular-velocity damping
 //   DRAG          medium drag -drag*m*v
 //   LOADS         constant point loads
+//   CLAMP         clamped ends: a clamp frame per clamped end (state, in `clamps`) turned by the
+//                 end's prescribed angular velocity, acting on the rod's end frame through its
+//                 bend–twist node (cosserat_model::rod::EndNode)
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -93,7 +96,8 @@ struct Item {
     base: u32,
     // Elements of the rod.
     n: u32,
-    // bit0 end 0 holds its point, bit1 its frame, bit2 end 1 holds its point, bit3 its frame.
+    // bit0 end 0 holds its point, bit1 it is clamped (CLAMP), bit2 end 1 holds its point, bit3
+    // it is clamped.
     flags: u32,
     // Window [w0, w1) and owned range [o0, o1) of point indices.
     w0: u32,
@@ -111,12 +115,22 @@ struct Item {
 // A held end's prescribed motion: velocity `v` and angular velocity `w` during steps
 // [window.x, window.y); the point's position after step s is `origin` plus `v h` times the steps
 // of the window in [window.z, s] (`origin`: its position before step window.z, tracked in f64
-// by the host).
+// by the host). `w` turns the clamp of a clamped end (CLAMP).
 struct Drive {
     v: vec4<f32>,
     w: vec4<f32>,
     window: vec4<u32>,
     origin: vec4<f32>,
+}
+
+// A clamped end (CLAMP), per rod and end: the clamp's frame `q` (xyzw; state, turned by the
+// end's prescribed angular velocity every step) and its bend–twist node to the rod's end frame:
+// rest Darboux vector and length (half the end element) in `d`, stiffness and damping in `e`,
+// as a Slot's node.
+struct Clamp {
+    q: vec4<f32>,
+    d: vec4<f32>,
+    e: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -133,6 +147,11 @@ struct Drive {
 @group(0) @binding(9) var<storage, read_write> status: array<atomic<u32>>;
 //#if LOADS
 @group(0) @binding(10) var<storage, read> loads: array<vec4<f32>>;
+//#endif
+//#if CLAMP
+// Read at the start of a dispatch and written at its end only by the thread that steps the
+// end frame in the item that owns it, so one copy serves every path.
+@group(0) @binding(17) var<storage, read_write> clamps: array<Clamp>;
 //#endif
 //#if PERSTEP
 @group(0) @binding(11) var<storage, read> src_pos: array<vec4<f32>>;
@@ -285,6 +304,25 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
     }
 //#endfor
+
+//#if CLAMP
+    // The clamps of this thread's end frames, in registers for the dispatch: c0 when the thread
+    // steps frame 0 of a clamped first end in the item that owns it, c1 the same for frame n - 1
+    // of a clamped last end. A window that reaches an end frame it does not own (a halo) leaves
+    // the clamp out there: like any halo edge, that error cannot reach the points it owns
+    // before their next exchange.
+    let c0 = (it.flags & 2u) != 0u && it.o0 == 0u && lid == 0u;
+    let f1 = it.n - 1u;
+    let c1 = (it.flags & 8u) != 0u && f1 >= it.o0 && f1 < it.o1 && (f1 - it.w0) / EPT == lid;
+    var qc0 = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    var qc1 = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    if c0 {
+        qc0 = clamps[2u * it.rod].q;
+    }
+    if c1 {
+        qc1 = clamps[2u * it.rod + 1u].q;
+    }
+//#endif
 
 //#if !EXTENSIBLE
     // Constraint constants for the whole dispatch: constraint x joins extended points x and
@@ -650,6 +688,35 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#endfor
 
+//#if CLAMP
+        // The clamps' prescribed angular velocities (world) in this step, and the torques their
+        // nodes give the end frames (computed once here, not in every copy of the unrolled loop
+        // below). Frame 0 is the thread's first; frame n - 1 is picked out by its index.
+        var om0 = vec3<f32>(0.0);
+        var om1 = vec3<f32>(0.0);
+        var tc0 = vec3<f32>(0.0);
+        var tc1 = vec3<f32>(0.0);
+        if c0 {
+            let dr = drives[it.rod * 2u];
+            om0 = select(vec3<f32>(0.0), dr.w.xyz, step >= dr.window.x && step < dr.window.y);
+            let k = clamps[2u * it.rod];
+            tc0 = clamp_torque(qc0, q[0], w[0], om0, k.d.xyz, k.e.xyz, k.d.w, k.e.w, false);
+        }
+        if c1 {
+            let dr = drives[it.rod * 2u + 1u];
+            om1 = select(vec3<f32>(0.0), dr.w.xyz, step >= dr.window.x && step < dr.window.y);
+            var qf = q[0];
+            var wf = w[0];
+//#for e 1 EPT
+            if it.w0 + b0 + {e} == f1 {
+                qf = q[{e}];
+                wf = w[{e}];
+            }
+//#endfor
+            let k = clamps[2u * it.rod + 1u];
+            tc1 = clamp_torque(qc1, qf, wf, om1, k.d.xyz, k.e.xyz, k.d.w, k.e.w, true);
+        }
+//#endif
         // Integrate velocities: v += h f / m and Euler's equations with the gyroscopic term.
 //#for e 0 EPT
         {
@@ -673,12 +740,21 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 var vn = vx[{e+1}] + f * (h * sl.a.y);
                 var wn = w[{e}];
                 if gp < end_elem {
-                    // Torque order as on the CPU: parallel, node j-1 (as its b), node j (as its a).
-                    let tq = ((te[{e+1}] + tb[{e}]) + ta[{e+1}]);
+                    // Torque order as on the CPU: parallel, node j-1 (as its b), node j (as its a),
+                    // then a clamp's node.
+                    var tq = ((te[{e+1}] + tb[{e}]) + ta[{e+1}]);
+//#if CLAMP
+                    if c0 && gp == 0u {
+                        tq += tc0;
+                    }
+                    if c1 && gp == f1 {
+                        tq += tc1;
+                    }
+//#endif
                     let gyro = cross(wn, sl.b.xyz * wn);
                     wn += (tq - gyro) * sl.c.xyz * h;
                 }
-                // Held ends follow their prescribed motion exactly.
+                // Held end points follow their prescribed motion exactly.
                 if gp == 0u && (it.flags & 1u) != 0u {
                     let dr = drives[it.rod * 2u];
                     let on = step >= dr.window.x && step < dr.window.y;
@@ -688,16 +764,6 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     let dr = drives[it.rod * 2u + 1u];
                     let on = step >= dr.window.x && step < dr.window.y;
                     vn = select(vec3<f32>(0.0), dr.v.xyz, on);
-                }
-                if gp == 0u && (it.flags & 2u) != 0u {
-                    let dr = drives[it.rod * 2u];
-                    let on = step >= dr.window.x && step < dr.window.y;
-                    wn = quat_rotate_inv(q[{e}], select(vec3<f32>(0.0), dr.w.xyz, on));
-                }
-                if gp + 1u == it.n && (it.flags & 8u) != 0u {
-                    let dr = drives[it.rod * 2u + 1u];
-                    let on = step >= dr.window.x && step < dr.window.y;
-                    wn = quat_rotate_inv(q[{e}], select(vec3<f32>(0.0), dr.w.xyz, on));
                 }
                 vx[{e+1}] = vn;
                 w[{e}] = wn;
@@ -849,6 +915,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             }
         }
 //#endfor
+//#if CLAMP
+        // The clamps turn with their prescribed rotation: q_c <- normalise(exp(h ω) ⊗ q_c).
+        if c0 {
+            let qn = quat_mul(exp_rotation(om0 * h), qc0);
+            qc0 = qn / sqrt(dot(qn, qn));
+        }
+        if c1 {
+            let qn = quat_mul(exp_rotation(om1 * h), qc1);
+            qc1 = qn / sqrt(dot(qn, qn));
+        }
+//#endif
         steps_done = s + 1u;
     }
 
@@ -940,4 +1017,12 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
     }
 //#endfor
+//#if CLAMP
+    if c0 {
+        clamps[2u * it.rod].q = qc0;
+    }
+    if c1 {
+        clamps[2u * it.rod + 1u].q = qc1;
+    }
+//#endif
 }
