@@ -17,6 +17,9 @@ Errors are exceptions carrying the library's messages: :class:`SceneError` (a sc
 cannot be built; the message names the file, field and value), :class:`StepError` (a run that
 diverged, naming the rod, element and step), :class:`ControlError` (a refused control call;
 nothing was changed).
+
+``cosserat.bench`` is a solver for the cosseratbench rod benchmarks (``pip install
+"cosserat[bench]"``; ``docs/benchmarks/cosseratbench.md``); it is not imported here.
 """
 
 from ._cosserat import (

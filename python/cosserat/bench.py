@@ -1,0 +1,497 @@
+"""A `cosseratbench <https://pypi.org/project/cosseratbench/>`_ solver for this simulator
+(issue 23).
+
+cosseratbench finds it through the ``cosseratbench.solvers`` entry point ``cosserat``
+(``python/pyproject.toml``) and runs it in this process::
+
+    pip install "cosserat[bench]"
+    cosseratbench run cantilever catenary --solver cosserat --solver pyelastica
+
+:class:`CosseratSolver` turns a :class:`cosseratbench.Scenario` into a scene (TOML text for
+:meth:`cosserat.Simulation.from_toml`, the same format as ``scenes/*.toml``), steps it with the
+GIL released and samples the frames cosseratbench asks for: every rod's points and the ``d1``
+director of each of its frames.
+
+What a scene cannot say is declared, not imitated: the run raises ``NotImplementedError``
+naming it, which cosseratbench reports as *unsupported* (issue 28 lists these gaps):
+
+- a rod that starts pre-stretched (``Rod.rest_arc_length`` other than the polyline's own arc
+  length): a scene builds a rod unstretched in the shape it starts in;
+- a clamp that slides along an axis (``Motion.slides_along``);
+- cylinder obstacles (``Capability.CYLINDER_CONTACT`` is not claimed), more than one obstacle,
+  and friction coefficients that differ between rods or between rods and the floor in a way one
+  scene-wide coefficient cannot express.
+
+cosseratbench 0.3.0 has no torques, moments or time-varying loads in its scenarios; its
+constant end forces are scene loads.
+
+cosseratbench is an optional dependency (``pip install "cosserat[bench]"``): ``import
+cosserat`` does not import it; only this module does, when cosseratbench loads it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+
+from . import _cosserat
+
+try:
+    from cosseratbench.scenario import (
+        Cylinder,
+        End,
+        EndCondition,
+        Motion,
+        Plane,
+        Rod,
+        Scenario,
+    )
+    from cosseratbench.solver import Capability, Diverged
+    from cosseratbench.trajectory import Trajectory
+except ImportError as error:  # pragma: no cover - exercised only without the extra
+    raise ImportError(
+        'cosserat.bench needs cosseratbench: pip install "cosserat[bench]"',
+        name="cosseratbench",
+    ) from error
+
+__all__ = ["CosseratSolver"]
+
+# The explicit scheme's accepted fraction of its estimated critical step
+# (`cosserat_model::stability::SAFETY`, measured in docs/stability.md).
+_SAFETY = 0.5
+# Time step of the stiff scheme: the haptic step it is validated at (docs/stiff-solver.md). Its
+# statics do not depend on the step, so a quasi-static run needs only enough steps per slowest
+# period to follow the rod settling (the bound below), and a driven end enough per frame.
+_STIFF_DT = 1e-3
+_STIFF_STEPS_PER_RADIAN = 20.0  # steps per radian of the slowest mode: h ω ≤ 1/20
+# A floor is a square plane mesh; this many times the rods' extent, so that nothing reaches
+# its edges.
+_FLOOR_SIZE = 100.0
+
+
+def _stable_step(rod: Rod, n_elements: int, drag: float, extensible: bool) -> float:
+    """The explicit scheme's estimated critical step for ``rod`` (seconds).
+
+    The same estimate as the library's ``cosserat_model::stability::stable_step``, which the
+    scene builder applies to refuse a step (it is not in the Python API, and this adapter needs
+    it before it writes the scene): the fastest of the bending/shear, torsion and stretching
+    blocks, with the default parallel penalty ``K_p = G A`` and drag as the only damping.
+    """
+    m = rod.material
+    rho, r = m.density, rod.radius
+    # The shortest element: the rod is resampled to equal chords, never longer than its arc.
+    nodes = rod.nodes(n_elements)
+    seg = float(np.linalg.norm(np.diff(nodes, axis=0), axis=1).min())
+    area = math.pi * r * r
+    i2 = math.pi * r**4 / 4.0
+    kp = m.shear_modulus * area
+    bending = 4.0 * m.youngs_modulus / (rho * seg**2)
+    blocks = [
+        (bending + kp / rho * (4.0 / (area * seg**2) + 1.0 / i2), drag),
+        (4.0 * m.shear_modulus / (rho * seg**2), 0.0),
+        (4.0 * m.youngs_modulus / (rho * seg**2) if extensible else 0.0, drag),
+    ]
+
+    def critical(w2: float, gamma: float) -> float:
+        if w2 == 0.0:
+            return 2.0 / gamma if gamma > 0.0 else math.inf
+        return 4.0 / (math.sqrt(gamma * gamma + 4.0 * w2) + gamma)
+
+    return min(critical(w2, g) for w2, g in blocks)
+
+
+def _toml(value: Any) -> str:
+    """A TOML literal."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    return "[" + ", ".join(_toml(v) for v in value) + "]"
+
+
+def _rotation(vectors: np.ndarray) -> np.ndarray:
+    """Rotation matrices [k, 3, 3] of rotation vectors [k, 3] (Rodrigues)."""
+    angle = np.linalg.norm(vectors, axis=1)
+    k = np.zeros((len(vectors), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -vectors[:, 2], vectors[:, 1], -vectors[:, 0]
+    k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = vectors[:, 2], -vectors[:, 1], vectors[:, 0]
+    small = angle < 1e-12
+    safe = np.where(small, 1.0, angle)
+    a = np.where(small, 1.0, np.sin(safe) / safe)[:, None, None]
+    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)[:, None, None]
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def _log(rotations: np.ndarray) -> np.ndarray:
+    """Rotation vectors [k, 3] of rotation matrices [k, 3, 3] (angles below π)."""
+    cos = np.clip((np.trace(rotations, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axial = np.stack(
+        [
+            rotations[:, 2, 1] - rotations[:, 1, 2],
+            rotations[:, 0, 2] - rotations[:, 2, 0],
+            rotations[:, 1, 0] - rotations[:, 0, 1],
+        ],
+        axis=1,
+    )
+    sin = np.sin(angle)
+    scale = np.where(angle < 1e-8, 0.5, angle / (2.0 * np.where(sin == 0.0, 1.0, sin)))
+    return axial * scale[:, None]
+
+
+def _poses(motion: Motion, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``Motion.pose`` at many times: displacements [k, 3] and rotation matrices [k, 3, 3]."""
+    knots = np.asarray(motion.times, dtype=float)
+    d = np.asarray(motion.displacement, dtype=float)
+    r = np.asarray(motion.rotation, dtype=float)
+    i = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, len(knots) - 2)
+    f = np.clip((times - knots[i]) / (knots[i + 1] - knots[i]), 0.0, 1.0)[:, None]
+    return d[i] + f * (d[i + 1] - d[i]), _rotation(r[i] + f * (r[i + 1] - r[i]))
+
+
+@dataclass
+class _Drive:
+    """A driven clamp: rod ``rod``'s end ``end`` (0 first point, 1 last) follows ``motion``."""
+
+    rod: int
+    end: int
+    motion: Motion
+    last: Optional[np.ndarray] = None  # the (v, ω) set last, 6 numbers
+
+    def rates(self, start: float, dt: float, steps: int) -> np.ndarray:
+        """The constant velocity and world angular velocity [steps, 6] that take the end from
+        its pose at each step's start to its pose at the step's end exactly: the clamp point
+        moves by ``h v`` and the clamp frame turns by ``exp(h ω)`` in a step."""
+        times = start + dt * np.arange(steps + 1)
+        d, rot = _poses(self.motion, times)
+        v = np.diff(d, axis=0) / dt
+        w = _log(rot[1:] @ np.transpose(rot[:-1], (0, 2, 1))) / dt
+        return np.concatenate([v, w], axis=1)
+
+
+@dataclass
+class _Plan:
+    """The numerical choices for one scenario at one resolution, and the scene they make."""
+
+    scheme: str
+    extensible: bool
+    time_step: float
+    steps_per_frame: int
+    drag: float
+    scene: str
+    drives: list[_Drive] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def _unsupported(scenario: Scenario) -> list[str]:
+    """What in ``scenario`` the scene format cannot express (issue 28), one line each."""
+    prestretched, strains, sliding = [], [], []
+    for k, rod in enumerate(scenario.rods):
+        if rod.rest_arc_length is not None:
+            points = np.asarray(rod.centerline, dtype=float)
+            chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
+            arc = np.concatenate(([0.0], np.cumsum(chords)))
+            rest = np.asarray(rod.rest_arc_length, dtype=float)
+            if np.max(np.abs(rest - arc)) > 1e-9 * arc[-1]:
+                prestretched.append(k)
+                strains.append(float(np.max(np.abs(np.diff(arc) / np.diff(rest) - 1.0))))
+        for end in End:
+            motion = rod.motion(end)
+            if motion is not None and motion.slides_along is not None:
+                sliding.append(f"{k} ({end.value})")
+    reasons = []
+    if prestretched:
+        reasons.append(
+            f"rod(s) {', '.join(map(str, prestretched))} start pre-stretched (rest_arc_length, "
+            f"strain up to {max(strains):.2g}): a scene builds a rod unstretched in the shape "
+            "it starts in (issue 28)"
+        )
+    if sliding:
+        reasons.append(
+            f"rod(s) {', '.join(sliding)} end in a clamp that slides along an axis "
+            "(Motion.slides_along): scene ends are free, pinned or clamped (issue 28)"
+        )
+    cylinders = [o for o in scenario.obstacles if isinstance(o, Cylinder)]
+    if cylinders:
+        reasons.append(
+            f"{len(cylinders)} cylinder obstacle(s): the scene's environment is a mesh or a "
+            "square floor, with no cylinder (issue 28)"
+        )
+    planes = [o for o in scenario.obstacles if isinstance(o, Plane)]
+    if len(scenario.obstacles) > 1:
+        reasons.append(f"{len(scenario.obstacles)} obstacles: a scene has one environment mesh")
+    elif planes:
+        coefficients = {max(planes[0].friction, rod.friction) for rod in scenario.rods}
+        if len(coefficients) > 1:
+            reasons.append(
+                f"rod-floor friction differs between rods ({sorted(coefficients)}): a scene "
+                "has one coefficient for its environment"
+            )
+    if _touching(scenario) and len({rod.friction for rod in scenario.rods}) > 1:
+        reasons.append(
+            "rods with different friction coefficients touch each other: a scene has one "
+            "coefficient for rod-rod contact"
+        )
+    return reasons
+
+
+def _touching(scenario: Scenario) -> bool:
+    """Whether the scenario needs rod-rod or self-contact."""
+    return len(scenario.rods) > 1 or scenario.self_contact
+
+
+class CosseratSolver:
+    """The ``cosserat`` solver of cosseratbench: this package's CPU backend, in process.
+
+    The scheme is chosen per scenario as a user of the simulator would:
+
+    - **stiff** (implicit bending, twisting, stretch and shear; ``docs/stiff-solver.md``) for a
+      quasi-static scenario, where only the state the rod settles to counts: its statics do not
+      depend on the step, so it runs at the haptic step of 1 ms (a smaller one where the slowest
+      mode or the frame interval needs it) instead of the explicit scheme's, which for a stiff
+      thin wire is hundreds to thousands of times smaller (2 to 30 times for cosseratbench's soft
+      rods). Implicit Euler damps what it cannot resolve, which a settling rod does not mind.
+    - **explicit** (the paper's semi-implicit Euler) for a dynamic scenario, where the motion
+      is the result: it adds no numerical damping, as cosseratbench asks, at half the estimated
+      critical step (the library's default safety). Also for rods that touch each other or
+      themselves, which the stiff scheme does not handle yet.
+
+    Rods are extensible (stretch energy ``E A``) and shear through the parallel penalty
+    ``K_p = G A`` (a Timoshenko rod with shear coefficient 1), in double precision, with a
+    straight rest shape (cosseratbench rods are straight when stress-free). A quasi-static
+    scenario gets drag at twice the slowest mode's angular frequency (critical damping of that
+    mode, as cosseratbench's PyElastica adapter does); a dynamic one gets no damping at all.
+    """
+
+    name = "cosserat"
+    backend_version = _cosserat.__version__
+    capabilities = frozenset(
+        {
+            Capability.STRETCH,
+            Capability.SHEAR,
+            Capability.ROD_CONTACT,  # explicit scheme, [rod_contact]
+            Capability.ROD_FRICTION,  # Coulomb, static and kinetic alike here
+            Capability.PLANE_CONTACT,  # a square floor mesh, with Coulomb friction
+        }
+    )
+
+    def __init__(self, time_step_scale: float = 1.0, scheme: Optional[str] = None) -> None:
+        """``time_step_scale`` multiplies the step this adapter would choose (cosseratbench's
+        solver option); ``scheme`` (``"explicit"`` or ``"stiff"``) overrides the choice of
+        scheme, for comparing the two (the stiff scheme has no rod-rod contact)."""
+        if not time_step_scale > 0.0:
+            raise ValueError(f"time_step_scale = {time_step_scale}: expected a number > 0")
+        if scheme not in (None, "explicit", "stiff"):
+            raise ValueError(f'scheme = {scheme!r}: expected None, "explicit" or "stiff"')
+        self.time_step_scale = float(time_step_scale)
+        self.scheme = scheme
+
+    # -- planning ---------------------------------------------------------------------------
+
+    def _plan(self, scenario: Scenario, n_elements: int, n_frames: int) -> _Plan:
+        reasons = _unsupported(scenario)
+        if reasons:
+            raise NotImplementedError("; ".join(reasons))
+        if n_frames < 2:
+            raise ValueError(f"n_frames = {n_frames}: expected at least 2")
+        frame_interval = scenario.duration / (n_frames - 1)
+        touching = _touching(scenario)
+        stiff = scenario.quasi_static and not touching
+        if self.scheme is not None:
+            stiff = self.scheme == "stiff"
+        drag = 2.0 * scenario.slowest_frequency() if scenario.quasi_static else 0.0
+        extensible = True
+        if stiff:
+            limit = min(_STIFF_DT, 1.0 / (_STIFF_STEPS_PER_RADIAN * scenario.slowest_frequency()))
+        else:
+            limit = _SAFETY * min(
+                _stable_step(rod, n_elements, drag, extensible) for rod in scenario.rods
+            )
+        limit *= self.time_step_scale
+        steps_per_frame = max(1, math.ceil(frame_interval / limit * (1.0 - 1e-12)))
+        dt = frame_interval / steps_per_frame
+
+        notes = []
+        lines = [
+            f"name = {_toml('cosseratbench')}",
+            "",
+            "[solver]",
+            f"scheme = {_toml('stiff' if stiff else 'explicit')}",
+            f"dt = {_toml(dt)}",
+            f"mode = {_toml('extensible' if extensible else 'inextensible')}",
+            f"precision = {_toml('f64')}",
+            f"gravity = {_toml([float(g) for g in scenario.gravity])}",
+            # At scale 1 the step is the library's accepted fraction of its estimate; a larger
+            # scale asks what happens beyond it, so the builder must not refuse it.
+            f"check_stability = {_toml(self.time_step_scale <= 1.0)}",
+        ]
+        obstacle = scenario.obstacles[0] if scenario.obstacles else None
+        if isinstance(obstacle, Plane):
+            points = np.concatenate([np.asarray(rod.centerline, float) for rod in scenario.rods])
+            extent = float(np.ptp(points, axis=0).max()) + max(rod.length for rod in scenario.rods)
+            friction = max(obstacle.friction, scenario.rods[0].friction)
+            lines += [
+                "",
+                "[environment]",
+                "mesh = "
+                + _toml(
+                    {
+                        "kind": "plane",
+                        "point": [float(x) for x in obstacle.point],
+                        "normal": [float(x) for x in obstacle.unit_normal],
+                        "size": _FLOOR_SIZE * extent,
+                    }
+                ),
+                "friction = " + _toml({"static": friction, "kinetic": friction}),
+                # A floor has no lumen to leave.
+                "stop_outside = false",
+            ]
+            notes.append("floor: Coulomb friction, static = kinetic")
+        if touching:
+            friction = scenario.rods[0].friction
+            lines += [
+                "",
+                "[rod_contact]",
+                f"self_collisions = {_toml(bool(scenario.self_contact))}",
+                "friction = " + _toml({"static": friction, "kinetic": friction}),
+            ]
+        drives = []
+        for k, rod in enumerate(scenario.rods):
+            lines += self._rod_lines(k, rod, n_elements, drag)
+            for e, end in enumerate(End):
+                if (motion := rod.motion(end)) is not None:
+                    drives.append(_Drive(rod=k, end=e, motion=motion))
+        return _Plan(
+            scheme="stiff" if stiff else "explicit",
+            extensible=extensible,
+            time_step=dt,
+            steps_per_frame=steps_per_frame,
+            drag=drag,
+            scene="\n".join(lines) + "\n",
+            drives=drives,
+            notes=notes,
+        )
+
+    @staticmethod
+    def _rod_lines(k: int, rod: Rod, n_elements: int, drag: float) -> list[str]:
+        m = rod.material
+        lines = [
+            "",
+            "[[rod]]",
+            f"name = {_toml(f'rod{k}')}",
+            f"elements = {n_elements}",
+            # Material points evenly spaced along the rod, as cosseratbench's Rod.nodes; the
+            # scene resamples them to equal chords, which moves them by less than the chord's
+            # sagitta.
+            "shape = "
+            + _toml(
+                {"kind": "polyline", "points": [list(map(float, p)) for p in rod.nodes(n_elements)]}
+            ),
+            "material = "
+            + _toml(
+                {
+                    "young_modulus": m.youngs_modulus,
+                    "shear_modulus": m.shear_modulus,
+                    "density": m.density,
+                    "radius": rod.radius,
+                }
+            ),
+            f"rest_shape = {_toml('straight')}",
+            f"first_director = {_toml([float(x) for x in rod.normal])}",
+            "damping = " + _toml({"drag": drag}),
+        ]
+        for end, key in ((End.START, "start"), (End.END, "end")):
+            lines.append(f"{key} = " + _toml({"kind": rod.condition(end).value}))
+        for load in rod.loads:
+            lines += [
+                "[[rod.load]]",
+                f"point = {0 if load.at is End.START else -1}",
+                f"force = {_toml([float(f) for f in load.force])}",
+            ]
+        return lines
+
+    # -- the solver interface ---------------------------------------------------------------
+
+    def settings(self, scenario: Scenario, *, n_elements: int, n_frames: int) -> dict:
+        """The numerical choices this adapter makes for ``scenario``, as JSON values."""
+        try:
+            plan = self._plan(scenario, n_elements, n_frames)
+        except NotImplementedError as error:
+            return {"unsupported": str(error)}
+        return {
+            "scheme": plan.scheme,
+            "integrator": (
+                "implicit Euler (stiff scheme, direct Newton solve)"
+                if plan.scheme == "stiff"
+                else "semi-implicit Euler (explicit scheme)"
+            ),
+            "time_step": plan.time_step,
+            "mode": "extensible" if plan.extensible else "inextensible",
+            "precision": "f64",
+            "shear_stiffness": "G A (parallel penalty)",
+            "drag_rate": plan.drag,
+            **({"notes": plan.notes} if plan.notes else {}),
+        }
+
+    def scene(self, scenario: Scenario, *, n_elements: int, n_frames: int) -> str:
+        """The scene (TOML) this adapter runs for ``scenario``; it raises
+        ``NotImplementedError`` for what a scene cannot express."""
+        return self._plan(scenario, n_elements, n_frames).scene
+
+    def run(self, scenario: Scenario, *, n_elements: int, n_frames: int) -> Trajectory:
+        plan = self._plan(scenario, n_elements, n_frames)
+        sim = _cosserat.Simulation.from_toml(plan.scene, name="cosseratbench.toml")
+        n_rods = len(scenario.rods)
+        positions = [[sim.positions(k)] for k in range(n_rods)]
+        directors = [[sim.directors(k)[:, 0, :]] for k in range(n_rods)]
+        try:
+            for frame in range(n_frames - 1):
+                if plan.drives:
+                    self._driven_frame(sim, plan, frame)
+                else:
+                    sim.run(plan.steps_per_frame)
+                for k in range(n_rods):
+                    positions[k].append(sim.positions(k))
+                    directors[k].append(sim.directors(k)[:, 0, :])
+        except _cosserat.StepError as error:
+            raise Diverged(f"cosserat: {error}", time=float(sim.time)) from error
+        return Trajectory(
+            np.linspace(0.0, scenario.duration, n_frames),
+            tuple(np.stack(p) for p in positions),
+            tuple(np.stack(d) for d in directors),
+        )
+
+    @staticmethod
+    def _driven_frame(sim: Any, plan: _Plan, frame: int) -> None:
+        """One frame's steps with driven clamps: each clamp's velocity is set whenever it
+        changes, and the steps between changes run in one call."""
+        steps, dt = plan.steps_per_frame, plan.time_step
+        start = frame * steps * dt
+        rates = [d.rates(start, dt, steps) for d in plan.drives]
+        # Rates taken from poses carry round-off of order 1e-16 / dt; a change smaller than a
+        # billionth of the frame's largest rate is that, not a change of the motion.
+        tolerances = [1e-9 * float(np.abs(r).max()) + 1e-12 for r in rates]
+        step = 0
+        while step < steps:
+            for drive, r, tol in zip(plan.drives, rates, tolerances):
+                now = r[step]
+                if drive.last is None or np.any(np.abs(now - drive.last) > tol):
+                    sim.set_end_velocity(drive.end, now[:3], now[3:], rod=drive.rod)
+                    drive.last = now
+            # Run up to the next step at which some clamp's rates change.
+            until = steps
+            for drive, r, tol in zip(plan.drives, rates, tolerances):
+                changes = np.flatnonzero(np.any(np.abs(r[step:] - drive.last) > tol, axis=1))
+                if len(changes):
+                    until = min(until, step + int(changes[0]))
+            sim.run(until - step)
+            step = until
