@@ -299,3 +299,122 @@ fn a_load_at_a_fraction_follows_the_elements() {
         "{outside}"
     );
 }
+
+/// A rod built stretched (`rest_length` shorter than its shape, or `pre_strain`) and pinned at
+/// both ends holds the tension `E A ε` of its strain: the pins' reactions pull outwards with it,
+/// and the two ways of saying the strain build the same rod. Both together are refused.
+#[test]
+fn a_pre_stretched_rod_holds_its_tension() {
+    let (e, r, eps) = (1e6_f64, 0.002_f64, 0.01_f64);
+    let scene = |strain: &str| {
+        format!(
+            r#"
+[solver]
+dt = 2e-5
+steps = 10
+mode = "extensible"
+gravity = [0.0, 0.0, 0.0]
+[[rod]]
+elements = 8
+shape = {{ kind = "straight", start = [0, 0, 0], direction = [1, 0, 0], length = 0.1 }}
+material = {{ young_modulus = {e}, density = 1000, radius = {r} }}
+{strain}
+start = {{ kind = "pinned" }}
+end = {{ kind = "pinned" }}
+"#
+        )
+    };
+    let run = |strain: &str| {
+        let (b, _, _) = parse_scene(Path::new("taut.toml"), &scene(strain), &[]).unwrap();
+        let mut sim = b.reaction_cutoff_hz(f64::INFINITY).build().unwrap();
+        sim.run(200).unwrap();
+        let h = cosserat::RodHandle(0);
+        (
+            sim.end_reaction(h, 0).unwrap().force,
+            sim.end_reaction(h, 1).unwrap().force,
+            sim.positions(h),
+        )
+    };
+    let tension = e * std::f64::consts::PI * r * r * eps;
+    let (start, end, p) = run(&format!("rest_length = {}", 0.1 / (1.0 + eps)));
+    assert!(
+        (start[0] / -tension - 1.0).abs() < 1e-3,
+        "{start:?} vs {tension}"
+    );
+    assert!(
+        (end[0] / tension - 1.0).abs() < 1e-3,
+        "{end:?} vs {tension}"
+    );
+    let (_, _, q) = run(&format!("pre_strain = {eps}"));
+    for (a, b) in p.iter().zip(&q) {
+        assert!(
+            (0..3).all(|k| (a[k] - b[k]).abs() < 1e-12),
+            "{a:?} vs {b:?}"
+        );
+    }
+    let err = error_for(&scene("pre_strain = 0.01\nrest_length = 0.09"));
+    assert!(
+        err.contains("pre_strain") && err.contains("one of them"),
+        "{err}"
+    );
+    let err = error_for(&scene("pre_strain = -1.5"));
+    assert!(err.contains("pre_strain") && err.contains("-1.5"), "{err}");
+}
+
+/// `rest_lengths` gives every element its own rest length: a rod whose first half is built
+/// stretched by 2 % and second half unstretched, pinned at both ends, relaxes until both halves
+/// carry one tension; a wrong count or length is refused by name.
+#[test]
+fn rest_lengths_per_element_set_an_uneven_strain() {
+    let scene = |rest: &str| {
+        format!(
+            r#"
+[solver]
+dt = 2e-5
+steps = 10
+mode = "extensible"
+precision = "f64"
+gravity = [0.0, 0.0, 0.0]
+[[rod]]
+elements = 4
+shape = {{ kind = "straight", start = [0, 0, 0], direction = [1, 0, 0], length = 0.1 }}
+material = {{ young_modulus = 1e6, density = 1000, radius = 0.002 }}
+damping = {{ drag = 2000.0 }}
+rest_lengths = {rest}
+start = {{ kind = "pinned" }}
+end = {{ kind = "pinned" }}
+"#
+        )
+    };
+    let (a, b) = (0.025 / 1.02, 0.025);
+    let (builder, _, _) = parse_scene(
+        Path::new("uneven.toml"),
+        &scene(&format!("[{a}, {a}, {b}, {b}]")),
+        &[],
+    )
+    .unwrap();
+    let mut sim = builder.build().unwrap();
+    sim.run(20_000).unwrap();
+    let p = sim.positions(cosserat::RodHandle(0));
+    // Equal tension: equal strain in every element; total length 0.1 over the rest 0.1 − 0.05·(0.02/1.02).
+    let rest_total = 2.0 * a + 2.0 * b;
+    let strain = 0.1 / rest_total - 1.0;
+    for (j, rest) in [a, a, b, b].iter().enumerate() {
+        let l = p[j + 1][0] - p[j][0];
+        assert!(
+            (l / rest - 1.0 - strain).abs() < 1e-6,
+            "element {j}: {l} over {rest}: strain {} against {strain}",
+            l / rest - 1.0
+        );
+    }
+    let err = error_for(&scene("[0.025, 0.025]"));
+    assert!(
+        err.contains("rest_lengths") && err.contains("one per element: 4"),
+        "{err}"
+    );
+    let err = error_for(&scene("[0.025, 0.025, -1.0, 0.025]"));
+    assert!(
+        err.contains("rest_lengths[2]") && err.contains("-1"),
+        "{err}"
+    );
+}

@@ -15,8 +15,6 @@ director of each of its frames.
 What a scene cannot say is declared, not imitated: the run raises ``NotImplementedError``
 naming it, which cosseratbench reports as *unsupported* (issue 28 lists these gaps):
 
-- a rod that starts pre-stretched (``Rod.rest_arc_length`` other than the polyline's own arc
-  length): a scene builds a rod unstretched in the shape it starts in;
 - a clamp that slides along an axis (``Motion.slides_along``);
 - cylinder obstacles (``Capability.CYLINDER_CONTACT`` is not claimed), more than one obstacle,
   and friction coefficients that differ between rods or between rods and the floor in a way one
@@ -194,27 +192,13 @@ class _Plan:
 
 def _unsupported(scenario: Scenario) -> list[str]:
     """What in ``scenario`` the scene format cannot express (issue 28), one line each."""
-    prestretched, strains, sliding = [], [], []
+    sliding = []
     for k, rod in enumerate(scenario.rods):
-        if rod.rest_arc_length is not None:
-            points = np.asarray(rod.centerline, dtype=float)
-            chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
-            arc = np.concatenate(([0.0], np.cumsum(chords)))
-            rest = np.asarray(rod.rest_arc_length, dtype=float)
-            if np.max(np.abs(rest - arc)) > 1e-9 * arc[-1]:
-                prestretched.append(k)
-                strains.append(float(np.max(np.abs(np.diff(arc) / np.diff(rest) - 1.0))))
         for end in End:
             motion = rod.motion(end)
             if motion is not None and motion.slides_along is not None:
                 sliding.append(f"{k} ({end.value})")
     reasons = []
-    if prestretched:
-        reasons.append(
-            f"rod(s) {', '.join(map(str, prestretched))} start pre-stretched (rest_arc_length, "
-            f"strain up to {max(strains):.2g}): a scene builds a rod unstretched in the shape "
-            "it starts in (issue 28)"
-        )
     if sliding:
         reasons.append(
             f"rod(s) {', '.join(sliding)} end in a clamp that slides along an axis "
@@ -242,6 +226,18 @@ def _unsupported(scenario: Scenario) -> list[str]:
             "coefficient for rod-rod contact"
         )
     return reasons
+
+
+def _rest_lengths(rod: Rod, n_elements: int) -> list[float]:
+    """The rest length of each of the ``n_elements`` elements the rod is built with: its rest
+    arc length (given at its centreline's nodes) interpolated at the built nodes' arc length."""
+    points = np.asarray(rod.centerline, dtype=float)
+    arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))))
+    rest = np.asarray(rod.rest_arc_length, dtype=float)
+    nodes = np.asarray(rod.nodes(n_elements), dtype=float)
+    built = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(nodes, axis=0), axis=1))))
+    at = built * (arc[-1] / built[-1])
+    return [float(x) for x in np.diff(np.interp(at, arc, rest))]
 
 
 def _touching(scenario: Scenario) -> bool:
@@ -406,6 +402,11 @@ class CosseratSolver:
                 }
             ),
             f"rest_shape = {_toml('straight')}",
+            *(
+                [f"rest_lengths = {_toml(_rest_lengths(rod, n_elements))}"]
+                if rod.rest_arc_length is not None
+                else []
+            ),
             f"first_director = {_toml([float(x) for x in rod.normal])}",
             "damping = " + _toml({"drag": drag}),
         ]

@@ -201,6 +201,12 @@ pub enum RodBuildError {
     Material(crate::MaterialError),
     /// A per-rod coefficient is negative or not finite.
     InvalidCoefficient(&'static str, f64),
+    /// A pre-strain that is not finite or not above −1 (a rest length must be positive).
+    InvalidPreStrain(f64),
+    /// Rest lengths given for another number of elements (given, elements).
+    RestLengthCount(usize, usize),
+    /// A rest length that is not finite and positive (element, value).
+    InvalidRestLength(usize, f64),
     /// A uniform rest curvature that no pair of frames can have at this node: the discrete
     /// Darboux vector `(2/l̄) Im(q̄_j q_{j+1})` has a length of at most `2/l̄` (a relative
     /// rotation of π), so `|û| l̄ / 2` (the second field) must stay below 1.
@@ -238,6 +244,18 @@ impl std::fmt::Display for RodBuildError {
                  expected |(κ1, κ2)| below 1/r = {:.4e} 1/m",
                 1.0 / kappa,
                 1.0 / r
+            ),
+            Self::RestLengthCount(got, n) => write!(
+                f,
+                "{got} rest lengths given for a rod of {n} elements: expected one per element"
+            ),
+            Self::InvalidRestLength(j, v) => write!(
+                f,
+                "the rest length of element {j} is {v}: expected a finite length above 0"
+            ),
+            Self::InvalidPreStrain(v) => write!(
+                f,
+                "`pre_strain` = {v} is invalid: expected a finite number above -1 (rest length = built length / (1 + pre_strain))"
             ),
             Self::InvalidCoefficient(name, v) => write!(
                 f,
@@ -277,6 +295,10 @@ pub struct RodSpec {
     pub drag: f64,
     /// Direction `d1` of the first frame should point to (projected off the tangent).
     pub first_director_hint: [f64; 3],
+    /// Strain of the rod as built: every rest length is the built length over `1 + pre_strain`
+    /// (0: the rod is built unstretched; 0.01: stretched by 1 %, as a rope hung taut; negative:
+    /// compressed). Masses and inertias follow the rest lengths (the material is conserved).
+    pub pre_strain: f64,
 }
 
 impl RodSpec {
@@ -291,6 +313,7 @@ impl RodSpec {
             stretch_damping: 0.0,
             drag: 0.0,
             first_director_hint: [0.0, 0.0, 1.0],
+            pre_strain: 0.0,
         }
     }
 }
@@ -304,7 +327,28 @@ pub fn build_rod<T: Real>(
     points: &[[f64; 3]],
     spec: &RodSpec,
 ) -> Result<(RodState<T>, RodParams<T>), RodBuildError> {
+    build_rod_with_rest_lengths(points, spec, None)
+}
+
+/// [`build_rod`] with the rest length of every element given (`rest_lengths[j]` for the
+/// segment `points[j] → points[j + 1]`), for a rod built strained unevenly (a rope hung under
+/// its own weight, a cable pulled round a drum); `spec.pre_strain` then applies on top of them.
+/// `None` takes the built lengths.
+pub fn build_rod_with_rest_lengths<T: Real>(
+    points: &[[f64; 3]],
+    spec: &RodSpec,
+    rest_lengths: Option<&[f64]>,
+) -> Result<(RodState<T>, RodParams<T>), RodBuildError> {
     spec.material.validate().map_err(RodBuildError::Material)?;
+    if let Some(rest) = rest_lengths {
+        let n = points.len().saturating_sub(1);
+        if rest.len() != n {
+            return Err(RodBuildError::RestLengthCount(rest.len(), n));
+        }
+        if let Some(j) = rest.iter().position(|l| !(l.is_finite() && *l > 0.0)) {
+            return Err(RodBuildError::InvalidRestLength(j, rest[j]));
+        }
+    }
     for (name, v) in [
         ("bend_damping", spec.bend_damping),
         ("stretch_damping", spec.stretch_damping),
@@ -314,6 +358,9 @@ pub fn build_rod<T: Real>(
         if !(v.is_finite() && v >= 0.0) {
             return Err(RodBuildError::InvalidCoefficient(name, v));
         }
+    }
+    if !(spec.pre_strain.is_finite() && spec.pre_strain > -1.0) {
+        return Err(RodBuildError::InvalidPreStrain(spec.pre_strain));
     }
     if points.len() < 2 {
         return Err(RodBuildError::TooFewPoints(points.len()));
@@ -331,7 +378,8 @@ pub fn build_rod<T: Real>(
         if !(l > 0.0) {
             return Err(RodBuildError::ZeroLengthElement(j));
         }
-        lengths.push(l);
+        let rest = rest_lengths.map_or(l, |r| r[j]);
+        lengths.push(rest / (1.0 + spec.pre_strain));
         tangents.push(e / l);
     }
     let hint = Vec3::from(spec.first_director_hint);
@@ -465,6 +513,35 @@ mod tests {
         for (j, q) in s.frames.iter().enumerate() {
             assert!((crate::quat::d3(q) - Vec3::x()).norm() < 1e-12, "frame {j}");
         }
+    }
+
+    /// A pre-strained rod's rest lengths are its built lengths over `1 + ε`, its mass that of
+    /// its rest length, and its stretching energy `½ E A L_rest ε²`; a pre-strain at or below
+    /// −1 is refused.
+    #[test]
+    fn a_pre_strained_rod_rests_shorter_than_it_is_built() {
+        let eps = 0.02;
+        let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 2.0, 10);
+        let mut spec = RodSpec::new(mat());
+        spec.pre_strain = eps;
+        let (s, p) = build_rod::<f64>(&pts, &spec).unwrap();
+        let rest = 2.0 / (1.0 + eps);
+        assert!((p.rest_lengths.iter().sum::<f64>() - rest).abs() < 1e-12);
+        let total: f64 = p.masses.iter().sum();
+        assert!((total - mat().linear_density() * rest).abs() < 1e-12);
+        let model = crate::energy::ForceModel {
+            extensible: true,
+            gravity: Vec3::zeros(),
+            clamped: [false; 2],
+        };
+        let e = crate::energy::energies(&s, &p, &model).stretch;
+        let expected = 0.5 * mat().stretch_stiffness() * rest * eps * eps;
+        assert!((e / expected - 1.0).abs() < 1e-12, "{e} vs {expected}");
+        spec.pre_strain = -1.0;
+        assert_eq!(
+            build_rod::<f64>(&pts, &spec).unwrap_err(),
+            RodBuildError::InvalidPreStrain(-1.0)
+        );
     }
 
     #[test]

@@ -304,6 +304,14 @@ pub struct RodSection {
     pub rest_shape: Option<toml::Value>,
     /// Override of the parallel-constraint penalty `K_p` [N] (default `G A`).
     pub parallel_stiffness: Option<f64>,
+    /// The rod's strain as built (`0.01`: stretched by 1 % over its rest length); or give
+    /// `rest_length`.
+    pub pre_strain: Option<f64>,
+    /// The rod's total rest length [m] (the built length over `1 + pre_strain`).
+    pub rest_length: Option<f64>,
+    /// The rest length of every element [m], one per element (a rod strained unevenly, as a rope
+    /// hung under its own weight); `pre_strain` or `rest_length` then cannot be given.
+    pub rest_lengths: Option<Vec<f64>>,
     /// Damping coefficients.
     #[serde(default)]
     pub damping: DampingSection,
@@ -1167,6 +1175,52 @@ impl Checker<'_> {
         };
         if let Some(kp) = r.parallel_stiffness {
             rb = rb.parallel_stiffness(self.positive(&f("parallel_stiffness"), kp)?);
+        }
+        if let Some(rest) = &r.rest_lengths {
+            if r.pre_strain.is_some() || r.rest_length.is_some() {
+                return Err(self.invalid(
+                    f("rest_lengths"),
+                    "rest_lengths with pre_strain or rest_length",
+                    "one way of giving the rest state",
+                ));
+            }
+            let n = rb.element_count();
+            if rest.len() != n {
+                return Err(self.invalid(
+                    f("rest_lengths"),
+                    format!("{} entries", rest.len()),
+                    &format!("one per element: {n} (the rod's elements)"),
+                ));
+            }
+            if let Some(j) = rest.iter().position(|l| !(l.is_finite() && *l > 0.0)) {
+                return Err(self.invalid(
+                    f(&format!("rest_lengths[{j}]")),
+                    rest[j],
+                    "a finite length above 0",
+                ));
+            }
+            rb = rb.rest_lengths(rest.clone());
+        }
+        match (r.pre_strain, r.rest_length) {
+            (None, None) => {}
+            (Some(e), None) => {
+                if !(e.is_finite() && e > -1.0) {
+                    return Err(self.invalid(f("pre_strain"), e, "a finite number above -1"));
+                }
+                rb = rb.pre_strain(e);
+            }
+            (None, Some(l)) => {
+                let l = self.positive(&f("rest_length"), l)?;
+                let strain = rb.built_length() / l - 1.0;
+                rb = rb.pre_strain(strain);
+            }
+            (Some(_), Some(_)) => {
+                return Err(self.invalid(
+                    f("pre_strain"),
+                    "both pre_strain and rest_length",
+                    "one of them",
+                ));
+            }
         }
         rb = rb.damping(
             self.non_negative(&f("damping.bend"), r.damping.bend)?,

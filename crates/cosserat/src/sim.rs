@@ -11,7 +11,7 @@ pub use cosserat_backend_cpu::{BindingSpec, RodContactSpec};
 use cosserat_backend_cpu::{CpuRod, CpuStepper, Guide};
 pub use cosserat_constraints::BindingVariant;
 use cosserat_model::energy::Energies;
-use cosserat_model::rod::{RestShape, RodSpec, build_rod, straight_polyline};
+use cosserat_model::rod::{RestShape, RodSpec, build_rod_with_rest_lengths, straight_polyline};
 use cosserat_model::{Material, Quat, Real, RodBuildError, Vec3};
 use cosserat_problem::Snapshot;
 pub use cosserat_problem::{
@@ -58,6 +58,7 @@ pub struct RodBuilder {
     name: Option<String>,
     collides: bool,
     guide: Option<f64>,
+    rest_lengths: Option<Vec<f64>>,
 }
 
 impl RodBuilder {
@@ -85,6 +86,7 @@ impl RodBuilder {
             name: None,
             collides: true,
             guide: None,
+            rest_lengths: None,
         }
     }
 
@@ -202,6 +204,34 @@ impl RodBuilder {
         self
     }
 
+    /// Builds the rod stretched by `strain` over its rest length (rest lengths are the built
+    /// lengths over `1 + strain`; `cosserat_model::rod::RodSpec::pre_strain`).
+    pub fn pre_strain(mut self, strain: f64) -> Self {
+        self.spec.pre_strain = strain;
+        self
+    }
+
+    /// The rest length of every element (one per element of the rod as it is built), for a
+    /// rod that starts strained unevenly; see
+    /// `cosserat_model::rod::build_rod_with_rest_lengths`.
+    pub fn rest_lengths(mut self, lengths: Vec<f64>) -> Self {
+        self.rest_lengths = Some(lengths);
+        self
+    }
+
+    /// The length of the polyline the rod is built along [m].
+    pub fn built_length(&self) -> f64 {
+        self.points
+            .windows(2)
+            .map(|w| {
+                (0..3)
+                    .map(|k| (w[1][k] - w[0][k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .sum()
+    }
+
     /// Adds a constant force [N] on point `point`.
     pub fn load(mut self, point: usize, force: [f64; 3]) -> Self {
         self.loads.push((point, force));
@@ -212,7 +242,11 @@ impl RodBuilder {
         &self,
         environment: Option<&Environment>,
     ) -> Result<CpuRod<T>, RodBuildError> {
-        let (state, params) = build_rod::<T>(&self.points, &self.spec)?;
+        let (state, params) = build_rod_with_rest_lengths::<T>(
+            &self.points,
+            &self.spec,
+            self.rest_lengths.as_deref(),
+        )?;
         let ends = self.ends.map(|e| e.cast());
         let loads = self
             .loads
