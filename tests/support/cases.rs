@@ -106,6 +106,12 @@ impl Row {
 /// of `−4 (l/2)/L` in the uniform-load tip deflection, `−3 (l/2)/L` for the tip load and
 /// `+2 (l/2)/L` in frequencies.)
 pub const CLAMPED: f64 = 2.0;
+/// Formal order of the binding case: the wire's free end lies inside the bending catheter,
+/// where the composite beam's curvature is not zero, and a free end has no bend–twist node over
+/// its last half element, so the wire's bending stiffness is missing there: a first-order
+/// error (observed 1.76 at 16–64 elements, two-way, converging to 6e-4 below the composite
+/// beam). A free cantilever's tip does not show it: its curvature vanishes there.
+pub const BOUND_FREE_END: f64 = 1.0;
 /// Formal order of free rods at rest in their intrinsic shape: the discrete Darboux vector is
 /// `2 sin(θ/2)/l`, second order (the shapes are exact polygons inscribed in the continuum curve).
 pub const FREE: f64 = 2.0;
@@ -115,18 +121,37 @@ pub const FREE: f64 = 2.0;
 /// element in.
 pub const CLAMPED_ORDER_FLOOR: f64 = 1.8;
 
+/// Below this change between the two finest resolutions, relative to the value, an observed
+/// order is not judged: the quantity has converged to where other error sources of a few 1e-6
+/// (the static runs' stopping rule, the reference's own quadrature) bend the differences. The
+/// elastica's tip angle shows it: errors of 3.0e-4, 1.6e-4, 5.3e-5 and 1.7e-5 rad at 8 to 64
+/// elements (α = 5) are second order over a floor of about 5e-6 rad.
+pub const ORDER_JUDGED_ABOVE: f64 = 1e-4;
+
 /// A row judging the observed order of `c` against [`CLAMPED_ORDER_FLOOR`], for runs with at
 /// least three resolutions (none otherwise). A quantity that does not converge monotonically has
-/// no observed order and fails.
+/// no observed order and fails; one whose finest change is below [`ORDER_JUDGED_ABOVE`] of its
+/// value is reported, not judged.
 pub fn clamped_order_row(case: &str, quantity: &str, c: &Convergence) -> Option<Row> {
-    (c.values.len() >= 3).then(|| Row {
-        case: case.into(),
-        quantity: format!("observed order of {quantity}"),
-        measured: c.order.unwrap_or(f64::NAN),
-        reference: CLAMPED,
-        tolerance: CLAMPED_ORDER_FLOOR,
-        check: Check::AtLeast,
-        note: "from the three finest resolutions".into(),
+    let k = c.values.len();
+    (k >= 3).then(|| {
+        let change = (c.values[k - 1] - c.values[k - 2]).abs() / c.finest.abs();
+        let judged = change > ORDER_JUDGED_ABOVE;
+        Row {
+            case: case.into(),
+            quantity: format!("observed order of {quantity}"),
+            measured: c.order.unwrap_or(f64::NAN),
+            reference: CLAMPED,
+            tolerance: CLAMPED_ORDER_FLOOR,
+            check: if judged { Check::AtLeast } else { Check::Info },
+            note: if judged {
+                "from the three finest resolutions".into()
+            } else {
+                format!(
+                    "from the three finest resolutions; not judged: they differ by {change:.1e} of the value, below {ORDER_JUDGED_ABOVE:e}"
+                )
+            },
+        }
     })
 }
 
@@ -144,22 +169,41 @@ pub struct Convergence {
     pub gci: f64,
     /// Observed order (three or more resolutions and monotone convergence).
     pub order: Option<f64>,
+    /// The safety factor of the GCI (1.25 or 3).
+    pub safety: f64,
     /// The values, coarsest first.
     pub values: Vec<f64>,
 }
 
+/// How far an observed order may be from the formal one for the runs to count as asymptotic
+/// (Roache's `F_s = 1.25`); further away, `F_s = 3` with the formal order. A first-order error
+/// mixed with a second-order one of the other sign shows as order 1.76 at 16–64 elements (the
+/// binding case) while its error shrinks at order 1: the successive differences then understate
+/// the error, and 1.25 did not cover it.
+pub const ORDER_AGREEMENT: f64 = 0.5;
+
 /// Roache's GCI for values at resolutions `N, 2N, 4N, …` of a quantity whose formal order of
 /// convergence is `formal` (the order used is the smaller of the observed and the formal one,
-/// as Roache recommends, so a pre-asymptotic "super-convergent" triple cannot shrink the bound).
+/// as Roache recommends, so a pre-asymptotic "super-convergent" triple cannot shrink the bound;
+/// and `F_s = 3` unless the observed order is within [`ORDER_AGREEMENT`] of the formal one).
 pub fn convergence(values: &[f64], formal: f64) -> Convergence {
     let k = values.len() - 1;
     let step = |i: usize| values[i] - values[i - 1];
     // A scalar that does not converge monotonically has no observed order.
     let coarser = (k >= 2 && step(k) * step(k - 1) > 0.0).then(|| step(k - 1).abs());
     let g = grid_convergence(coarser, step(k).abs(), formal);
+    let agrees = g
+        .observed_order
+        .is_some_and(|p| (p - formal).abs() <= ORDER_AGREEMENT);
+    let (gci, safety) = if agrees || g.safety_factor == 3.0 {
+        (g.gci, g.safety_factor)
+    } else {
+        (3.0 * step(k).abs() / (2f64.powf(formal) - 1.0), 3.0)
+    };
     Convergence {
         finest: values[k],
-        gci: g.gci,
+        gci,
+        safety,
         order: g.observed_order,
         values: values.to_vec(),
     }
@@ -170,9 +214,12 @@ fn order_text(c: &Convergence, ns: &[usize]) -> String {
     let vals: Vec<String> = c.values.iter().map(|v| format!("{v:.7e}")).collect();
     let head = format!("N = {}: {}", ns.join(", "), vals.join(", "));
     match c.order {
-        Some(p) if p > 0.5 => {
+        Some(p) if c.safety == 1.25 => {
             format!("{head}; observed order {p:.2}; GCI (Fs 1.25, p = min(observed, formal))")
         }
+        Some(p) => format!(
+            "{head}; observed order {p:.2}, not the formal one: GCI with the formal order (Fs 3)"
+        ),
         _ => format!("{head}; GCI with the formal order (Fs 3)"),
     }
 }
@@ -1541,7 +1588,7 @@ fn binding_composite_in(
             "one-way",
         ),
     };
-    let c = convergence(&tips, CLAMPED);
+    let c = convergence(&tips, BOUND_FREE_END);
     Ok(Row {
         case: format!(
             "{}binding, {name}: catheter with a wire, tip load",

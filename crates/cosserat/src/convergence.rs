@@ -40,9 +40,10 @@ impl Refinement {
     /// The lowest order of convergence the schemes have in this refinement, which the GCI
     /// uses when the observed order is higher or unknown: the explicit scheme (symplectic
     /// Euler) and the stiff scheme's default (implicit Euler) are first order in time (its BDF2
-    /// is second order, for which this bound is then conservative); in space the half-element
-    /// offset of a clamped end makes clamped rods first order (free rods converge at second
-    /// order, `docs/validation.md`).
+    /// is second order, for which this bound is then conservative); in space rods converge at
+    /// second order, clamped ones included (`docs/validation.md`), but a free end bound inside
+    /// another rod (a wire's tip in a catheter) is first order, and so is a contact that moves
+    /// by whole elements, so 1 is the bound that holds for every scene.
     pub fn formal_order(self) -> f64 {
         1.0
     }
@@ -55,8 +56,9 @@ pub struct GridConvergence {
     /// fewer runs, or when a difference vanishes.
     pub observed_order: Option<f64>,
     /// Bound on the finest run's error: `F_s d_finest / (2^p − 1)`, with `p` the smaller of the
-    /// observed and the formal order and `F_s = 1.25` when the observed order is above 0.5;
-    /// otherwise the formal order and `F_s = 3` (Roache's choices for two resolutions).
+    /// observed and the formal order and `F_s = 1.25` when the observed order is within
+    /// [`ASYMPTOTIC_ORDERS`]; otherwise the formal order and `F_s = 3` (Roache's choices for two
+    /// resolutions).
     pub gci: f64,
     /// The `F_s` used: 1.25 or 3.
     pub safety_factor: f64,
@@ -74,8 +76,13 @@ pub fn grid_convergence(
         .filter(|_| finest_difference > 0.0)
         .map(|d| (d / finest_difference).log2())
         .filter(|p| p.is_finite());
+    // Roache's 1.25 only where the runs look asymptotic: an observed order above the
+    // asymptotic range (a lucky cancellation, or differences at the level of other errors)
+    // says as little about the error as a low one.
     let (fs, p) = match observed_order {
-        Some(p) if p > 0.5 => (1.25, p.min(formal_order)),
+        Some(p) if p > ASYMPTOTIC_ORDERS.0 && p < ASYMPTOTIC_ORDERS.1 => {
+            (1.25, p.min(formal_order))
+        }
         _ => (3.0, formal_order),
     };
     GridConvergence {
