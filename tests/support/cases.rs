@@ -552,6 +552,16 @@ fn cantilever_large_in(scheme: Scheme, size: Size) -> Result<Vec<Row>, String> {
             res = res.max(moved / l);
         }
         let (x_ref, y_ref, angle_ref) = refs::elastica_end(alpha, sigma, 4000);
+        // The stiff scheme's stretch–shear constraint equals the model's parallel penalty up
+        // to a relative difference of order φ² in the shear angle φ (`stiff/constraints.rs`),
+        // at most about α σ here: its statics may differ from the model's (and the reference's
+        // shear law) by that much (α = 10: 9e-6; the tip angle shows 1.2e-6, where the
+        // explicit scheme and the reference agree to 5e-6 rad).
+        let shear_law = if scheme == Scheme::Explicit {
+            0.0
+        } else {
+            (alpha * sigma).powi(2)
+        };
         let (_, y_eb) = refs::elastica_tip(alpha, 0.0, 4000);
         for (name, vals, reference) in [
             ("tip deflection y/L", &ys, y_ref),
@@ -569,7 +579,7 @@ fn cantilever_large_in(scheme: Scheme, size: Size) -> Result<Vec<Row>, String> {
                 quantity: format!("{name} vs shearable elastica"),
                 measured: c.finest,
                 reference,
-                tolerance: (c.gci + res) / reference.abs(),
+                tolerance: (c.gci + res) / reference.abs() + shear_law,
                 check: Check::Relative,
                 note: format!(
                     "{}; unshearable elastica y/L = {y_eb:.6}",
