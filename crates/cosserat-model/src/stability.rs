@@ -39,9 +39,10 @@ use crate::rod::RodSpec;
 ///
 /// Measured by bisection (`cargo xtask validate`, `docs/stability.md`): for 64 straight rods
 /// over E = 1e3…2e11 Pa, r = 0.05…10 mm and element lengths 0.1…100 mm the largest stable step
-/// was 0.99–1.19 times the estimate `h_c` (the bound is tight: 0.99 is the bisection's 1.6%
-/// resolution). Rods with strong intrinsic curvature and a driven clamp went lower, to 0.53 in
-/// a sample of 40 random rods; 0.5 is at or below every measured ratio.
+/// was 0.99–1.17 times the estimate `h_c` (the bound is tight: 0.99 is the bisection's 1.6%
+/// resolution). Rods released straight from a rest shape that turns by 0.5–1.2 rad per element
+/// went lower, to 0.55 in a sample of 40 random rods (the same rods with a straight rest shape:
+/// 1.00); 0.5 is at or below every measured ratio.
 pub const SAFETY: f64 = 0.5;
 
 /// What the estimate needs to know about one rod.
