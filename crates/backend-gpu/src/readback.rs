@@ -15,7 +15,6 @@
 use crate::layout::{ClampG, DriveG};
 use crate::sim::EndTrack;
 use crate::{DivergedQuantity, Divergence, GpuError, GpuSimulation};
-use cosserat_model::rod::clamp_frame_at_rest;
 use cosserat_model::{Quat, Vec3};
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -447,8 +446,9 @@ impl GpuSimulation {
 
     /// Overwrites one field of rod `rod` (`xyz` of each of its points or frames; frames as
     /// `[x, y, z, w]`), keeping whatever else the device stores beside them. A held end point
-    /// starts its path again from where it is put; the clamp of a clamped end closes on the
-    /// written end frame (its node at rest: `RodState::seat_clamp`), as on the CPU.
+    /// starts its path again from where it is put. Clamp frames are not touched: a caller that
+    /// writes end frames seats the clamps on them (`RodState::seat_clamp`) and writes them with
+    /// [`write_clamp_frame`](Self::write_clamp_frame).
     pub fn write_rod_field(
         &mut self,
         rod: usize,
@@ -496,24 +496,28 @@ impl GpuSimulation {
                 self.restart_end_path(2 * rod + end, [p[0], p[1], p[2]]);
             }
         }
-        if field == GpuField::Frames {
-            for end in (0..2).filter(|&e| self.clamped[rod][e]) {
-                let [x, y, z, w] = words[base + if end == 0 { 0 } else { n - 1 }];
-                let node = &self.clamps[2 * rod + end].d;
-                let q = clamp_frame_at_rest(
-                    &Quat::new(w, x, y, z),
-                    &Vec3::new(node[0], node[1], node[2]),
-                    node[3],
-                    end,
-                );
-                let at = std::mem::size_of::<ClampG>() * (2 * rod + end);
-                self.gpu.queue.write_buffer(
-                    &self.clamps_buf,
-                    at as u64,
-                    bytemuck::cast_slice(&[q.i, q.j, q.k, q.w]),
-                );
-            }
+        self.gpu.queue.submit([]);
+        self.gpu.errors.take()
+    }
+
+    /// Overwrites the frame (`[x, y, z, w]`) of the clamp at end `end` of rod `rod`, a rod built
+    /// with that end clamped (`CLAMP`).
+    pub fn write_clamp_frame(
+        &mut self,
+        rod: usize,
+        end: usize,
+        q: [f32; 4],
+    ) -> Result<(), GpuError> {
+        self.ensure_idle()?;
+        if !self.clamped.get(rod).is_some_and(|c| end < 2 && c[end]) {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod} has no clamp at end {end}"
+            )));
         }
+        let at = std::mem::size_of::<ClampG>() * (2 * rod + end);
+        self.gpu
+            .queue
+            .write_buffer(&self.clamps_buf, at as u64, bytemuck::cast_slice(&q));
         self.gpu.queue.submit([]);
         self.gpu.errors.take()
     }

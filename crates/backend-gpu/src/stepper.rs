@@ -225,11 +225,15 @@ impl Stepper for GpuStepper {
         for (t, w) in self.states[rod].frames.iter_mut().zip(&words) {
             *t = cosserat_model::Quat::new(w[3], w[0], w[1], w[2]);
         }
-        // The device re-seated the clamps of clamped ends on the written frames; so does the
-        // host copy, with the same arithmetic.
+        // A clamp closes on the written end frame, as on the CPU: seated on the host copy and
+        // written to the device.
         for end in 0..2 {
             if self.ends[rod][end].holds_frame() {
                 self.states[rod].seat_clamp(&self.params[rod], end);
+                let q = self.states[rod].clamp_frames[end];
+                self.sim
+                    .write_clamp_frame(rod, end, [q.i, q.j, q.k, q.w])
+                    .map_err(to_control)?;
             }
         }
         Ok(())
