@@ -136,6 +136,26 @@ struct PySnapshot {
     time: f64,
 }
 
+impl PySnapshot {
+    /// The state of `sim` now.
+    fn of(sim: &mut Simulation) -> PyResult<Self> {
+        let time = sim.time();
+        let inner = sim
+            .snapshot()
+            .map_err(|e| StepError::new_err(e.to_string()))?;
+        Ok(Self {
+            inner: Mutex::new(inner),
+            time,
+        })
+    }
+
+    /// Returns `sim` to this state.
+    fn restore_into(&self, sim: &mut Simulation) -> PyResult<()> {
+        let snap = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+        sim.restore(&snap).map_err(control_err)
+    }
+}
+
 #[pymethods]
 impl PySnapshot {
     /// Simulated time of the snapshot [s].
@@ -593,22 +613,13 @@ impl PySimulation {
 
     /// The whole state, to come back to with `restore`.
     fn snapshot(&self) -> PyResult<PySnapshot> {
-        let mut sim = self.lock();
-        let time = sim.time();
-        let inner = sim
-            .snapshot()
-            .map_err(|e| StepError::new_err(e.to_string()))?;
-        Ok(PySnapshot {
-            inner: Mutex::new(inner),
-            time,
-        })
+        PySnapshot::of(&mut self.lock())
     }
 
     /// Returns to a snapshot of this simulation: the steps that follow are, bit for bit, those
     /// that followed it.
     fn restore(&self, snapshot: &PySnapshot) -> PyResult<()> {
-        let snap = snapshot.inner.lock().unwrap_or_else(|p| p.into_inner());
-        self.lock().restore(&snap).map_err(control_err)
+        snapshot.restore_into(&mut self.lock())
     }
 
     /// Contact measurements of rod `rod` since the start, `None` without mesh contact:
@@ -724,6 +735,18 @@ impl PyBatch {
 
     fn lock(&self, copy: usize) -> MutexGuard<'_, Simulation> {
         self.sims[copy].lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Copy `copy`, or an error naming the copies there are.
+    fn copy(&self, copy: usize) -> PyResult<MutexGuard<'_, Simulation>> {
+        if copy < self.sims.len() {
+            Ok(self.lock(copy))
+        } else {
+            Err(ControlError::new_err(format!(
+                "no copy {copy}: the batch has copies 0..{}",
+                self.sims.len()
+            )))
+        }
     }
 
     /// `(copies, k, 3)` of a field of rod `rod` of every copy.
@@ -950,33 +973,12 @@ impl PyBatch {
 
     /// Copy `copy` as its own state snapshot (to inspect or restore one copy).
     fn snapshot(&self, copy: usize) -> PyResult<PySnapshot> {
-        if copy >= self.sims.len() {
-            return Err(ControlError::new_err(format!(
-                "no copy {copy}: the batch has copies 0..{}",
-                self.sims.len()
-            )));
-        }
-        let mut sim = self.lock(copy);
-        let time = sim.time();
-        let inner = sim
-            .snapshot()
-            .map_err(|e| StepError::new_err(e.to_string()))?;
-        Ok(PySnapshot {
-            inner: Mutex::new(inner),
-            time,
-        })
+        PySnapshot::of(&mut *self.copy(copy)?)
     }
 
     /// Returns copy `copy` to a snapshot taken of any copy of this batch.
     fn restore(&self, copy: usize, snapshot: &PySnapshot) -> PyResult<()> {
-        if copy >= self.sims.len() {
-            return Err(ControlError::new_err(format!(
-                "no copy {copy}: the batch has copies 0..{}",
-                self.sims.len()
-            )));
-        }
-        let snap = snapshot.inner.lock().unwrap_or_else(|p| p.into_inner());
-        self.lock(copy).restore(&snap).map_err(control_err)
+        snapshot.restore_into(&mut *self.copy(copy)?)
     }
 }
 

@@ -675,16 +675,7 @@ impl SimulationBuilder {
                 self.rods
                     .iter()
                     .map(|r| {
-                        let length: f64 = r
-                            .points
-                            .windows(2)
-                            .map(|w| {
-                                (0..3)
-                                    .map(|k| (w[1][k] - w[0][k]).powi(2))
-                                    .sum::<f64>()
-                                    .sqrt()
-                            })
-                            .sum();
+                        let length = r.built_length();
                         let m = &r.spec.material;
                         (
                             m.density * std::f64::consts::PI * m.radius * m.radius * length,
