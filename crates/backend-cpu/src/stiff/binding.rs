@@ -281,15 +281,17 @@ fn reaction_on_outer<T: Real>(
 
 /// Holds the points of `lines` on their lines for a step's solve, from its starting guess: each
 /// is put on its line and may move only along it. Points held by their end condition, points
-/// of an element whose frame is held, and points an introducer guide already holds (the pins
-/// in `w` so far) are left alone.
+/// of an element whose frame a clamp holds, and points an introducer guide already holds (the
+/// pins in `w` so far) are left alone.
 pub(super) fn pin_on_lines(w: &mut Work, k: &Consts, lines: &[LinePin]) {
     // The guide's pins, the only ones so far, run from point 1 upward.
     let guided = w.pinned.len();
-    // A point of an element whose frame is held (the element next to a clamped end) is placed
-    // by the clamp through the stiff stretch–shear constraint: a line on it too would be a
-    // second, conflicting support, and its force would be that of the shear stiffness, far
-    // stiffer than anything the outer rod can answer in one step.
+    // A point of an element whose frame a clamp holds (the element next to a clamped end: its
+    // frame is solved outside the lanes, `ConstCols::free` 0, and tied to the clamp by the
+    // half-element node, `clamp.rs`) is placed by the clamp through that node and the stiff
+    // stretch–shear constraint: a line on it too would be a second, conflicting support, and
+    // its force would be that of those stiffnesses, far stiffer than anything the outer rod can
+    // answer in one step.
     let n = w.n;
     let clamped = |j: Option<usize>| j.is_some_and(|j| j < n && k.cols.free[j] == 0.0);
     for line in lines {
