@@ -8,7 +8,7 @@ use cosserat_constraints::{
     ContactSet, KinematicImpulses, Ordering, RedBlackSolver, solve_distance_gauss_seidel_soa,
 };
 use cosserat_model::energy::{
-    bend_damping_node, bend_twist_node, clamp_damping, stretch_damping_element,
+    bend_damping_node, clamp_damping, clamp_node_of, stretch_damping_element,
 };
 use cosserat_model::quat::{exp_rotation, rotate};
 use cosserat_model::{Quat, Real, RodParams, RodState, Vec3};
@@ -463,12 +463,7 @@ fn clamp_torque<T: Real>(
     let node = &params.end_nodes[e];
     let l = params.end_node_length(e);
     let q = w.frame(frame);
-    let (_, a, b) = if e == 0 {
-        bend_twist_node(clamp, &q, &node.rest_darboux, &node.stiffness, l)
-    } else {
-        bend_twist_node(&q, clamp, &node.rest_darboux, &node.stiffness, l)
-    };
-    let elastic = if e == 0 { b } else { a };
+    let elastic = clamp_node_of(clamp, &q, node, l, e).1;
     if node.damping > T::zero() {
         elastic + clamp_damping(&q, &w.w.get(frame), clamp, &omega, node.damping, l)
     } else {

@@ -18,6 +18,7 @@
 
 use crate::darboux::relative_rotation;
 use crate::quat::{d3, rotate, rotate_inv};
+use crate::rod::EndNode;
 use crate::{Quat, Real, RodParams, RodState, Vec3};
 
 /// Bending/twisting energy at one node and the body-frame torques on its two frames.
@@ -46,26 +47,32 @@ pub fn bend_twist_node<T: Real>(
 /// frame: `(energy, torque on the end frame, torque on the clamp frame)`.
 #[inline(always)]
 pub fn clamp_node<T: Real>(s: &RodState<T>, p: &RodParams<T>, end: usize) -> (T, Vec3<T>, Vec3<T>) {
-    let node = &p.end_nodes[end];
-    let l = p.end_node_length(end);
+    let frame = if end == 0 { 0 } else { s.elements() - 1 };
+    clamp_node_of(
+        &s.clamp_frames[end],
+        &s.frames[frame],
+        &p.end_nodes[end],
+        p.end_node_length(end),
+        end,
+    )
+}
+
+/// [`clamp_node`] of the clamp frame `clamp` and the end frame `q` at end `end`, for a node
+/// `node` of length `l`: `(energy, torque on the end frame, torque on the clamp frame)`. The
+/// clamp is the node's lower frame at the first end and its upper frame at the last.
+#[inline(always)]
+pub fn clamp_node_of<T: Real>(
+    clamp: &Quat<T>,
+    q: &Quat<T>,
+    node: &EndNode<T>,
+    l: T,
+    end: usize,
+) -> (T, Vec3<T>, Vec3<T>) {
     if end == 0 {
-        let (e, tc, tf) = bend_twist_node(
-            &s.clamp_frames[0],
-            &s.frames[0],
-            &node.rest_darboux,
-            &node.stiffness,
-            l,
-        );
+        let (e, tc, tf) = bend_twist_node(clamp, q, &node.rest_darboux, &node.stiffness, l);
         (e, tf, tc)
     } else {
-        let n = s.elements();
-        bend_twist_node(
-            &s.frames[n - 1],
-            &s.clamp_frames[1],
-            &node.rest_darboux,
-            &node.stiffness,
-            l,
-        )
+        bend_twist_node(q, clamp, &node.rest_darboux, &node.stiffness, l)
     }
 }
 

@@ -91,7 +91,7 @@ impl ClampConst {
     }
 }
 
-/// `a w bᵀ` as the upper triangle `[00, 01, 02, 11, 12, 22]` added to `e`.
+/// The upper triangle `[00, 01, 02, 11, 12, 22]` of the symmetric `m` added to `e`.
 fn add_upper(e: &mut [f64], m: &Matrix3<f64>) {
     for (slot, (r, c)) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
         .into_iter()
@@ -108,11 +108,6 @@ fn add_block(e: &mut [f64], m: &Matrix3<f64>) {
             e[4 * r + c] += m[(r, c)];
         }
     }
-}
-
-/// `[a]×`.
-fn cross(a: &Vec3<f64>) -> Matrix3<f64> {
-    a.cross_matrix()
 }
 
 impl Work {
@@ -237,7 +232,7 @@ impl Work {
             }
             let f = c.frame;
             let w = self.clamps[i].w;
-            let gx = cross(&(self.gamma.get(f) + Vec3::z()));
+            let gx = (self.gamma.get(f) + Vec3::z()).cross_matrix();
             add_upper(&mut out.records[f], &(gx * w * gx.transpose()));
             if n < 2 {
                 continue;
@@ -246,7 +241,7 @@ impl Work {
             let node = if f == 0 { 0 } else { n - 2 };
             let s = self.rel.get(node);
             let il = 1.0 / k.lbar[node];
-            let sv = cross(&(s.imag() * il));
+            let sv = (s.imag() * il).cross_matrix();
             let a = Matrix3::from_diagonal_element(s.w * il);
             if f == 0 {
                 let da = sv - a;
