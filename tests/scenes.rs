@@ -95,6 +95,46 @@ fn bad_values_name_file_field_and_value() {
         ),
         (
             GOOD.replace(
+                "start = { kind = \"clamped\" }",
+                "start = { kind = \"free\", slide = [1, 0, 0] }",
+            ),
+            "rod[0].start.kind",
+            "free",
+        ),
+        (
+            GOOD.replace(
+                "start = { kind = \"clamped\" }",
+                "start = { kind = \"pinned\", slide = [0, 0, 0] }",
+            ),
+            "rod[0].start.slide",
+            "0.0",
+        ),
+        (
+            GOOD.replace(
+                "start = { kind = \"clamped\" }",
+                "start = { kind = \"clamped\", path = { times = [0.5, 1.0] } }",
+            ),
+            "rod[0].start.path",
+            "keyframes",
+        ),
+        (
+            GOOD.replace(
+                "start = { kind = \"clamped\" }",
+                "start = { kind = \"pinned\", path = { times = [0, 1], rotation = [[0, 0, 0], [1, 0, 0]] } }",
+            ),
+            "rod[0].start.kind",
+            "pinned",
+        ),
+        (
+            GOOD.replace(
+                "start = { kind = \"clamped\" }",
+                "start = { kind = \"pinned\", slide = [1, 0, 0], path = { times = [0, 1], displacement = [[0, 0, 0], [0.1, 0.01, 0]] } }",
+            ),
+            "rod[0].start.path.displacement",
+            "0.1",
+        ),
+        (
+            GOOD.replace(
                 "steps = 10",
                 "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\nrefactor = \"sometimes\"",
             ),
@@ -195,9 +235,9 @@ fn the_stiff_scheme_takes_bindings_and_refuses_rod_contact() {
 }
 
 /// `solver.stability_safety` sets the fraction of the estimated critical step below which the
-/// explicit scheme runs without a warning: at 0.8 of the estimate the default (0.5) warns and
-/// 0.9 does not; a step above the estimate is refused whatever the fraction; a fraction outside
-/// (0, 1] is refused naming the field.
+/// explicit scheme runs without a warning: at 0.95 of the estimate the default (0.9) warns and
+/// 1.0 does not, at 0.8 a fraction of 0.5 warns; a step above the estimate is refused whatever
+/// the fraction; a fraction outside (0, 1] is refused naming the field.
 #[test]
 fn the_stability_safety_fraction_is_the_users() {
     use cosserat::cosserat_model::Material;
@@ -219,9 +259,10 @@ fn the_stability_safety_fraction_is_the_users() {
             .iter()
             .any(|w| w.contains("below the estimated critical step"))
     };
-    assert!(warned(&build(0.8 * hc, None).unwrap()));
-    assert!(!warned(&build(0.8 * hc, Some(0.9)).unwrap()));
-    assert!(!warned(&build(0.4 * hc, None).unwrap()));
+    assert!(warned(&build(0.95 * hc, None).unwrap()));
+    assert!(!warned(&build(0.95 * hc, Some(1.0)).unwrap()));
+    assert!(warned(&build(0.8 * hc, Some(0.5)).unwrap()));
+    assert!(!warned(&build(0.8 * hc, None).unwrap()));
     assert!(build(1.1 * hc, Some(1.0)).is_err());
     for bad in [0.0, 1.5, -0.2] {
         let e = match build(0.4 * hc, Some(bad)) {

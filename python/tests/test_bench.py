@@ -12,6 +12,7 @@ from cosseratbench import (  # noqa: E402
     Material,
     Motion,
     Plane,
+    PointLoad,
     Rod,
     Scenario,
     registry,
@@ -70,6 +71,12 @@ def test_what_a_scene_cannot_express_is_reported_unsupported():
     capstan = cosseratbench.run(registry.load_experiment("capstan"), solver())
     assert capstan.outcome == UNSUPPORTED
     assert capstan.missing == ("cylinder_contact",)
+
+
+def test_a_clamp_that_slides_along_the_rod_lets_its_load_stretch_it():
+    # The end clamp turns about the rod's axis and slides along it (Motion.slides_along), pulled
+    # by a load along the axis: the rod stretches by F L / (E A) and stays on its axis.
+    force = 0.5
     sliding = Motion(
         times=(0.0, 1.0),
         displacement=((0.0, 0.0, 0.0),) * 2,
@@ -83,9 +90,17 @@ def test_what_a_scene_cannot_express_is_reported_unsupported():
         start=EndCondition.CLAMPED,
         end=EndCondition.CLAMPED,
         end_motion=sliding,
+        loads=(PointLoad(force=(force, 0.0, 0.0)),),
     )
-    with pytest.raises(NotImplementedError, match="slides along"):
-        solver().run(Scenario(rods=(rod,), duration=0.1), n_elements=10, n_frames=2)
+    # The load is applied at once; 20 s lets the drag (twice the slowest bending frequency)
+    # settle the axial oscillation it starts.
+    scenario = Scenario(rods=(rod,), duration=20.0, quasi_static=True, self_contact=False)
+    assert solver().settings(scenario, n_elements=10, n_frames=3)["scheme"] == "explicit"
+    trajectory = solver().run(scenario, n_elements=10, n_frames=3)
+    end = trajectory.positions[0][-1][-1]
+    stretch = force / (MATERIAL.youngs_modulus * np.pi * 0.01**2)
+    assert abs(end[0] - (1.0 + stretch)) < 2e-3 * stretch
+    assert abs(end[1]) < 1e-12 and abs(end[2]) < 1e-12
 
 
 def test_frames_start_as_the_scenario_says_and_a_driven_clamp_follows_its_motion():

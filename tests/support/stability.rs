@@ -33,6 +33,8 @@ pub struct TrialRod {
     pub seed: u64,
     /// Step with the stiff solver (default settings) instead of the explicit scheme.
     pub stiff: bool,
+    /// Initial angular velocity of every frame about its own axis `d3` [rad/s].
+    pub spin: f64,
 }
 
 impl TrialRod {
@@ -50,6 +52,7 @@ impl TrialRod {
             double: true,
             seed: 1,
             stiff: false,
+            spin: 0.0,
         }
     }
 
@@ -156,6 +159,12 @@ impl TrialRod {
             .with_rod(b)
             .build()
             .map_err(|e| e.to_string())?;
+        if self.spin != 0.0 {
+            let h = sim.rods().next().expect("one rod");
+            let w = vec![[0.0, 0.0, self.spin]; self.elements];
+            sim.write(h, cosserat::StateField::AngularVelocities, &w)
+                .map_err(|e| e.to_string())?;
+        }
         let energy = |sim: &cosserat::Simulation| {
             let e = sim.energies();
             e.bend_twist + e.parallel + e.stretch + e.kinetic()

@@ -463,7 +463,7 @@ fn sweep_rod<T: Real>(
     let track = rod
         .reaction
         .as_deref()
-        .map_or([false; 2], |r: &Reactions<T>| r.held);
+        .map_or([false; 2], |r: &Reactions<T>| r.tracked());
     let CpuRod {
         work: w,
         work_params: p,

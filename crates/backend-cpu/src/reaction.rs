@@ -50,6 +50,9 @@ pub(crate) struct Reactions<T: Real> {
     /// Which ends hold their point / their frame.
     pub(crate) held: [bool; 2],
     pub(crate) clamped: [bool; 2],
+    /// Which held points slide along an axis: they keep their mass, so the constraints move
+    /// them, and their reaction is what puts them back on their axis (`sliding_impulse`).
+    pub(crate) sliding: [bool; 2],
     cutoff_hz: f64,
     /// The part of the force known before the constraints: `m (v_p − v) / h − f_k`.
     force_pre: [Vec3<T>; 2],
@@ -61,10 +64,11 @@ pub(crate) struct Reactions<T: Real> {
 }
 
 impl<T: Real> Reactions<T> {
-    pub(crate) fn new(held: [bool; 2], clamped: [bool; 2]) -> Self {
+    pub(crate) fn new(held: [bool; 2], clamped: [bool; 2], sliding: [bool; 2]) -> Self {
         Self {
             held,
             clamped,
+            sliding,
             cutoff_hz: DEFAULT_CUTOFF_HZ,
             force_pre: [Vec3::zeros(); 2],
             torque: [Vec3::zeros(); 2],
@@ -80,6 +84,12 @@ impl<T: Real> Reactions<T> {
 
     pub(crate) fn cutoff(&self) -> f64 {
         self.cutoff_hz
+    }
+
+    /// Which ends' distance constraints the sweeps measure (held ends that do not slide: a
+    /// sliding end point moves under its constraint like a free one).
+    pub(crate) fn tracked(&self) -> [bool; 2] {
+        [0, 1].map(|e| self.held[e] && !self.sliding[e])
     }
 
     /// Before the end conditions overwrite the velocities: the force on the held point, its
@@ -181,7 +191,7 @@ mod tests {
         };
         let error = |steps: usize| {
             let h = end / steps as f64;
-            let mut r = Reactions::<f64>::new([true, false], [false, false]);
+            let mut r = Reactions::<f64>::new([true, false], [false, false], [false, false]);
             r.set_cutoff(fc);
             let mut worst = 0.0_f64;
             for k in 1..=steps {

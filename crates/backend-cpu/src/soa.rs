@@ -289,6 +289,14 @@ pub(crate) fn elastic_forces<T: Real>(
 }
 
 /// Semi-implicit Euler update of velocities from forces, and Euler's equations for the frames.
+///
+/// A frame's angular velocity takes its torque as two half kicks around the gyroscopic term,
+/// which for the rod's axisymmetric sections (`I₁ = I₂ = I`, `I₃ = J`) is an exact rotation of
+/// the transverse part `(ω₁, ω₂)` by `h (J − I)/I ω₃`, applied as a Cayley rotation (norm
+/// preserving, one division). Taken explicitly (`ω += −h I⁻¹ (ω × Iω)`), that term destroys the
+/// scheme's stability near its limit as soon as frames spin: a rod spinning at 5 rad/s about its
+/// axis was stable only to 0.77 of the critical step, at 100 rad/s to 0.22; split this way it
+/// keeps the whole step (`docs/stability.md`).
 pub(crate) fn integrate_velocities<T: Real>(s: &mut SoaState<T>, p: &SoaParams<T>, h: T) {
     for (v, f) in [
         (&mut s.v.x, &s.f.x),
@@ -302,20 +310,30 @@ pub(crate) fn integrate_velocities<T: Real>(s: &mut SoaState<T>, p: &SoaParams<T
     let n = s.w.x.len();
     let (wx, wy, wz) = (&mut s.w.x[..n], &mut s.w.y[..n], &mut s.w.z[..n]);
     let (tx, ty, tz) = (&s.tq.x[..n], &s.tq.y[..n], &s.tq.z[..n]);
-    let (ix, iy, iz) = (&p.inertia.x[..n], &p.inertia.y[..n], &p.inertia.z[..n]);
+    let iz = &p.inertia.z[..n];
     let (jx, jy, jz) = (
         &p.inv_inertia.x[..n],
         &p.inv_inertia.y[..n],
         &p.inv_inertia.z[..n],
     );
+    let hh = h * T::lit(0.5);
     for j in 0..n {
-        let (a, b, c) = (wx[j], wy[j], wz[j]);
-        let (la, lb, lc) = (ix[j] * a, iy[j] * b, iz[j] * c);
-        // ω̇ = I⁻¹ (τ − ω × Iω)
-        wx[j] = a + h * jx[j] * (tx[j] - (b * lc - c * lb));
-        wy[j] = b + h * jy[j] * (ty[j] - (c * la - a * lc));
-        wz[j] = c + h * jz[j] * (tz[j] - (a * lb - b * la));
+        let (kx, ky) = (hh * jx[j] * tx[j], hh * jy[j] * ty[j]);
+        let kz = hh * jz[j] * tz[j];
+        let (a, b, c) = (wx[j] + kx, wy[j] + ky, wz[j] + kz);
+        let (cos, sin) = gyroscopic_rotation(hh * (iz[j] * jx[j] - T::one()) * c);
+        wx[j] = cos * a - sin * b + kx;
+        wy[j] = sin * a + cos * b + ky;
+        wz[j] = c + kz;
     }
+}
+
+/// Cosine and sine of the Cayley rotation whose half-angle tangent is `t`: the gyroscopic
+/// precession `(J − I)/I ω₃ h` of a step, with `t` half of it (exact to third order in the angle).
+#[inline(always)]
+pub(crate) fn gyroscopic_rotation<T: Real>(t: T) -> (T, T) {
+    let inv = T::one() / (T::one() + t * t);
+    ((T::one() - t * t) * inv, (t + t) * inv)
 }
 
 /// `r += h v`; `q ← normalise(q + q ⊗ (0, h ω / 2))`; squared length ratios into `s.ratio2`.

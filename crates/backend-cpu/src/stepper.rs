@@ -48,6 +48,8 @@ pub struct CpuRod<T: Real> {
     /// Held end points' positions in `f64`, advanced by their prescribed velocity (see
     /// [`HeldPath`]).
     pub(crate) held_path: [HeldPath; 2],
+    /// The velocity across its axis that a sliding end's motion prescribes over this step.
+    pub(crate) slide_velocity: [Vec3<T>; 2],
 }
 
 /// The path of a held end point, accumulated in `f64`.
@@ -117,7 +119,8 @@ impl<T: Real> DirectState<T> {
 }
 
 impl<T: Real> CpuRod<T> {
-    /// Prepares a rod for stepping: held end points get zero inverse mass.
+    /// Prepares a rod for stepping: held end points get zero inverse mass (a sliding one keeps
+    /// its mass: it is free along its axis and put back across it, see `hold_sliding_ends`).
     ///
     /// The parameters are read here, once; to change them, build a new `CpuRod`.
     pub fn new(
@@ -127,17 +130,20 @@ impl<T: Real> CpuRod<T> {
         loads: Vec<PointLoad<T>>,
     ) -> Self {
         let n = state.elements();
-        if ends[0].holds_point() {
-            params.inv_masses[0] = T::zero();
-        }
-        if ends[1].holds_point() {
-            params.inv_masses[n] = T::zero();
+        for (end, point) in ends.iter().zip([0, n]) {
+            if end.holds_point() && end.slide_axis().is_none() {
+                params.inv_masses[point] = T::zero();
+            }
         }
         let held = [ends[0].holds_point(), ends[1].holds_point()];
         let reaction = (held[0] || held[1]).then(|| {
             Box::new(Reactions::new(
                 held,
                 [ends[0].holds_frame(), ends[1].holds_frame()],
+                [
+                    ends[0].slide_axis().is_some(),
+                    ends[1].slide_axis().is_some(),
+                ],
             ))
         });
         Self {
@@ -155,6 +161,7 @@ impl<T: Real> CpuRod<T> {
             direct: None,
             guide: None,
             held_path: [HeldPath::default(); 2],
+            slide_velocity: [Vec3::zeros(); 2],
         }
     }
 
@@ -221,22 +228,25 @@ impl<T: Real> CpuRod<T> {
     /// # Panics
     /// If `end > 1`.
     pub fn set_end_condition(&mut self, end: usize, condition: EndCondition<T>) {
-        let old = self.ends[end];
-        self.ends[end] = condition;
-        if old.kind == condition.kind {
+        let old = std::mem::replace(&mut self.ends[end], condition);
+        let condition = &self.ends[end];
+        if old.kind == condition.kind
+            && old.slide_axis().is_some() == condition.slide_axis().is_some()
+        {
             return;
         }
-        if condition.holds_frame() {
+        if condition.holds_frame() && !old.holds_frame() {
             // The clamp closes on the end frame where it is.
             self.state.seat_clamp(&self.params, end);
         }
         let n = self.elements();
         let point = if end == 0 { 0 } else { n };
-        self.params.inv_masses[point] = if condition.holds_point() {
-            T::zero()
-        } else {
-            T::one() / self.params.masses[point]
-        };
+        self.params.inv_masses[point] =
+            if condition.holds_point() && condition.slide_axis().is_none() {
+                T::zero()
+            } else {
+                T::one() / self.params.masses[point]
+            };
         self.work_params = SoaParams::new(&self.params);
         self.red_black = None;
         self.held_path[end] = HeldPath::default();
@@ -246,6 +256,10 @@ impl<T: Real> CpuRod<T> {
             let mut r = Reactions::new(
                 held,
                 [self.ends[0].holds_frame(), self.ends[1].holds_frame()],
+                [
+                    self.ends[0].slide_axis().is_some(),
+                    self.ends[1].slide_axis().is_some(),
+                ],
             );
             if let Some(hz) = cutoff {
                 r.set_cutoff(hz);
@@ -411,7 +425,7 @@ pub(crate) fn before_constraints<T: Real>(
     // frame then turns with the clamp's prescribed rotation.
     for (e, (end, frame)) in rod.ends.iter().zip([0, n - 1]).enumerate() {
         if end.holds_frame() {
-            let omega = end.velocities_at(t).1;
+            let omega = end.velocities_over(t, h.to_f64()).1;
             let torque = clamp_torque(w, &rod.state.clamp_frames[e], &rod.params, e, frame, omega);
             w.tq.set(frame, w.tq.get(frame) + torque);
             if let Some(rx) = rod.reaction.as_deref_mut() {
@@ -422,12 +436,20 @@ pub(crate) fn before_constraints<T: Real>(
         }
     }
     soa::integrate_velocities(w, p, h);
-    // Held end points follow their prescribed motion exactly.
+    // Held end points follow their prescribed motion exactly; a sliding one only across its
+    // axis, keeping along it what its forces gave it.
     for (e, (end, point)) in rod.ends.iter().zip([0, n]).enumerate() {
         if end.holds_point() {
-            let v = end.velocities_at(t).0;
+            let mut v = end.velocities_over(t, h.to_f64()).0;
+            // A kinematic point's velocity did not take its force; a sliding one's did.
+            let mut force = w.f.get(point);
+            if let Some(a) = end.slide_axis() {
+                rod.slide_velocity[e] = v;
+                v += a * a.dot(&w.v.get(point));
+                force = Vec3::zeros();
+            }
             if let Some(rx) = rod.reaction.as_deref_mut() {
-                rx.record_point(e, p.masses[point], w.f.get(point), w.v.get(point), v, h);
+                rx.record_point(e, p.masses[point], force, w.v.get(point), v, h);
             }
             w.v.set(point, v);
         }
@@ -488,7 +510,8 @@ pub(crate) fn red_black_of<'a, T: Real>(
     solver.get_or_insert_with(|| {
         let mut s = RedBlackSolver::new(&p.inv_masses, &p.rest_lengths);
         if let Some(r) = reaction {
-            s.track_ends(r.held[0], r.held[1]);
+            let [a, b] = r.tracked();
+            s.track_ends(a, b);
         }
         s
     })
@@ -502,7 +525,7 @@ fn solve_constraints<T: Real>(rod: &mut CpuRod<T>, settings: &SolverSettings<T>)
     let h = settings.dt;
     let w = &mut rod.work;
     let p = &rod.work_params;
-    let track = rod.reaction.as_deref().map_or([false; 2], |r| r.held);
+    let track = rod.reaction.as_deref().map_or([false; 2], |r| r.tracked());
     let mut distance = [Vec3::zeros(); 2];
     let mut contacts = rod
         .mesh
@@ -584,6 +607,19 @@ pub(crate) fn after_constraints<T: Real>(
     consts: &BatchConsts<T>,
     distance: [Vec3<T>; 2],
 ) -> Result<(f64, f64), (usize, DivergedQuantity)> {
+    let n = rod.elements();
+    let mut distance = distance;
+    // A sliding end point is put back on its axis: across it, the velocity its motion
+    // prescribes; along it, what the forces and constraints gave it. What that removes is the
+    // holder's impulse (its reaction: minus what the point received across the axis).
+    for (e, point) in [(0, 0), (1, n)] {
+        if let Some(a) = rod.ends[e].slide_axis() {
+            let v = rod.work.v.get(point);
+            let kept = rod.slide_velocity[e] + a * a.dot(&v);
+            distance[e] = (kept - v) * rod.work_params.masses[point];
+            rod.work.v.set(point, kept);
+        }
+    }
     if let Some(rx) = rod.reaction.as_deref_mut() {
         rx.finish(distance, rod.kinematic, settings.dt);
         rod.kinematic = [Vec3::zeros(); 2];
@@ -591,7 +627,6 @@ pub(crate) fn after_constraints<T: Real>(
     if let Some(guide) = &rod.guide {
         guide.constrain(&mut rod.work);
     }
-    let n = rod.elements();
     let held = [
         (0, rod.ends[0].holds_point()),
         (n, rod.ends[1].holds_point()),

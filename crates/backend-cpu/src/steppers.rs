@@ -12,8 +12,8 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::ends::cast_vec;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_rod, check_write, read_state_field, read_state_frames,
-    unit_frames,
+    check_condition, check_end, check_rod, check_write, condition_needs, read_state_field,
+    read_state_frames, unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
@@ -68,13 +68,15 @@ pub trait Scheme<T: Real>: Clone + Send + Sync + 'static {
     }
 }
 
-/// What every CPU scheme can do: mesh contact, the guide, reactions at held ends, `f64`.
+/// What every CPU scheme can do: mesh contact, the guide, reactions at held ends, `f64`, held
+/// ends along keyframed paths.
 fn cpu_base() -> Capabilities {
     Capabilities::of(&[
         Capability::MeshContact,
         Capability::Guide,
         Capability::Reactions,
         Capability::DoublePrecision,
+        Capability::EndPaths,
     ])
 }
 
@@ -86,7 +88,9 @@ impl<T: Real> Scheme<T> for Explicit {
     const NAME: &'static str = "cpu explicit";
 
     fn capabilities() -> Capabilities {
-        cpu_base().with(Capability::DirectConstraints)
+        cpu_base()
+            .with(Capability::DirectConstraints)
+            .with(Capability::SlidingEnds)
     }
 
     fn advance(
@@ -114,6 +118,7 @@ impl<T: Real> Scheme<T> for Coupled<T> {
         cpu_base()
             .with(Capability::Bindings)
             .with(Capability::RodContact)
+            .with(Capability::SlidingEnds)
     }
 
     fn advance(
@@ -540,6 +545,14 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
     ) -> Result<(), ControlError> {
         check_end(end)?;
         check_condition(&condition)?;
+        let missing = S::capabilities().missing(condition_needs(&condition));
+        if !missing.is_empty() {
+            let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
+            return Err(ControlError::Unsupported {
+                stepper: S::NAME,
+                what: format!("drive an end with {}", list.join(", ")),
+            });
+        }
         let allows = self.scheme.allows_kind_changes();
         let r = self.rod_mut(rod)?;
         if r.ends[end].kind != condition.kind && !allows {
@@ -636,7 +649,7 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
                 let model = ForceModel {
                     extensible: self.settings.extensible,
                     gravity: self.settings.gravity,
-                    clamped: r.ends.map(|e| e.holds_frame()),
+                    clamped: r.ends.each_ref().map(|e| e.holds_frame()),
                 };
                 energies(&r.state, &r.params, &model)
             })

@@ -308,7 +308,7 @@ fn two_way_binding_bends_the_pair_in_proportion_to_stiffness() {
         let pts = straight_polyline([0.0; 3], [1.0, 0.0, 0.0], 0.1, 10);
         let wire_pts = straight_polyline([0.01, 0.0, 0.0], [1.0, 0.0, 0.0], 0.08, 8);
         let free = [EndCondition::free(), EndCondition::free()];
-        let mut rods = vec![rod(&pts, &cath, free), rod(&wire_pts, &wire, free)];
+        let mut rods = vec![rod(&pts, &cath, free.clone()), rod(&wire_pts, &wire, free)];
         let mut coupling = Coupling::new(
             &rods,
             &[BindingSpec {

@@ -258,7 +258,7 @@ fn run_scenario<T: Real>(
     } else {
         [EndCondition::pinned(), EndCondition::free()]
     };
-    let mut rod = straight::<T>(p, 0.5, n, 0.0, ends, vec![]);
+    let mut rod = straight::<T>(p, 0.5, n, 0.0, ends.clone(), vec![]);
     let s = settings::<T>(dt, Vec3::new(0.0, 0.0, -9.81), false);
     let stiff = StiffSettings {
         integrator,
@@ -328,7 +328,7 @@ fn bdf2_held_ends_stop_where_their_motion_does() {
         end_time: 0.05,
     };
     let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
-    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
+    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends.clone(), vec![]);
     let (x0, q0) = (rod.state.positions[0], rod.state.frames[0]);
     let s = settings::<f64>(1e-3, Vec3::new(0.0, 0.0, -9.81), false);
     let st = StiffSettings {
@@ -465,7 +465,7 @@ fn pinned_push(
         EndCondition::clamped().driven(motion),
         EndCondition::pinned(),
     ];
-    let mut rod = straight::<f64>(p, 0.5, n, 0.0, ends, vec![]);
+    let mut rod = straight::<f64>(p, 0.5, n, 0.0, ends.clone(), vec![]);
     let mut s = settings::<f64>(1e-3, Vec3::new(0.0, 0.0, -9.81), false);
     s.divergence_strain = 0.2;
     let mut scratch = StiffScratch::new();
@@ -545,7 +545,7 @@ fn pushed_positions(p: &Preset, stiff: &StiffSettings, dt: f64) -> Vec<Vec3<f64>
         end_time: f64::INFINITY,
     };
     let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
-    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
+    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends.clone(), vec![]);
     let s = settings::<f64>(dt, Vec3::new(0.0, 0.0, -9.81), false);
     let steps = (1e-2 / dt).round() as u64;
     step_rod_stiff(
@@ -618,7 +618,7 @@ fn spin_up(p: &Preset, mut step: impl FnMut(&mut CpuRod<f64>, f64)) -> Vec<f64> 
         end_time: f64::INFINITY,
     };
     let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
-    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
+    let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends.clone(), vec![]);
     let q0 = rod.state.frames[39];
     (0..10)
         .map(|k| {
@@ -687,7 +687,7 @@ fn stiff_rods_step_alike_serially_and_in_parallel() {
         .enumerate()
         .map(|(i, p)| {
             let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
-            straight::<f64>(p, 0.5, 20 + 7 * i, 0.0, ends, vec![])
+            straight::<f64>(p, 0.5, 20 + 7 * i, 0.0, ends.clone(), vec![])
         })
         .collect();
     let mut parallel = serial.clone();
@@ -743,7 +743,7 @@ fn the_step_continues_from_its_own_state_and_reads_a_changed_one() {
             integrator,
             ..StiffSettings::default()
         };
-        let mut single = straight::<T>(p, 0.5, 30, 0.0, ends, vec![]);
+        let mut single = straight::<T>(p, 0.5, 30, 0.0, ends.clone(), vec![]);
         let mut batch = single.clone();
         let (mut a, mut b) = (StiffScratch::new(), StiffScratch::new());
         for k in 0..20 {
@@ -799,7 +799,7 @@ fn a_prepared_scratch_steps_as_a_fresh_one() {
             integrator,
             ..StiffSettings::default()
         };
-        let mut fresh = straight::<T>(p, 0.5, 30, 0.0, ends, vec![]);
+        let mut fresh = straight::<T>(p, 0.5, 30, 0.0, ends.clone(), vec![]);
         let mut prepared = fresh.clone();
         let (mut a, mut b) = (StiffScratch::new(), StiffScratch::new());
         b.prepare(&prepared, &s, &st);
@@ -841,7 +841,7 @@ fn a_step_far_from_converged_is_retaken_in_halves() {
             integrator,
             ..StiffSettings::default()
         };
-        let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends, vec![]);
+        let mut rod = straight::<f64>(p, 0.5, 40, 0.0, ends.clone(), vec![]);
         let mut scratch = StiffScratch::new();
         step_rod_stiff(&mut rod, &s, &st, &mut scratch, 0.0, 0, 0, 10).unwrap();
         (rod, scratch.report())
@@ -878,7 +878,7 @@ fn a_step_that_stays_unconverged_stops_the_run() {
             max_halvings,
             ..StiffSettings::default()
         };
-        let mut rod = straight::<f64>(p, 0.5, 20, 0.0, ends, vec![]);
+        let mut rod = straight::<f64>(p, 0.5, 20, 0.0, ends.clone(), vec![]);
         let e = step_rod_stiff(&mut rod, &s, &st, &mut StiffScratch::new(), 0.0, 3, 7, 5)
             .expect_err("no step can reach 1e-300");
         assert_eq!((e.rod, e.step), (3, 7), "{e}");
@@ -952,8 +952,8 @@ fn the_pin_reaction_of_a_swinging_rod_balances_its_momentum() {
     let ends = [EndCondition::pinned(), EndCondition::free()];
     let mut errors = Vec::new();
     for (dt, balance_tol, peak_tol) in [(1e-3, 2e-4, 0.03), (1e-4, 5e-6, 0.005)] {
-        let mut rod =
-            straight::<f64>(p, length, n, 0.0, ends, vec![]).with_reaction_cutoff(f64::INFINITY);
+        let mut rod = straight::<f64>(p, length, n, 0.0, ends.clone(), vec![])
+            .with_reaction_cutoff(f64::INFINITY);
         let s = settings::<f64>(dt, g, false);
         let masses = rod.params.masses.clone();
         let mass: f64 = masses.iter().sum();

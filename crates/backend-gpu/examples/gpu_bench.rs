@@ -81,7 +81,7 @@ fn cpu_positions(rods: &[GpuRodInput], steps: u32) -> Vec<Vec<Vec3<f32>>> {
                     let mut cpu = CpuRod::new(
                         rod.state.clone(),
                         rod.params.clone(),
-                        rod.ends,
+                        rod.ends.clone(),
                         rod.loads.clone(),
                     );
                     for k in 0..steps as u64 {

@@ -320,7 +320,7 @@ impl GpuSimulation {
         }
         let clamped = rods
             .iter()
-            .map(|r| r.ends.map(|e| e.holds_frame()))
+            .map(|r| r.ends.each_ref().map(|e| e.holds_frame()))
             .collect();
         let has_loads = plan.cfg.flags.contains(&"LOADS");
         let has_clamps = plan.cfg.flags.contains(&"CLAMP");

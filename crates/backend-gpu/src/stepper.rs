@@ -5,8 +5,8 @@ use cosserat_model::energy::{Energies, ForceModel, energies};
 use cosserat_model::{RodParams, RodState, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_rod, check_write, read_state_field, read_state_frames,
-    unit_frames,
+    check_condition, check_end, check_rod, check_write, condition_needs, read_state_field,
+    read_state_frames, unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Clock, CollisionStats, ContactSample, ControlError, CouplingStats, Divergence,
@@ -85,7 +85,7 @@ impl GpuStepper {
     ) -> Result<Self, GpuError> {
         let states = rods.iter().map(|r| r.state.clone()).collect();
         let params = rods.iter().map(|r| r.params.clone()).collect();
-        let ends = rods.iter().map(|r| r.ends).collect();
+        let ends = rods.iter().map(|r| r.ends.clone()).collect();
         let sim = make(rods)?;
         Ok(Self {
             sim,
@@ -254,7 +254,15 @@ impl Stepper for GpuStepper {
         check_end(end)?;
         check_rod(rod, self.ends.len())?;
         check_condition(&condition)?;
-        let old = self.ends[rod][end];
+        let needs = condition_needs(&condition);
+        if needs != cosserat_problem::Capabilities::NONE {
+            let list: Vec<&str> = needs.iter().map(|c| c.describe()).collect();
+            return Err(ControlError::Unsupported {
+                stepper: NAME,
+                what: format!("drive an end with {}", list.join(", ")),
+            });
+        }
+        let old = &self.ends[rod][end];
         if old.kind != condition.kind {
             return Err(ControlError::Unsupported {
                 stepper: NAME,
@@ -324,7 +332,7 @@ impl Stepper for GpuStepper {
                 let model = ForceModel {
                     extensible: self.settings.extensible,
                     gravity: self.settings.gravity,
-                    clamped: ends.map(|e| e.holds_frame()),
+                    clamped: ends.each_ref().map(|e| e.holds_frame()),
                 };
                 energies(s, p, &model)
             })

@@ -111,7 +111,7 @@ impl Case {
             .map(|(s, p, e, l)| GpuRodInput {
                 state: s.clone(),
                 params: p.clone(),
-                ends: *e,
+                ends: e.clone(),
                 loads: l.clone(),
             })
             .collect()
@@ -131,7 +131,7 @@ impl Case {
             .iter()
             .enumerate()
             .map(|(r, (s, p, e, l))| {
-                let mut rod = CpuRod::new(s.clone(), p.clone(), *e, l.clone());
+                let mut rod = CpuRod::new(s.clone(), p.clone(), e.clone(), l.clone());
                 for k in 0..steps {
                     step_rod(&mut rod, settings, k as f64 * settings.dt as f64, r, k)
                         .expect("the CPU oracle must not diverge");
@@ -726,7 +726,12 @@ fn divergence_with(variant: KernelVariant) {
             );
             // The CPU, stepping the same rod, diverges too, no later than the GPU says.
             let cpu_rod = &case.rods[d.rod];
-            let mut rod = CpuRod::new(cpu_rod.0.clone(), cpu_rod.1.clone(), cpu_rod.2, vec![]);
+            let mut rod = CpuRod::new(
+                cpu_rod.0.clone(),
+                cpu_rod.1.clone(),
+                cpu_rod.2.clone(),
+                vec![],
+            );
             let cpu_step = (0..50u64)
                 .find(|&k| step_rod(&mut rod, &s, k as f64 * s.dt as f64, d.rod, k).is_err());
             assert!(
@@ -899,11 +904,11 @@ fn straight_rod(n: usize, angle: f64, spec: &RodSpec) -> (RodState<f32>, RodPara
 /// windows).
 #[test]
 fn clamped_cantilevers_match_cpu() {
-    let (free, clamped) = (EndCondition::free(), EndCondition::clamped());
+    let (free, clamped) = (EndCondition::free, EndCondition::clamped);
     let rods = [
-        (40, [clamped, free], 0.0),
-        (40, [free, clamped], 0.0),
-        (300, [clamped, clamped], 1e-9),
+        (40, [clamped(), free()], 0.0),
+        (40, [free(), clamped()], 0.0),
+        (300, [clamped(), clamped()], 1e-9),
     ]
     .into_iter()
     .enumerate()
@@ -991,7 +996,7 @@ fn driven_clamps_case() -> Case {
         .into_iter()
         .map(|n| {
             let (s, p) = straight_rod(n, 0.3, &RodSpec::new(material()));
-            (s, p, ends, vec![])
+            (s, p, ends.clone(), vec![])
         })
         .collect();
     Case { rods }

@@ -28,7 +28,7 @@ pub mod scene;
 pub mod sim;
 
 pub use cosserat_backend_cpu::{
-    self, Divergence, EndCondition, EndKind, Ordering, PrescribedMotion,
+    self, Divergence, EndCondition, EndKind, EndPath, Ordering, PrescribedMotion,
 };
 pub use cosserat_collide;
 pub use cosserat_constraints;

@@ -10,7 +10,7 @@
 
 use crate::environment::{Entry, Environment};
 use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
-use cosserat_backend_cpu::{EndCondition, EndKind, Ordering, PrescribedMotion};
+use cosserat_backend_cpu::{EndCondition, EndKind, EndPath, Ordering, PrescribedMotion};
 use cosserat_model::Material;
 use cosserat_model::rod::RestShape;
 use serde::Deserialize;
@@ -222,7 +222,7 @@ pub struct SolverSection {
     /// true).
     pub check_stability: bool,
     /// The fraction of the estimated critical step of the explicit scheme below which a step is
-    /// accepted without a warning (default 0.5, `SimulationBuilder::stability_safety`).
+    /// accepted without a warning (default 0.9, `SimulationBuilder::stability_safety`).
     pub stability_safety: f64,
     /// Stop a run whose total energy grows beyond the work its loads and driven ends could
     /// have done (default true; `cosserat::energy_watch`).
@@ -427,6 +427,27 @@ pub struct EndSection {
     /// Length [m] of a straight introducer from the start point along the first element, in
     /// which points move only along its axis (`rod.start` only).
     pub guide: Option<f64>,
+    /// A keyframed path instead of a constant velocity (`cosserat_problem::EndPath`).
+    pub path: Option<PathSection>,
+    /// An axis (world frame) along which the held end point is free: the rod and loads on the
+    /// end point move it along the axis, the motion or path only across it.
+    pub slide: Option<[f64; 3]>,
+}
+
+/// `rod.start.path` / `rod.end.path`: keyframes of a held end's displacement and rotation
+/// from where it is when the path starts, interpolated linearly, held after the last.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PathSection {
+    /// When the path starts [s] (default 0).
+    pub start_time: f64,
+    /// Keyframe times [s after the start], from 0, increasing.
+    pub times: Vec<f64>,
+    /// Displacement at each keyframe [m], world frame (default: none).
+    pub displacement: Option<Vec<[f64; 3]>>,
+    /// Rotation at each keyframe, as a rotation vector (axis times angle) [rad], world frame
+    /// (default: none; needs a clamped end).
+    pub rotation: Option<Vec<[f64; 3]>>,
 }
 
 /// `[[rod.load]]`.
@@ -1328,6 +1349,8 @@ impl Checker<'_> {
             start_time: e.start_time,
             end_time: e.end_time,
             guide: e.guide,
+            path: e.path.clone(),
+            slide: e.slide,
         };
         let kind = match e.kind.as_deref() {
             None | Some("free") => EndKind::Free,
@@ -1356,7 +1379,70 @@ impl Checker<'_> {
                 "an angular_velocity needs a \"clamped\" end",
             ));
         }
-        let mut cond = EndCondition { kind, motion: None };
+        let mut cond = EndCondition {
+            kind,
+            ..EndCondition::default()
+        };
+        if let Some(axis) = e.slide {
+            let axis = self.finite3(&format!("{field}.slide"), axis)?;
+            if kind == EndKind::Free {
+                return Err(self.invalid(
+                    format!("{field}.kind"),
+                    "free",
+                    "a sliding end (slide) must be \"pinned\" or \"clamped\"",
+                ));
+            }
+            if axis == [0.0; 3] {
+                return Err(self.invalid(
+                    format!("{field}.slide"),
+                    axis,
+                    "expected an axis of non-zero length",
+                ));
+            }
+            cond = cond.sliding_along(axis.into());
+        }
+        if let Some(p) = &e.path {
+            if driven {
+                return Err(self.invalid(
+                    format!("{field}.path"),
+                    "a path",
+                    "give either a path or a velocity / angular_velocity, not both",
+                ));
+            }
+            if kind == EndKind::Free {
+                return Err(self.invalid(
+                    format!("{field}.kind"),
+                    "free",
+                    "an end with a path must be \"pinned\" or \"clamped\"",
+                ));
+            }
+            if p.rotation.is_some() && kind != EndKind::Clamped {
+                return Err(self.invalid(
+                    format!("{field}.kind"),
+                    e.kind.as_deref().unwrap_or("free"),
+                    "a path with a rotation needs a \"clamped\" end",
+                ));
+            }
+            let n = p.times.len();
+            let displacement = p.displacement.clone().unwrap_or_else(|| vec![[0.0; 3]; n]);
+            let rotation = p.rotation.clone().unwrap_or_else(|| vec![[0.0; 3]; n]);
+            if let Some(a) = cond.slide {
+                let along = displacement
+                    .iter()
+                    .map(|d| (d[0] * a.x + d[1] * a.y + d[2] * a.z).abs())
+                    .fold(0.0, f64::max);
+                if along > 0.0 {
+                    return Err(self.invalid(
+                        format!("{field}.path.displacement"),
+                        along,
+                        "a sliding end moves only across its slide axis: the displacement along it must be zero",
+                    ));
+                }
+            }
+            let path = EndPath::new(p.start_time, p.times.clone(), displacement, rotation)
+                .map_err(|why| self.invalid(format!("{field}.path"), "the keyframes", &why))?;
+            cond = cond.following(path);
+        }
         if driven {
             let v = self.finite3(&format!("{field}.velocity"), e.velocity.unwrap_or([0.0; 3]))?;
             let w = self.finite3(

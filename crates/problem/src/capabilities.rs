@@ -21,11 +21,15 @@ pub enum Capability {
     Reactions,
     /// Double precision.
     DoublePrecision,
+    /// Held ends driven along keyframed paths ([`crate::EndPath`]).
+    EndPaths,
+    /// Held end points that slide along an axis.
+    SlidingEnds,
 }
 
 impl Capability {
     /// Every capability, in a fixed order.
-    pub const ALL: [Capability; 8] = [
+    pub const ALL: [Capability; 10] = [
         Capability::MeshContact,
         Capability::Guide,
         Capability::Bindings,
@@ -34,6 +38,8 @@ impl Capability {
         Capability::DirectConstraints,
         Capability::Reactions,
         Capability::DoublePrecision,
+        Capability::EndPaths,
+        Capability::SlidingEnds,
     ];
 
     fn bit(self) -> u32 {
@@ -53,6 +59,8 @@ impl Capability {
             }
             Capability::Reactions => "reaction forces at held ends",
             Capability::DoublePrecision => "f64 (solver.precision = \"f64\")",
+            Capability::EndPaths => "keyframed end paths (rod.start.path / rod.end.path)",
+            Capability::SlidingEnds => "sliding ends (rod.start.slide / rod.end.slide)",
         }
     }
 }
@@ -80,6 +88,12 @@ impl Capabilities {
     #[must_use]
     pub fn with(self, c: Capability) -> Self {
         Self(self.0 | c.bit())
+    }
+
+    /// This set and every capability of `other`.
+    #[must_use]
+    pub fn union(self, other: Capabilities) -> Self {
+        Self(self.0 | other.0)
     }
 
     /// This set and `c` when `yes`.

@@ -25,7 +25,7 @@ pub mod stepper;
 pub use capabilities::{Capabilities, Capability};
 pub use clock::Clock;
 pub use divergence::{DivergedQuantity, Divergence, StepStats};
-pub use ends::{EndCondition, EndKind, PrescribedMotion};
+pub use ends::{EndCondition, EndKind, EndPath, PrescribedMotion};
 pub use report::{CollisionStats, CouplingStats, EndReaction, StiffReport, StiffSummary};
 pub use settings::{
     Integrator, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme, StiffSettings,

@@ -17,7 +17,7 @@ use std::fmt;
 
 use cosserat_model::energy::Energies;
 
-use crate::capabilities::Capabilities;
+use crate::capabilities::{Capabilities, Capability};
 use crate::clock::Clock;
 use crate::divergence::Divergence;
 use crate::ends::EndCondition;
@@ -391,8 +391,30 @@ pub fn check_finite<const N: usize>(
     }
 }
 
-/// Checks an end condition's motion: finite velocities and a start no later than its end.
+/// The capabilities an end condition needs beyond holding and constant motions.
+pub fn condition_needs(condition: &EndCondition<f64>) -> Capabilities {
+    Capabilities::NONE
+        .with_if(Capability::EndPaths, condition.path.is_some())
+        .with_if(Capability::SlidingEnds, condition.slide_axis().is_some())
+}
+
+/// Checks an end condition's motion: finite velocities and a start no later than its end; a
+/// finite slide axis on a held end. (A path checks itself when it is made.)
 pub fn check_condition(condition: &EndCondition<f64>) -> Result<(), ControlError> {
+    if let Some(a) = condition.slide {
+        if !a.iter().all(|x| x.is_finite()) {
+            return Err(ControlError::Value {
+                field: "end slide axis",
+                why: format!("{:?} is not finite", [a.x, a.y, a.z]),
+            });
+        }
+        if !condition.holds_point() {
+            return Err(ControlError::Value {
+                field: "end slide axis",
+                why: "a free end has no point to slide: hold it (pinned or clamped)".into(),
+            });
+        }
+    }
     if let Some(m) = condition.motion {
         let finite = m
             .velocity

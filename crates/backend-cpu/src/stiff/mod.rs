@@ -31,8 +31,8 @@
 //!
 //! **One step** (XPBD, Macklin et al. Algorithm 1, with rotations as in Kugelstadt & Schömer):
 //! 1. predict `v += h (g + f/m)`, `v /= 1 + h γ` (drag, implicit), `x̃ = x + h v`; frames
-//!    `ω += −h I⁻¹ (ω × I ω)`, `q̃ = q ⊗ exp(h ω / 2)`; held ends follow their prescribed
-//!    motion;
+//!    precess by the gyroscopic term (`(ω₁, ω₂)` turned by `h (J − I)/I ω₃`),
+//!    `q̃ = q ⊗ exp(h ω / 2)`; held ends follow their prescribed motion;
 //! 2. from `λ = 0`, iterate the constraint solve (direct or Gauss–Seidel), updating points by
 //!    `u + M⁻¹ Jᵀ Δλ` and frames by the body rotation `u_θ + K_θ⁻¹ J_θᵀ Δλ` (the direct
 //!    solver's Newton step, `Work::rhs`; `K_θ` is the frame inertia plus a bound of the
@@ -715,7 +715,7 @@ fn step_fixed<T: Real>(
             h
         } else if w.history == Some(h) {
             w.extrapolate_bdf2();
-            place_held_ends(w, rod, t, h - 2.0 * h / 3.0);
+            place_held_ends(w, rod, t, h, h - 2.0 * h / 3.0);
             2.0 * h / 3.0
         } else {
             w.keep_history();
@@ -951,11 +951,11 @@ fn record_reactions<T: Real>(
 /// `exp(lead Ω(t)) q_n`, `lead = h − 2h/3`, so that the implicit step of `2h/3`, which moves
 /// them by their prescribed velocities (`solve_step`), ends where a step of `h` does. An
 /// extrapolated held end would keep moving by a third of its last step after its motion stops.
-fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, lead: f64) {
+fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, h: f64, lead: f64) {
     let n = w.n;
     for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
         if end.holds_point() {
-            let v = v64(&end.velocities_at(t).0);
+            let v = v64(&end.velocities_over(t, h).0);
             w.x.set(i, &(w.x_prev.get(i) + v * lead));
         }
     }
@@ -1055,12 +1055,12 @@ fn solve_step<T: Real>(
         .chain(ctx.loads.iter().copied());
     let ends = &rod.ends;
     // Also without clamps: a clamp released since the last step leaves none behind.
-    let omega = [0, 1].map(|e| v64(&ends[e].velocities_at(t).1));
+    let omega = [0, 1].map(|e| v64(&ends[e].velocities_over(t, h).1));
     w.clamp_begin(k, h, ctx.advance, omega);
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
-                let v = v64(&end.velocities_at(t).0);
+                let v = v64(&end.velocities_over(t, h).0);
                 w.v.set(i, &v);
                 // The direct solver starts where the velocities alone lead (the full
                 // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`

@@ -675,7 +675,7 @@ impl Work {
 
     /// Step 1 of the module docs for the free points and frames: `x_old = x`, `v += h (g + f/m)`,
     /// `x̃ = x_old + h v` (and `x = x_old + h v_old` as the starting guess of the direct
-    /// solver, `x = x̃` for Gauss–Seidel); frames `ω += −h I⁻¹ (ω × I ω)`,
+    /// solver, `x = x̃` for Gauss–Seidel); frames precess by the gyroscopic term,
     /// `q = q̃ = q ⊗ exp(h ω / 2)`. `held` is called between the velocities and the targets,
     /// to set the held points' and frames' velocities and positions.
     pub(crate) fn predict(
@@ -715,10 +715,19 @@ impl Work {
             self.q_old.store(j, q);
             let o = self.omega.load(j);
             self.omega_start.store(j, o);
-            let gyro = o
-                .cross(c.inertia.load(j).mul(o))
-                .mul(c.inv_inertia_own.load(j));
-            let o = o.add_scaled(gyro, -hf);
+            // The gyroscopic term as the exact precession of (ω₁, ω₂) by h (J − I)/I ω₃, a Cayley
+            // rotation (`soa::integrate_velocities` says why not `ω += −h I⁻¹ (ω × Iω)`).
+            let t = hf
+                * F::splat(0.5)
+                * o.z
+                * (c.inertia.load(j).z * c.inv_inertia_own.load(j).x - F::ONE);
+            let inv = F::ONE / t.mul_add(t, F::ONE);
+            let (cs, sn) = ((F::ONE - t * t) * inv, (t + t) * inv);
+            let o = V {
+                x: cs.mul_sub(o.x, sn * o.y),
+                y: sn.mul_add(o.x, cs * o.y),
+                z: o.z,
+            };
             self.omega.store(j, o);
             // Lanes past 1e-2 rad are redone.
             let v = o.scale(hf);

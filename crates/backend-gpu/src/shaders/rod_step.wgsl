@@ -751,8 +751,16 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                         tq += tc1;
                     }
 //#endif
-                    let gyro = cross(wn, sl.b.xyz * wn);
-                    wn += (tq - gyro) * sl.c.xyz * h;
+                    // Half kick, the gyroscopic precession of (ω1, ω2) by h (J - I)/I ω3 as a
+                    // Cayley rotation, half kick: as the CPU's soa::integrate_velocities (an
+                    // explicit ω × Iω term loses the step's stability once frames spin).
+                    let kick = tq * sl.c.xyz * (0.5 * h);
+                    wn += kick;
+                    let t = 0.5 * h * (sl.b.z * sl.c.x - 1.0) * wn.z;
+                    let inv = 1.0 / (1.0 + t * t);
+                    let cs = (1.0 - t * t) * inv;
+                    let sn = 2.0 * t * inv;
+                    wn = vec3<f32>(cs * wn.x - sn * wn.y, sn * wn.x + cs * wn.y, wn.z) + kick;
                 }
                 // Held end points follow their prescribed motion exactly.
                 if gp == 0u && (it.flags & 1u) != 0u {
