@@ -15,9 +15,8 @@ director of each of its frames.
 What a scene cannot say is declared, not imitated: the run raises ``NotImplementedError``
 naming it, which cosseratbench reports as *unsupported* (issue 28 lists these gaps):
 
-- cylinder obstacles (``Capability.CYLINDER_CONTACT`` is not claimed), more than one obstacle,
-  and friction coefficients that differ between rods or between rods and the floor in a way one
-  scene-wide coefficient cannot express.
+- more than one obstacle, and friction coefficients that differ between rods or between rods
+  and an obstacle in a way one scene-wide coefficient cannot express.
 
 cosseratbench 0.3.0 has no torques, moments or time-varying loads in its scenarios; its
 constant end forces are scene loads.
@@ -67,6 +66,9 @@ _STIFF_STEPS_PER_RADIAN = 20.0  # steps per radian of the slowest mode: h ω ≤
 # A floor is a square plane mesh; this many times the rods' extent, so that nothing reaches
 # its edges.
 _FLOOR_SIZE = 100.0
+# Faces around a cylinder obstacle: the faces lie within radius (1 - cos(pi/512)) = 1.9e-5 radius
+# of the round surface.
+_CYLINDER_SEGMENTS = 512
 
 
 def _stable_step(rod: Rod, n_elements: int, drag: float, extensible: bool) -> float:
@@ -192,20 +194,14 @@ class _Plan:
 def _unsupported(scenario: Scenario) -> list[str]:
     """What in ``scenario`` the scene format cannot express (issue 28), one line each."""
     reasons = []
-    cylinders = [o for o in scenario.obstacles if isinstance(o, Cylinder)]
-    if cylinders:
-        reasons.append(
-            f"{len(cylinders)} cylinder obstacle(s): the scene's environment is a mesh or a "
-            "square floor, with no cylinder (issue 28)"
-        )
-    planes = [o for o in scenario.obstacles if isinstance(o, Plane)]
     if len(scenario.obstacles) > 1:
         reasons.append(f"{len(scenario.obstacles)} obstacles: a scene has one environment mesh")
-    elif planes:
-        coefficients = {max(planes[0].friction, rod.friction) for rod in scenario.rods}
+    elif scenario.obstacles:
+        obstacle = scenario.obstacles[0]
+        coefficients = {max(obstacle.friction, rod.friction) for rod in scenario.rods}
         if len(coefficients) > 1:
             reasons.append(
-                f"rod-floor friction differs between rods ({sorted(coefficients)}): a scene "
+                f"rod-obstacle friction differs between rods ({sorted(coefficients)}): a scene "
                 "has one coefficient for its environment"
             )
     if _touching(scenario) and len({rod.friction for rod in scenario.rods}) > 1:
@@ -226,6 +222,34 @@ def _rest_lengths(rod: Rod, n_elements: int) -> list[float]:
     built = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(nodes, axis=0), axis=1))))
     at = built * (arc[-1] / built[-1])
     return [float(x) for x in np.diff(np.interp(at, arc, rest))]
+
+
+def _clear_of_cylinder(nodes: np.ndarray, cylinder: Cylinder, radius: float) -> np.ndarray:
+    """``nodes`` with those wrapped on ``cylinder`` moved out from its axis so that the chords
+    between them rest on it instead of cutting into it.
+
+    cosseratbench places a wrapped rope's material points a hair outside the wrap radius for
+    its own fine sampling; a rod of fewer, longer elements through the same points has chords
+    that cut into the cylinder by their sagitta (0.12 mm, an eighth of the rope's radius, for
+    the capstan at 100 elements), which the first step's contacts throw out: a jolt that starts
+    the rope sliding. Points within a chord's sagitta of the wrap radius are put at
+    ``wrap / cos(Δ/2)``, ``Δ`` the angle a chord spans there.
+    """
+    axis = cylinder.unit_axis
+    center = np.asarray(cylinder.center, dtype=float)
+    wrap = cylinder.radius + radius
+    chord = float(np.linalg.norm(np.diff(nodes, axis=0), axis=1).mean())
+    outside = wrap / math.cos(min(chord / wrap, 1.0) / 2.0)
+    rel = nodes - center
+    along = rel @ axis
+    across = rel - along[:, None] * axis
+    distance = np.linalg.norm(across, axis=1)
+    wrapped = (distance < outside) & (np.abs(along) <= cylinder.length / 2.0) & (distance > 0.0)
+    out = nodes.copy()
+    out[wrapped] = (
+        center + along[wrapped, None] * axis + across[wrapped] * (outside / distance[wrapped])[:, None]
+    )
+    return out
 
 
 def _sliding(scenario: Scenario) -> bool:
@@ -275,6 +299,7 @@ class CosseratSolver:
             Capability.ROD_CONTACT,  # explicit scheme, [rod_contact]
             Capability.ROD_FRICTION,  # Coulomb, static and kinetic alike here
             Capability.PLANE_CONTACT,  # a square floor mesh, with Coulomb friction
+            Capability.CYLINDER_CONTACT,  # a closed cylinder mesh as a solid, likewise
         }
     )
 
@@ -299,7 +324,10 @@ class CosseratSolver:
             raise ValueError(f"n_frames = {n_frames}: expected at least 2")
         frame_interval = scenario.duration / (n_frames - 1)
         touching = _touching(scenario)
-        stiff = scenario.quasi_static and not touching and not _sliding(scenario)
+        # The stiff scheme's friction lets a rope creep over a cylinder well below the capstan
+        # ratio (it slid at 0.6 of it where the explicit scheme held 1.0, tests/solid_obstacles.rs).
+        cylinder = any(isinstance(o, Cylinder) for o in scenario.obstacles)
+        stiff = scenario.quasi_static and not (touching or _sliding(scenario) or cylinder)
         if self.scheme is not None:
             stiff = self.scheme == "stiff"
         drag = 2.0 * scenario.slowest_frequency() if scenario.quasi_static else 0.0
@@ -350,6 +378,28 @@ class CosseratSolver:
                 "stop_outside = false",
             ]
             notes.append("floor: Coulomb friction, static = kinetic")
+        if isinstance(obstacle, Cylinder):
+            friction = max(obstacle.friction, scenario.rods[0].friction)
+            lines += [
+                "",
+                "[environment]",
+                "mesh = "
+                + _toml(
+                    {
+                        "kind": "cylinder",
+                        "center": [float(x) for x in obstacle.center],
+                        "axis": [float(x) for x in obstacle.unit_axis],
+                        "radius": float(obstacle.radius),
+                        "length": float(obstacle.length),
+                        "segments": _CYLINDER_SEGMENTS,
+                    }
+                ),
+                "friction = " + _toml({"static": friction, "kinetic": friction}),
+            ]
+            notes.append(
+                f"cylinder: a closed mesh of {_CYLINDER_SEGMENTS} faces around, as a solid; "
+                "Coulomb friction, static = kinetic"
+            )
         if touching:
             friction = scenario.rods[0].friction
             lines += [
@@ -360,7 +410,7 @@ class CosseratSolver:
             ]
         drives = []
         for k, rod in enumerate(scenario.rods):
-            lines += self._rod_lines(k, rod, n_elements, drag)
+            lines += self._rod_lines(k, rod, n_elements, drag, obstacle)
             for e, end in enumerate(End):
                 if (motion := rod.motion(end)) is not None:
                     drives.append(_Drive(rod=k, end=e, motion=motion))
@@ -376,8 +426,13 @@ class CosseratSolver:
         )
 
     @staticmethod
-    def _rod_lines(k: int, rod: Rod, n_elements: int, drag: float) -> list[str]:
+    def _rod_lines(
+        k: int, rod: Rod, n_elements: int, drag: float, obstacle: Optional[Any] = None
+    ) -> list[str]:
         m = rod.material
+        nodes = np.asarray(rod.nodes(n_elements), dtype=float)
+        if isinstance(obstacle, Cylinder):
+            nodes = _clear_of_cylinder(nodes, obstacle, rod.radius)
         lines = [
             "",
             "[[rod]]",
@@ -388,7 +443,7 @@ class CosseratSolver:
             # sagitta.
             "shape = "
             + _toml(
-                {"kind": "polyline", "points": [list(map(float, p)) for p in rod.nodes(n_elements)]}
+                {"kind": "polyline", "points": [list(map(float, p)) for p in nodes]}
             ),
             "material = "
             + _toml(

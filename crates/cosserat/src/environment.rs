@@ -66,6 +66,9 @@ pub struct Environment {
     /// Whether a run stops as diverged when a rod's point is found outside the lumen
     /// ([`Environment::outside`]); checked after every call to `Simulation::run`.
     pub stop_outside: bool,
+    /// The mesh is a solid the rods stay outside of (a post, a capstan, a bone), its normals
+    /// pointing out of it, instead of a lumen they stay inside ([`Environment::into_solid`]).
+    pub solid: bool,
 }
 
 impl Environment {
@@ -85,6 +88,7 @@ impl Environment {
             intake: Vec::new(),
             entry_note: None,
             stop_outside: true,
+            solid: false,
         }
     }
 
@@ -215,6 +219,83 @@ impl Environment {
         Ok(Self::with_mesh(mesh, None))
     }
 
+    /// A closed cylinder (a post, a capstan drum) of `radius` and `length` [m] centred on
+    /// `center` along `axis`, as a solid the rods stay outside of: `segments` flat faces around
+    /// (the faces' sagitta, `radius (1 − cos(π/segments))`, is how far the mesh lies inside the
+    /// round surface), closed by flat ends.
+    pub fn cylinder(
+        center: [f64; 3],
+        axis: [f64; 3],
+        radius: f64,
+        length: f64,
+        segments: usize,
+    ) -> Result<Self, MeshError> {
+        let a = nalgebra::Vector3::from(axis).normalize();
+        let helper = if a.x.abs() < 0.9 {
+            nalgebra::Vector3::x()
+        } else {
+            nalgebra::Vector3::y()
+        };
+        let u = helper.cross(&a).normalize();
+        let v = a.cross(&u);
+        let c = nalgebra::Vector3::from(center);
+        let k = segments as u32;
+        let mut vertices = Vec::with_capacity(2 * segments + 2);
+        for end in [-0.5, 0.5] {
+            for s in 0..segments {
+                let phi = 2.0 * std::f64::consts::PI * s as f64 / segments as f64;
+                let p = c + a * (end * length) + (u * phi.cos() + v * phi.sin()) * radius;
+                vertices.push([p.x, p.y, p.z]);
+            }
+        }
+        for end in [-0.5, 0.5] {
+            let p = c + a * (end * length);
+            vertices.push([p.x, p.y, p.z]);
+        }
+        let (bottom, top) = (2 * k, 2 * k + 1);
+        let mut triangles = Vec::with_capacity(4 * segments);
+        for s in 0..k {
+            let t = (s + 1) % k;
+            // Around: normals out of the axis.
+            triangles.push([s, t, k + t]);
+            triangles.push([s, k + t, k + s]);
+            // The ends: normals along −axis and +axis.
+            triangles.push([bottom, t, s]);
+            triangles.push([top, k + s, k + t]);
+        }
+        let (mut mesh, _) = TriMesh::new(vertices, triangles, "cylinder")?;
+        if mesh.signed_volume() < 0.0 {
+            mesh.flip_winding();
+        }
+        let mut env = Self::with_mesh(mesh, None);
+        env.solid = true;
+        Ok(env)
+    }
+
+    /// This environment's closed mesh as a solid the rods stay outside of: its normals turned
+    /// to point out of the volume it encloses, and [`Self::outside`] counting the points inside
+    /// it. Errors for a mesh that encloses no volume (a sheet has no inside to stay out of) and
+    /// for a generated vessel.
+    pub fn into_solid(mut self) -> Result<Self, String> {
+        if self.solid {
+            return Ok(self);
+        }
+        if self.vessel.is_some() {
+            return Err("a generated vessel is a lumen, not a solid".into());
+        }
+        if !self.collider.encloses_volume() {
+            return Err(format!(
+                "mesh `{}` encloses no volume: a solid must be a closed surface",
+                self.collider.mesh().name()
+            ));
+        }
+        let mut mesh = self.collider.mesh().clone();
+        mesh.flip_winding();
+        self.collider = Arc::new(MeshCollider::new(mesh));
+        self.solid = true;
+        Ok(self)
+    }
+
     /// Number of triangles.
     pub fn triangles(&self) -> usize {
         self.collider.mesh().triangles().len()
@@ -229,7 +310,8 @@ impl Environment {
         }
     }
 
-    /// Points of `points` whose centre lies outside the lumen, and how deep the deepest is.
+    /// Points of `points` whose centre lies outside the lumen (inside a solid), and how deep the
+    /// deepest is.
     ///
     /// Outside is decided by the lumen's winding number (`MeshCollider::lumen_winding`), which
     /// does not depend on how far the wall is or on which side of it the nearest feature says
@@ -259,7 +341,16 @@ impl Environment {
         let lumen = self.collider.encloses_volume();
         let mut out = Outside::default();
         for (i, p) in points.iter().enumerate() {
-            if !inserted(p) || (lumen && self.collider.lumen_winding(p) >= 0.5) {
+            if !inserted(p) {
+                continue;
+            }
+            // The winding number of the side the normals point to: 1 in a lumen, 0 outside it;
+            // around a solid (normals out), 0 outside it and −1 inside.
+            if self.solid {
+                if self.collider.lumen_winding(p) > -0.5 {
+                    continue;
+                }
+            } else if lumen && self.collider.lumen_winding(p) >= 0.5 {
                 continue;
             }
             let Some(nearest) = self.collider.nearest(p, reach) else {
@@ -282,7 +373,7 @@ impl Environment {
     /// never reaches the lumen, or reaches it far ([`FAR_ENTRY`]) from the entry point. `None`
     /// for a good entry, and when there is no entry or no lumen to enter (a sheet).
     pub fn entry_problem(&self) -> Option<String> {
-        if !self.collider.encloses_volume() {
+        if self.solid || !self.collider.encloses_volume() {
             return None;
         }
         self.entry_note.clone()

@@ -132,6 +132,9 @@ pub struct EnvironmentSection {
     /// Stop the run as diverged when a point of a rod is found outside the lumen (default
     /// true); false reports it and goes on.
     pub stop_outside: Option<bool>,
+    /// Which side of a closed mesh the rods stay on: `"lumen"` (inside; the default for a file)
+    /// or `"solid"` (outside; the default, and the only choice, for a cylinder).
+    pub side: Option<String>,
 }
 
 /// `environment.mesh`.
@@ -154,6 +157,19 @@ pub enum MeshSection {
         scale: f64,
         /// Where a wire enters the lumen, in file units: `{ point = [..], direction = [..] }`.
         entry: Option<EntrySection>,
+    },
+    /// A closed cylinder the rods stay outside of (a post, a capstan drum).
+    Cylinder {
+        /// Centre of the axis [m].
+        center: [f64; 3],
+        /// Direction of the axis.
+        axis: [f64; 3],
+        /// Radius [m].
+        radius: f64,
+        /// Length along the axis [m].
+        length: f64,
+        /// Flat faces around (default 256).
+        segments: Option<usize>,
     },
     /// A square floor.
     Plane {
@@ -927,6 +943,35 @@ impl Checker<'_> {
                 Environment::from_file(&full, scale, entry)
                     .map_err(|err| mesh_err("environment.mesh.path", err))?
             }
+            MeshSection::Cylinder {
+                center,
+                axis,
+                radius,
+                length,
+                segments,
+            } => {
+                let center = self.finite3("environment.mesh.center", *center)?;
+                let axis = self.finite3("environment.mesh.axis", *axis)?;
+                if !(axis.iter().map(|x| x * x).sum::<f64>() > 0.0) {
+                    return Err(self.invalid(
+                        "environment.mesh.axis",
+                        axis,
+                        "expected a non-zero vector",
+                    ));
+                }
+                let radius = self.positive("environment.mesh.radius", *radius)?;
+                let length = self.positive("environment.mesh.length", *length)?;
+                let segments = segments.unwrap_or(256);
+                if !(8..=100_000).contains(&segments) {
+                    return Err(self.invalid(
+                        "environment.mesh.segments",
+                        segments,
+                        "expected 8 ..= 100 000",
+                    ));
+                }
+                Environment::cylinder(center, axis, radius, length, segments)
+                    .map_err(|err| mesh_err("environment.mesh", err))?
+            }
             MeshSection::Plane {
                 point,
                 normal,
@@ -966,6 +1011,33 @@ impl Checker<'_> {
         }
         if let Some(stop) = e.stop_outside {
             env.stop_outside = stop;
+        }
+        match (e.side.as_deref(), &e.mesh) {
+            (None, _) | (Some("solid"), MeshSection::Cylinder { .. }) => {}
+            (Some("lumen"), MeshSection::Vessel { .. } | MeshSection::File { .. }) => {}
+            (Some("solid"), MeshSection::File { entry: None, .. }) => {
+                env = env
+                    .into_solid()
+                    .map_err(|why| self.invalid("environment.side", "solid", &why))?;
+            }
+            (Some(side @ ("lumen" | "solid")), mesh) => {
+                let kind = match mesh {
+                    MeshSection::Vessel { .. } => "a generated vessel is a lumen",
+                    MeshSection::File { .. } => "a mesh with an entry is a lumen",
+                    MeshSection::Cylinder { .. } => "a cylinder is a solid",
+                    MeshSection::Plane { .. } => {
+                        "a floor has one side, the one its normal points to"
+                    }
+                };
+                return Err(self.invalid("environment.side", side, kind));
+            }
+            (Some(other), _) => {
+                return Err(self.invalid(
+                    "environment.side",
+                    other,
+                    "expected \"lumen\" or \"solid\"",
+                ));
+            }
         }
         Ok(env)
     }
