@@ -357,49 +357,45 @@ class CosseratSolver:
             f"check_stability = {_toml(self.time_step_scale <= 1.0)}",
         ]
         obstacle = scenario.obstacles[0] if scenario.obstacles else None
-        if isinstance(obstacle, Plane):
-            points = np.concatenate([np.asarray(rod.centerline, float) for rod in scenario.rods])
-            extent = float(np.ptp(points, axis=0).max()) + max(rod.length for rod in scenario.rods)
+        if obstacle is not None:
             friction = max(obstacle.friction, scenario.rods[0].friction)
-            lines += [
-                "",
-                "[environment]",
-                "mesh = "
-                + _toml(
-                    {
-                        "kind": "plane",
-                        "point": [float(x) for x in obstacle.point],
-                        "normal": [float(x) for x in obstacle.unit_normal],
-                        "size": _FLOOR_SIZE * extent,
-                    }
-                ),
-                "friction = " + _toml({"static": friction, "kinetic": friction}),
+            if isinstance(obstacle, Plane):
+                points = np.concatenate(
+                    [np.asarray(rod.centerline, float) for rod in scenario.rods]
+                )
+                extent = float(np.ptp(points, axis=0).max()) + max(
+                    rod.length for rod in scenario.rods
+                )
+                mesh = {
+                    "kind": "plane",
+                    "point": [float(x) for x in obstacle.point],
+                    "normal": [float(x) for x in obstacle.unit_normal],
+                    "size": _FLOOR_SIZE * extent,
+                }
                 # A floor has no lumen to leave.
-                "stop_outside = false",
-            ]
-            notes.append("floor: Coulomb friction, static = kinetic")
-        if isinstance(obstacle, Cylinder):
-            friction = max(obstacle.friction, scenario.rods[0].friction)
+                extra = ["stop_outside = false"]
+                notes.append("floor: Coulomb friction, static = kinetic")
+            else:
+                mesh = {
+                    "kind": "cylinder",
+                    "center": [float(x) for x in obstacle.center],
+                    "axis": [float(x) for x in obstacle.unit_axis],
+                    "radius": float(obstacle.radius),
+                    "length": float(obstacle.length),
+                    "segments": _CYLINDER_SEGMENTS,
+                }
+                extra = []
+                notes.append(
+                    f"cylinder: a closed mesh of {_CYLINDER_SEGMENTS} faces around, as a solid; "
+                    "Coulomb friction, static = kinetic"
+                )
             lines += [
                 "",
                 "[environment]",
-                "mesh = "
-                + _toml(
-                    {
-                        "kind": "cylinder",
-                        "center": [float(x) for x in obstacle.center],
-                        "axis": [float(x) for x in obstacle.unit_axis],
-                        "radius": float(obstacle.radius),
-                        "length": float(obstacle.length),
-                        "segments": _CYLINDER_SEGMENTS,
-                    }
-                ),
+                "mesh = " + _toml(mesh),
                 "friction = " + _toml({"static": friction, "kinetic": friction}),
+                *extra,
             ]
-            notes.append(
-                f"cylinder: a closed mesh of {_CYLINDER_SEGMENTS} faces around, as a solid; "
-                "Coulomb friction, static = kinetic"
-            )
         if touching:
             friction = scenario.rods[0].friction
             lines += [

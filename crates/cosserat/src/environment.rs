@@ -195,14 +195,7 @@ impl Environment {
 
     /// A square floor of side `size` through `point`, facing `normal`.
     pub fn plane(point: [f64; 3], normal: [f64; 3], size: f64) -> Result<Self, MeshError> {
-        let n = nalgebra::Vector3::from(normal).normalize();
-        let helper = if n.x.abs() < 0.9 {
-            nalgebra::Vector3::x()
-        } else {
-            nalgebra::Vector3::y()
-        };
-        let u = helper.cross(&n).normalize();
-        let v = n.cross(&u);
+        let (u, v) = across(normal);
         let c = nalgebra::Vector3::from(point);
         let h = size / 2.0;
         let corners = [
@@ -231,13 +224,7 @@ impl Environment {
         segments: usize,
     ) -> Result<Self, MeshError> {
         let a = nalgebra::Vector3::from(axis).normalize();
-        let helper = if a.x.abs() < 0.9 {
-            nalgebra::Vector3::x()
-        } else {
-            nalgebra::Vector3::y()
-        };
-        let u = helper.cross(&a).normalize();
-        let v = a.cross(&u);
+        let (u, v) = across(axis);
         let c = nalgebra::Vector3::from(center);
         let k = segments as u32;
         let mut vertices = Vec::with_capacity(2 * segments + 2);
@@ -378,6 +365,19 @@ impl Environment {
         }
         self.entry_note.clone()
     }
+}
+
+/// Two unit vectors across `direction` that make a right-handed frame with it (`u × v` along
+/// `direction`).
+fn across(direction: [f64; 3]) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let n = nalgebra::Vector3::from(direction).normalize();
+    let helper = if n.x.abs() < 0.9 {
+        nalgebra::Vector3::x()
+    } else {
+        nalgebra::Vector3::y()
+    };
+    let u = helper.cross(&n).normalize();
+    (u, n.cross(&u))
 }
 
 /// Points of a rod outside the lumen ([`Environment::outside`]).
