@@ -162,6 +162,18 @@ fn bad_values_name_file_field_and_value() {
             "rod[0].load[0].point",
             "99",
         ),
+        (
+            GOOD.to_string()
+                + "[[rod.load]]\npoint = -1\nmoment = [0, 1e-4, 0]\nprofile = { kind = \"ramp\", duration = -1 }\n",
+            "rod[0].load[0].profile.duration",
+            "-1",
+        ),
+        (
+            GOOD.to_string()
+                + "[[rod.load]]\nat = 0.5\nforce = [0, 0, 1]\nprofile = { kind = \"table\", points = [[0, 1], [0, 2]] }\n",
+            "rod[0].load[0].profile.points",
+            "must increase",
+        ),
     ];
     for (text, field, value) in cases {
         let msg = error_for(&text);

@@ -100,3 +100,42 @@ fn a_solid_must_enclose_a_volume() {
     let out = drum.outside(&[[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]], 1e-3);
     assert_eq!((out.count, out.deepest_point), (1, Some(0)));
 }
+
+/// A rope dropped across a sphere and across a turned box comes to rest on top of it, its
+/// middle one rope radius above the top, no point inside.
+#[test]
+fn a_rope_rests_on_a_sphere_and_on_a_box() {
+    let r = 1e-3;
+    let cases = [
+        (Environment::sphere([0.0; 3], 0.05, 64).unwrap(), 0.05),
+        (
+            Environment::cuboid([0.0; 3], [0.1, 0.1, 0.1], [0.0, 0.0, 0.3]).unwrap(),
+            0.05,
+        ),
+    ];
+    for (env, top) in cases {
+        let n = 40;
+        let material = Material::new(3e5, 1e5, 1000.0, r);
+        let rod = RodBuilder::straight([-0.1, 0.0, top + 0.01], [1.0, 0.0, 0.0], 0.2, n, material)
+            .damping(0.0, 0.0, 20.0);
+        let mut sim = SimulationBuilder::new()
+            .double_precision(true)
+            .dt(5e-5)
+            .gravity([0.0, 0.0, -9.81])
+            .environment(env)
+            .with_rod(rod)
+            .build()
+            .unwrap();
+        let h = sim.rods().next().unwrap();
+        sim.run(10_000).unwrap();
+        let mut x = vec![[0.0; 3]; n + 1];
+        sim.read(h, StateField::Positions, &mut x).unwrap();
+        let rest = x[n / 2][2] - top;
+        assert!(
+            (rest - r).abs() < 0.2 * r,
+            "the rope's middle rests {rest} m above the top (radius {r})"
+        );
+        let inside = sim.environment().unwrap().outside(&x, r).count;
+        assert_eq!(inside, 0, "{inside} points inside the solid");
+    }
+}

@@ -70,10 +70,7 @@ fn cantilever(p: &Preset, dt: f64, n: usize, stiff: &StiffSettings, tip_load: bo
         let f = 0.01 * 3.0 * ei / length.powi(2);
         (
             f * length.powi(3) / (3.0 * ei),
-            vec![PointLoad {
-                point: n,
-                force: Vec3::new(0.0, 0.0, -f),
-            }],
+            vec![PointLoad::new(n, Vec3::new(0.0, 0.0, -f))],
             Vec3::zeros(),
         )
     } else {
@@ -361,10 +358,7 @@ fn frequency() {
                 n,
                 4.0 * omega1,
                 [EndCondition::clamped(), EndCondition::free()],
-                vec![PointLoad {
-                    point: n,
-                    force: Vec3::new(0.0, 0.0, -f),
-                }],
+                vec![PointLoad::new(n, Vec3::new(0.0, 0.0, -f))],
             );
             let mut s = settings(dt);
             s.gravity = Vec3::zeros();

@@ -28,8 +28,8 @@ pub mod stiff;
 
 pub use cosserat_problem::{
     Clock, CollisionStats, CouplingStats, DivergedQuantity, Divergence, EndCondition, EndKind,
-    EndPath, EndReaction, Integrator, Ordering, Par, PointLoad, PrescribedMotion, Refactor,
-    SolverSettings, StepStats, StiffReport, StiffScheme, StiffSettings,
+    EndPath, EndReaction, Integrator, LoadProfile, Ordering, Par, PointLoad, PrescribedMotion,
+    Refactor, SolverSettings, StepStats, StiffReport, StiffScheme, StiffSettings,
 };
 pub use coupling::{BindingSpec, Coupling, RodContactSpec, step_coupled_batch};
 pub use guide::Guide;

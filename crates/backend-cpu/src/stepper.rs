@@ -10,7 +10,7 @@ use cosserat_constraints::{
 use cosserat_model::energy::{
     bend_damping_node, clamp_damping, clamp_node_of, stretch_damping_element,
 };
-use cosserat_model::quat::{exp_rotation, rotate};
+use cosserat_model::quat::{exp_rotation, rotate, rotate_inv};
 use cosserat_model::{Quat, Real, RodParams, RodState, Vec3};
 use cosserat_problem::CollisionStats;
 use cosserat_problem::EndCondition;
@@ -418,8 +418,18 @@ pub(crate) fn before_constraints<T: Real>(
             w.f.set(j + 1, w.f.get(j + 1) + fd);
         }
     }
+    // Loads at the middle of the step (a ramp's impulse over the step is then exact); a
+    // moment acts half on each frame beside an interior point, all on an end point's frame.
+    let mid = t + 0.5 * h.to_f64();
     for load in &rod.loads {
-        w.f.set(load.point, w.f.get(load.point) + load.force);
+        let factor = T::lit(load.profile.factor(mid));
+        w.f.set(load.point, w.f.get(load.point) + load.force * factor);
+        if load.moment != Vec3::zeros() {
+            for (frame, share) in moment_shares(load.point, n) {
+                let body = rotate_inv(&w.frame(frame), &(load.moment * (factor * T::lit(share))));
+                w.tq.set(frame, w.tq.get(frame) + body);
+            }
+        }
     }
     // A clamp holds the end frame through its node (`cosserat_model::rod::EndNode`); the clamp
     // frame then turns with the clamp's prescribed rotation.
@@ -468,6 +478,17 @@ pub(crate) fn before_constraints<T: Real>(
             Motion::Velocity([&w.v.x, &w.v.y, &w.v.z], h.to_f64()),
         );
     }
+}
+
+/// The frames a moment on `point` of a rod of `n` elements acts on, and each one's share: half
+/// on each of an interior point's two frames, all on an end point's one.
+pub fn moment_shares(point: usize, n: usize) -> impl Iterator<Item = (usize, f64)> {
+    let both = point > 0 && point < n;
+    let share = if both { 0.5 } else { 1.0 };
+    [point.checked_sub(1), (point < n).then_some(point)]
+        .into_iter()
+        .flatten()
+        .map(move |f| (f, share))
 }
 
 /// The body torque the clamp of end `e` gives the end frame `frame` of the working layout: its

@@ -77,6 +77,7 @@ fn cpu_base() -> Capabilities {
         Capability::Reactions,
         Capability::DoublePrecision,
         Capability::EndPaths,
+        Capability::VaryingLoads,
     ])
 }
 
@@ -91,6 +92,7 @@ impl<T: Real> Scheme<T> for Explicit {
         cpu_base()
             .with(Capability::DirectConstraints)
             .with(Capability::SlidingEnds)
+            .with(Capability::Moments)
     }
 
     fn advance(
@@ -119,6 +121,7 @@ impl<T: Real> Scheme<T> for Coupled<T> {
             .with(Capability::Bindings)
             .with(Capability::RodContact)
             .with(Capability::SlidingEnds)
+            .with(Capability::Moments)
     }
 
     fn advance(
@@ -578,10 +581,21 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
                 last,
             });
         }
-        if loads.iter().any(|l| !l.force.iter().all(|x| x.is_finite())) {
+        if loads
+            .iter()
+            .any(|l| !l.force.iter().chain(l.moment.iter()).all(|x| x.is_finite()))
+        {
             return Err(ControlError::Value {
                 field: "load",
-                why: "forces must be finite".into(),
+                why: "forces and moments must be finite".into(),
+            });
+        }
+        let missing = S::capabilities().missing(PointLoad::needs(loads));
+        if !missing.is_empty() {
+            let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
+            return Err(ControlError::Unsupported {
+                stepper: S::NAME,
+                what: format!("set {}", list.join(", ")),
             });
         }
         r.loads.clear();

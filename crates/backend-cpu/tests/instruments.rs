@@ -203,10 +203,10 @@ fn catheter_and_wire(
         &cath,
         [EndCondition::clamped(), EndCondition::free()],
     );
-    outer.loads.push(cosserat_backend_cpu::PointLoad {
-        point: 20,
-        force: Vec3::new(0.0, 2e-4, 0.0),
-    });
+    outer.loads.push(cosserat_backend_cpu::PointLoad::new(
+        20,
+        Vec3::new(0.0, 2e-4, 0.0),
+    ));
     let inner = rod(
         &inner_pts,
         &wire,

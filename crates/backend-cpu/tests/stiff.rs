@@ -120,10 +120,7 @@ fn tip_loaded_cantilever(p: &Preset, length: f64, n: usize, drag: f64, force: f6
         n,
         drag,
         [EndCondition::clamped(), EndCondition::free()],
-        vec![PointLoad {
-            point: n,
-            force: Vec3::new(0.0, 0.0, -force),
-        }],
+        vec![PointLoad::new(n, Vec3::new(0.0, 0.0, -force))],
     )
 }
 

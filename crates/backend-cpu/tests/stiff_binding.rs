@@ -112,10 +112,7 @@ fn composite_rods(
         &straight_polyline([0.0; 3], [1.0, 0.0, 0.0], length, n),
         2.0 * omega,
         [EndCondition::clamped(), EndCondition::free()],
-        vec![PointLoad {
-            point: n,
-            force: Vec3::new(0.0, 0.0, -force),
-        }],
+        vec![PointLoad::new(n, Vec3::new(0.0, 0.0, -force))],
     );
     let inner = rod::<f64>(
         wire,

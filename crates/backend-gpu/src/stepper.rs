@@ -288,6 +288,14 @@ impl Stepper for GpuStepper {
                 why: "forces must be finite".into(),
             });
         }
+        let needs = PointLoad::needs(loads);
+        if needs != cosserat_problem::Capabilities::NONE {
+            let list: Vec<&str> = needs.iter().map(|c| c.describe()).collect();
+            return Err(ControlError::Unsupported {
+                stepper: NAME,
+                what: format!("set {}", list.join(", ")),
+            });
+        }
         let loads: Vec<PointLoad<f32>> = loads.iter().map(PointLoad::cast).collect();
         self.sim
             .set_loads(rod, &loads)

@@ -342,14 +342,8 @@ fn busy_case_sized(sizes: &[usize]) -> Case {
         };
         let ends = [EndCondition::clamped().driven(motion), EndCondition::free()];
         let loads = vec![
-            PointLoad {
-                point: n,
-                force: Vec3::new(0.0, 0.0, 0.05),
-            },
-            PointLoad {
-                point: n / 2,
-                force: Vec3::new(0.01, 0.0, 0.0),
-            },
+            PointLoad::new(n, Vec3::new(0.0, 0.0, 0.05)),
+            PointLoad::new(n / 2, Vec3::new(0.01, 0.0, 0.0)),
         ];
         rods.push((s, p, ends, loads));
     }

@@ -55,10 +55,7 @@ fn rods() -> Vec<GpuRodInput> {
                 state,
                 params,
                 ends: [EndCondition::clamped().driven(motion), EndCondition::free()],
-                loads: vec![PointLoad {
-                    point: n,
-                    force: Vec3::new(0.0, 0.0, 0.05),
-                }],
+                loads: vec![PointLoad::new(n, Vec3::new(0.0, 0.0, 0.05))],
             }
         })
         .collect()

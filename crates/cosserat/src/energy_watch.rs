@@ -8,7 +8,9 @@
 //! - a held end that moved by `Δx` and turned by `Δθ` between two checks did at most
 //!   `F Δx + M Δθ`, with `F`, `M` the largest force and torque measured at that end over the
 //!   calls in between (`Stepper::end_reaction`);
-//! - a point load `f` on a point that moved by `Δx` did at most `|f| |Δx|`;
+//! - a point load `f` on a point that moved by `Δx` did at most `|f| |Δx|`, and its moment
+//!   `m` at most `|m| Δθ`, `Δθ` the angle the frame beside the point turned by (both at the
+//!   largest factor of the load's profile);
 //! - contacts, friction and damping only take energy out.
 //!
 //! A driven end also gives the rod kinetic energy in jumps (an end set moving from one step to
@@ -35,7 +37,7 @@
 //! watch stops until it is reset. Writing the state, restoring a snapshot or changing an end's
 //! condition resets it (the energy then is the user's, not the run's).
 
-use cosserat_problem::{StateField, Stepper};
+use cosserat_problem::{PointLoad, StateField, Stepper};
 
 /// Steps between two checks. A check costs one pass over the rods (energies) and a read of
 /// their points and frames; every 64 steps it is a small fraction of a step's cost.
@@ -60,8 +62,8 @@ struct RodMarks {
     peak: [(f64, f64); 2],
     /// Per end: whether the stepper measured a reaction since the last check.
     measured: [bool; 2],
-    /// Per load: where its point was.
-    loads: Vec<[f64; 3]>,
+    /// Per load: where its point was and how the frame beside it was turned.
+    loads: Vec<EndMark>,
 }
 
 /// The watch over one simulation's energy.
@@ -155,7 +157,7 @@ impl EnergyWatch {
     }
 
     /// Reads where the held ends and loaded points of `rod` are.
-    fn mark(&mut self, stepper: &dyn Stepper, rod: usize, loads: &[(usize, [f64; 3])]) -> RodMarks {
+    fn mark(&mut self, stepper: &dyn Stepper, rod: usize, loads: &[PointLoad<f64>]) -> RodMarks {
         let held = [0, 1].map(|end| {
             stepper
                 .end_condition(rod, end)
@@ -189,7 +191,14 @@ impl EnergyWatch {
         }
         marks.loads = loads
             .iter()
-            .map(|&(p, _)| self.points.get(p).copied().unwrap_or([0.0; 3]))
+            .map(|l| {
+                let frame = l.point.min(n - 1);
+                (
+                    self.points.get(l.point).copied().unwrap_or([0.0; 3]),
+                    self.d1[frame],
+                    self.d3[frame],
+                )
+            })
             .collect();
         marks
     }
@@ -201,7 +210,7 @@ impl EnergyWatch {
         stepper: &dyn Stepper,
         steps: u64,
         time: f64,
-        loads: &[Vec<(usize, [f64; 3])>],
+        loads: &[Vec<PointLoad<f64>>],
     ) -> Result<(), Growth> {
         if !self.enabled || self.blind || steps < self.next_check {
             return Ok(());
@@ -247,9 +256,12 @@ impl EnergyWatch {
                 }
             }
             let l = loads.get(rod).unwrap_or(&no_loads);
-            for ((&(_, force), a), b) in l.iter().zip(&old.loads).zip(&new.loads) {
-                let d = sub(*b, *a);
-                self.work += norm(force) * norm(d);
+            for ((load, a), b) in l.iter().zip(&old.loads).zip(&new.loads) {
+                let most = load.profile.max_factor();
+                let dx = norm(sub(b.0, a.0));
+                let dtheta = angle(a.1, b.1) + angle(a.2, b.2);
+                self.work +=
+                    most * (norm(load.force.into()) * dx + norm(load.moment.into()) * dtheta);
             }
         }
         self.rods = marks;

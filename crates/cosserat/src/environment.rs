@@ -250,7 +250,81 @@ impl Environment {
             triangles.push([bottom, t, s]);
             triangles.push([top, k + s, k + t]);
         }
-        let (mut mesh, _) = TriMesh::new(vertices, triangles, "cylinder")?;
+        Self::solid_of(vertices, triangles, "cylinder")
+    }
+
+    /// A sphere of `radius` [m] about `center` as a solid the rods stay outside of: a UV sphere
+    /// of `segments` faces around and `segments / 2` rings (its flat faces lie within
+    /// `radius (1 − cos(π/segments))` of the round surface).
+    pub fn sphere(center: [f64; 3], radius: f64, segments: usize) -> Result<Self, MeshError> {
+        let (k, rings) = (segments as u32, (segments / 2).max(2) as u32);
+        let c = nalgebra::Vector3::from(center);
+        let mut vertices = vec![[c.x, c.y, c.z - radius], [c.x, c.y, c.z + radius]];
+        for ring in 1..rings {
+            let theta = std::f64::consts::PI * ring as f64 / rings as f64;
+            for s in 0..k {
+                let phi = 2.0 * std::f64::consts::PI * s as f64 / k as f64;
+                let p = c + nalgebra::Vector3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    -theta.cos(),
+                ) * radius;
+                vertices.push([p.x, p.y, p.z]);
+            }
+        }
+        let at = |ring: u32, s: u32| 2 + (ring - 1) * k + s % k;
+        let mut triangles = Vec::new();
+        for s in 0..k {
+            triangles.push([0, at(1, s + 1), at(1, s)]);
+            triangles.push([1, at(rings - 1, s), at(rings - 1, s + 1)]);
+            for ring in 1..rings - 1 {
+                triangles.push([at(ring, s), at(ring, s + 1), at(ring + 1, s + 1)]);
+                triangles.push([at(ring, s), at(ring + 1, s + 1), at(ring + 1, s)]);
+            }
+        }
+        Self::solid_of(vertices, triangles, "sphere")
+    }
+
+    /// A box of `size` [m] (full edge lengths along its own axes) about `center`, turned by the
+    /// rotation vector `rotation` [rad], as a solid the rods stay outside of.
+    pub fn cuboid(center: [f64; 3], size: [f64; 3], rotation: [f64; 3]) -> Result<Self, MeshError> {
+        let r = nalgebra::Rotation3::from_scaled_axis(nalgebra::Vector3::from(rotation));
+        let c = nalgebra::Vector3::from(center);
+        let vertices = (0..8)
+            .map(|i| {
+                let corner = nalgebra::Vector3::new(
+                    if i & 1 == 0 { -0.5 } else { 0.5 } * size[0],
+                    if i & 2 == 0 { -0.5 } else { 0.5 } * size[1],
+                    if i & 4 == 0 { -0.5 } else { 0.5 } * size[2],
+                );
+                let p = c + r * corner;
+                [p.x, p.y, p.z]
+            })
+            .collect();
+        // Two triangles per face, corners numbered by their (x, y, z) bits.
+        let quads = [
+            [0, 2, 6, 4],
+            [1, 5, 7, 3],
+            [0, 4, 5, 1],
+            [2, 3, 7, 6],
+            [0, 1, 3, 2],
+            [4, 6, 7, 5],
+        ];
+        let triangles = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Self::solid_of(vertices, triangles, "box")
+    }
+
+    /// A closed mesh of `vertices` and `triangles` as a solid: its normals turned out.
+    fn solid_of(
+        vertices: Vec<[f64; 3]>,
+        triangles: Vec<[u32; 3]>,
+        name: &str,
+    ) -> Result<Self, MeshError> {
+        let (mut mesh, _) = TriMesh::new(vertices, triangles, name)?;
+        mesh.repair_orientation();
         if mesh.signed_volume() < 0.0 {
             mesh.flip_winding();
         }

@@ -28,7 +28,8 @@ pub mod scene;
 pub mod sim;
 
 pub use cosserat_backend_cpu::{
-    self, Divergence, EndCondition, EndKind, EndPath, Ordering, PrescribedMotion,
+    self, Divergence, EndCondition, EndKind, EndPath, LoadProfile, Ordering, PointLoad,
+    PrescribedMotion,
 };
 pub use cosserat_collide;
 pub use cosserat_constraints;

@@ -10,7 +10,9 @@
 
 use crate::environment::{Entry, Environment};
 use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
-use cosserat_backend_cpu::{EndCondition, EndKind, EndPath, Ordering, PrescribedMotion};
+use cosserat_backend_cpu::{
+    EndCondition, EndKind, EndPath, LoadProfile, Ordering, PointLoad, PrescribedMotion,
+};
 use cosserat_model::Material;
 use cosserat_model::rod::RestShape;
 use serde::Deserialize;
@@ -170,6 +172,24 @@ pub enum MeshSection {
         length: f64,
         /// Flat faces around (default 256).
         segments: Option<usize>,
+    },
+    /// A sphere the rods stay outside of.
+    Sphere {
+        /// Centre [m].
+        center: [f64; 3],
+        /// Radius [m].
+        radius: f64,
+        /// Flat faces around (default 128).
+        segments: Option<usize>,
+    },
+    /// A box the rods stay outside of.
+    Box {
+        /// Centre [m].
+        center: [f64; 3],
+        /// Edge lengths along its own axes [m].
+        size: [f64; 3],
+        /// Rotation vector (axis times angle) [rad] from the world axes (default none).
+        rotation: Option<[f64; 3]>,
     },
     /// A square floor.
     Plane {
@@ -476,8 +496,47 @@ pub struct LoadSection {
     /// elements are equal): the nearest point, so the load stays in place when `--elements`
     /// changes.
     pub at: Option<f64>,
-    /// Force [N].
+    /// Force [N], world frame (default none).
+    #[serde(default)]
     pub force: [f64; 3],
+    /// Moment [N m], world frame (default none): half on each frame beside an interior point,
+    /// all on an end point's frame.
+    #[serde(default)]
+    pub moment: [f64; 3],
+    /// How force and moment vary in time (default: constant).
+    pub profile: Option<ProfileSection>,
+}
+
+/// `[[rod.load]] profile`: the factor force and moment are multiplied by over time.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
+pub enum ProfileSection {
+    /// 0 before `start`, rising linearly to 1 over `duration` [s].
+    Ramp {
+        /// When it starts [s] (default 0).
+        #[serde(default)]
+        start: f64,
+        /// How long it takes [s].
+        duration: f64,
+    },
+    /// `offset + amplitude sin(2π frequency t + phase)`.
+    Sine {
+        /// Mean factor (default 0).
+        #[serde(default)]
+        offset: f64,
+        /// Amplitude (default 1).
+        amplitude: Option<f64>,
+        /// Frequency [Hz].
+        frequency: f64,
+        /// Phase [rad] (default 0).
+        #[serde(default)]
+        phase: f64,
+    },
+    /// Linear between `(time [s], factor)` points, held outside them.
+    Table {
+        /// The points.
+        points: Vec<[f64; 2]>,
+    },
 }
 
 /// Run-time settings a scene asks for besides the physics.
@@ -615,6 +674,14 @@ impl Checker<'_> {
             Ok(v)
         } else {
             Err(self.invalid(field, v, "expected a finite number >= 0"))
+        }
+    }
+
+    fn finite(&self, field: &str, v: f64) -> Result<f64, SceneError> {
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.invalid(field, v, "expected a finite number"))
         }
     }
 
@@ -972,6 +1039,43 @@ impl Checker<'_> {
                 Environment::cylinder(center, axis, radius, length, segments)
                     .map_err(|err| mesh_err("environment.mesh", err))?
             }
+            MeshSection::Sphere {
+                center,
+                radius,
+                segments,
+            } => {
+                let center = self.finite3("environment.mesh.center", *center)?;
+                let radius = self.positive("environment.mesh.radius", *radius)?;
+                let segments = segments.unwrap_or(128);
+                if !(8..=4096).contains(&segments) {
+                    return Err(self.invalid(
+                        "environment.mesh.segments",
+                        segments,
+                        "expected 8 ..= 4096",
+                    ));
+                }
+                Environment::sphere(center, radius, segments)
+                    .map_err(|err| mesh_err("environment.mesh", err))?
+            }
+            MeshSection::Box {
+                center,
+                size,
+                rotation,
+            } => {
+                let center = self.finite3("environment.mesh.center", *center)?;
+                let size = self.finite3("environment.mesh.size", *size)?;
+                if !size.iter().all(|x| *x > 0.0) {
+                    return Err(self.invalid(
+                        "environment.mesh.size",
+                        size,
+                        "expected three lengths > 0",
+                    ));
+                }
+                let rotation =
+                    self.finite3("environment.mesh.rotation", rotation.unwrap_or([0.0; 3]))?;
+                Environment::cuboid(center, size, rotation)
+                    .map_err(|err| mesh_err("environment.mesh", err))?
+            }
             MeshSection::Plane {
                 point,
                 normal,
@@ -1013,7 +1117,11 @@ impl Checker<'_> {
             env.stop_outside = stop;
         }
         match (e.side.as_deref(), &e.mesh) {
-            (None, _) | (Some("solid"), MeshSection::Cylinder { .. }) => {}
+            (None, _)
+            | (
+                Some("solid"),
+                MeshSection::Cylinder { .. } | MeshSection::Sphere { .. } | MeshSection::Box { .. },
+            ) => {}
             (Some("lumen"), MeshSection::Vessel { .. } | MeshSection::File { .. }) => {}
             (Some("solid"), MeshSection::File { entry: None, .. }) => {
                 env = env
@@ -1025,6 +1133,8 @@ impl Checker<'_> {
                     MeshSection::Vessel { .. } => "a generated vessel is a lumen",
                     MeshSection::File { .. } => "a mesh with an entry is a lumen",
                     MeshSection::Cylinder { .. } => "a cylinder is a solid",
+                    MeshSection::Sphere { .. } => "a sphere is a solid",
+                    MeshSection::Box { .. } => "a box is a solid",
                     MeshSection::Plane { .. } => {
                         "a floor has one side, the one its normal points to"
                     }
@@ -1370,9 +1480,34 @@ impl Checker<'_> {
                     ));
                 }
             };
-            rb = rb.load(
-                idx as usize,
-                self.finite3(&f(&format!("load[{k}].force")), load.force)?,
+            let force = self.finite3(&f(&format!("load[{k}].force")), load.force)?;
+            let moment = self.finite3(&f(&format!("load[{k}].moment")), load.moment)?;
+            let field = f(&format!("load[{k}].profile"));
+            let profile = match &load.profile {
+                None => LoadProfile::Constant,
+                Some(ProfileSection::Ramp { start, duration }) => LoadProfile::Ramp {
+                    start: self.finite(&format!("{field}.start"), *start)?,
+                    duration: self.non_negative(&format!("{field}.duration"), *duration)?,
+                },
+                Some(ProfileSection::Sine {
+                    offset,
+                    amplitude,
+                    frequency,
+                    phase,
+                }) => LoadProfile::Sine {
+                    offset: self.finite(&format!("{field}.offset"), *offset)?,
+                    amplitude: self
+                        .finite(&format!("{field}.amplitude"), amplitude.unwrap_or(1.0))?,
+                    frequency: self.non_negative(&format!("{field}.frequency"), *frequency)?,
+                    phase: self.finite(&format!("{field}.phase"), *phase)?,
+                },
+                Some(ProfileSection::Table { points }) => LoadProfile::table(points.clone())
+                    .map_err(|why| self.invalid(format!("{field}.points"), "the points", &why))?,
+            };
+            rb = rb.load_with(
+                PointLoad::new(idx as usize, force.into())
+                    .with_moment(moment.into())
+                    .with_profile(profile),
             );
         }
         if let Some(name) = &r.name {

@@ -54,7 +54,7 @@ pub struct RodBuilder {
     points: Vec<[f64; 3]>,
     spec: RodSpec,
     ends: [EndCondition<f64>; 2],
-    loads: Vec<(usize, [f64; 3])>,
+    loads: Vec<PointLoad<f64>>,
     name: Option<String>,
     collides: bool,
     guide: Option<f64>,
@@ -234,7 +234,14 @@ impl RodBuilder {
 
     /// Adds a constant force [N] on point `point`.
     pub fn load(mut self, point: usize, force: [f64; 3]) -> Self {
-        self.loads.push((point, force));
+        self.loads.push(PointLoad::new(point, force.into()));
+        self
+    }
+
+    /// Adds a load: a force and a moment on a point, constant or varying in time
+    /// ([`PointLoad`], [`cosserat_problem::LoadProfile`]).
+    pub fn load_with(mut self, load: PointLoad<f64>) -> Self {
+        self.loads.push(load);
         self
     }
 
@@ -248,14 +255,7 @@ impl RodBuilder {
             self.rest_lengths.as_deref(),
         )?;
         let ends = self.ends.each_ref().map(|e| e.cast());
-        let loads = self
-            .loads
-            .iter()
-            .map(|&(point, f)| PointLoad {
-                point,
-                force: v3(f),
-            })
-            .collect();
+        let loads = self.loads.iter().map(PointLoad::cast).collect();
         let mut rod = CpuRod::new(state, params, ends, loads);
         if let (Some(length), [a, b, ..]) = (self.guide, self.points.as_slice()) {
             let direction = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
@@ -268,10 +268,6 @@ impl RodBuilder {
             _ => rod,
         })
     }
-}
-
-fn v3<T: Real>(a: [f64; 3]) -> Vec3<T> {
-    Vec3::new(T::lit(a[0]), T::lit(a[1]), T::lit(a[2]))
 }
 
 /// A simulation that could not be built.
@@ -571,7 +567,7 @@ impl SimulationBuilder {
                     )));
                 }
             }
-            for &(point, _) in &r.loads {
+            for &PointLoad { point, .. } in &r.loads {
                 if point > r.element_count() {
                     return Err(BuildError::LoadPoint {
                         rod: i,
@@ -717,6 +713,12 @@ impl SimulationBuilder {
             .with_if(Capability::StiffScheme, self.stiff.is_some())
             .with_if(Capability::DirectConstraints, self.direct_constraints)
             .with_if(Capability::DoublePrecision, self.double_precision)
+            .union(
+                self.rods
+                    .iter()
+                    .map(|r| PointLoad::needs(&r.loads))
+                    .fold(Capabilities::NONE, Capabilities::union),
+            )
             .union(
                 self.rods
                     .iter()
@@ -905,7 +907,7 @@ pub struct Simulation {
     /// deepest of them [m].
     outside: (usize, f64),
     /// Per rod, its point loads (for the energy watch's bound on their work).
-    loads: Vec<Vec<(usize, [f64; 3])>>,
+    loads: Vec<Vec<PointLoad<f64>>>,
     /// Energy that grows beyond the work done on the rods ([`crate::energy_watch`]).
     energy: EnergyWatch,
 }
@@ -1229,12 +1231,19 @@ impl Simulation {
     ) -> Result<(), ControlError> {
         let new: Vec<PointLoad<f64>> = loads
             .iter()
-            .map(|&(point, f)| PointLoad {
-                point,
-                force: f.into(),
-            })
+            .map(|&(point, f)| PointLoad::new(point, f.into()))
             .collect();
-        self.stepper.set_loads(h.0, &new)?;
+        self.set_point_loads(h, &new)
+    }
+
+    /// Replaces the loads of a rod with forces and moments, constant or varying in time
+    /// ([`PointLoad`]); an empty slice removes them.
+    pub fn set_point_loads(
+        &mut self,
+        h: RodHandle,
+        loads: &[PointLoad<f64>],
+    ) -> Result<(), ControlError> {
+        self.stepper.set_loads(h.0, loads)?;
         if let Some(l) = self.loads.get_mut(h.0) {
             *l = loads.to_vec();
         }

@@ -25,11 +25,15 @@ pub enum Capability {
     EndPaths,
     /// Held end points that slide along an axis.
     SlidingEnds,
+    /// Loads varying in time.
+    VaryingLoads,
+    /// Point moments.
+    Moments,
 }
 
 impl Capability {
     /// Every capability, in a fixed order.
-    pub const ALL: [Capability; 10] = [
+    pub const ALL: [Capability; 12] = [
         Capability::MeshContact,
         Capability::Guide,
         Capability::Bindings,
@@ -40,6 +44,8 @@ impl Capability {
         Capability::DoublePrecision,
         Capability::EndPaths,
         Capability::SlidingEnds,
+        Capability::VaryingLoads,
+        Capability::Moments,
     ];
 
     fn bit(self) -> u32 {
@@ -61,6 +67,8 @@ impl Capability {
             Capability::DoublePrecision => "f64 (solver.precision = \"f64\")",
             Capability::EndPaths => "keyframed end paths (rod.start.path / rod.end.path)",
             Capability::SlidingEnds => "sliding ends (rod.start.slide / rod.end.slide)",
+            Capability::VaryingLoads => "time-varying loads ([[rod.load]] profile)",
+            Capability::Moments => "point moments ([[rod.load]] moment)",
         }
     }
 }

@@ -28,7 +28,8 @@ pub use divergence::{DivergedQuantity, Divergence, StepStats};
 pub use ends::{EndCondition, EndKind, EndPath, PrescribedMotion};
 pub use report::{CollisionStats, CouplingStats, EndReaction, StiffReport, StiffSummary};
 pub use settings::{
-    Integrator, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme, StiffSettings,
+    Integrator, LoadProfile, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme,
+    StiffSettings,
 };
 pub use stepper::{
     ContactSample, ControlError, Snapshot, StateField, StepError, Stepper, StepperInfo,

@@ -1,6 +1,7 @@
 //! Settings of a simulation: the explicit scheme's and the stiff scheme's, and how it runs.
 
 use cosserat_model::{Real, Vec3};
+use std::sync::Arc;
 
 use crate::ends::cast_vec;
 
@@ -75,22 +76,171 @@ impl<T: Real> SolverSettings<T> {
     }
 }
 
-/// A constant external force on one point.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How a load varies in time: the factor its force and moment are multiplied by.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum LoadProfile {
+    /// 1 at all times.
+    #[default]
+    Constant,
+    /// 0 until `start` [s], rising linearly to 1 over `duration` [s], 1 after.
+    Ramp {
+        /// When the ramp starts [s].
+        start: f64,
+        /// How long it takes [s] (0: a step at `start`).
+        duration: f64,
+    },
+    /// `offset + amplitude sin(2π frequency t + phase)`.
+    Sine {
+        /// Mean factor.
+        offset: f64,
+        /// Amplitude of the factor.
+        amplitude: f64,
+        /// Frequency [Hz].
+        frequency: f64,
+        /// Phase [rad].
+        phase: f64,
+    },
+    /// Linear between `(time [s], factor)` points, held before the first and after the last
+    /// ([`LoadProfile::table`]).
+    Table(Arc<[[f64; 2]]>),
+}
+
+impl LoadProfile {
+    /// A piecewise-linear profile through `(time, factor)` points: at least one, times
+    /// increasing, every value finite; errors say which point is wrong.
+    pub fn table(points: Vec<[f64; 2]>) -> Result<Self, String> {
+        if points.is_empty() {
+            return Err("a table needs at least one (time, factor) point".into());
+        }
+        if let Some(k) = points
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(format!("point {k} is {:?}: not finite", points[k]));
+        }
+        if let Some(k) = (1..points.len()).find(|&k| !(points[k][0] > points[k - 1][0])) {
+            return Err(format!(
+                "point {k} is at {} s after {} s: times must increase",
+                points[k][0],
+                points[k - 1][0]
+            ));
+        }
+        Ok(Self::Table(points.into()))
+    }
+
+    /// The factor at time `t` [s].
+    pub fn factor(&self, t: f64) -> f64 {
+        match self {
+            Self::Constant => 1.0,
+            Self::Ramp { start, duration } => {
+                if t < *start {
+                    0.0
+                } else if t >= start + duration {
+                    1.0
+                } else {
+                    (t - start) / duration
+                }
+            }
+            Self::Sine {
+                offset,
+                amplitude,
+                frequency,
+                phase,
+            } => offset + amplitude * (2.0 * std::f64::consts::PI * frequency * t + phase).sin(),
+            Self::Table(points) => {
+                let k = points.partition_point(|p| p[0] <= t);
+                if k == 0 {
+                    points[0][1]
+                } else if k == points.len() {
+                    points[k - 1][1]
+                } else {
+                    let ([t0, f0], [t1, f1]) = (points[k - 1], points[k]);
+                    f0 + (f1 - f0) * (t - t0) / (t1 - t0)
+                }
+            }
+        }
+    }
+
+    /// The largest magnitude the factor takes.
+    pub fn max_factor(&self) -> f64 {
+        match self {
+            Self::Constant | Self::Ramp { .. } => 1.0,
+            Self::Sine {
+                offset, amplitude, ..
+            } => offset.abs() + amplitude.abs(),
+            Self::Table(points) => points.iter().fold(0.0, |m, p| m.max(p[1].abs())),
+        }
+    }
+}
+
+/// An external force and moment on one point, constant or varying in time.
+///
+/// The moment acts on the material frames beside the point: half on each of an interior
+/// point's two frames, all of it on an end point's one (a clamp's, a hand's or a load's
+/// torque on the rod's end).
+#[derive(Clone, Debug, PartialEq)]
 pub struct PointLoad<T: Real> {
     /// Index of the point.
     pub point: usize,
     /// Force [N], world frame.
     pub force: Vec3<T>,
+    /// Moment [N m], world frame.
+    pub moment: Vec3<T>,
+    /// How force and moment vary in time.
+    pub profile: LoadProfile,
 }
 
 impl<T: Real> PointLoad<T> {
+    /// A constant force on `point`.
+    pub fn new(point: usize, force: Vec3<T>) -> Self {
+        Self {
+            point,
+            force,
+            moment: Vec3::zeros(),
+            profile: LoadProfile::Constant,
+        }
+    }
+
+    /// This load with a moment [N m] (world frame).
+    #[must_use]
+    pub fn with_moment(mut self, moment: Vec3<T>) -> Self {
+        self.moment = moment;
+        self
+    }
+
+    /// This load varying in time as `profile`.
+    #[must_use]
+    pub fn with_profile(mut self, profile: LoadProfile) -> Self {
+        self.profile = profile;
+        self
+    }
+
     /// The same load in another precision.
     pub fn cast<U: Real>(&self) -> PointLoad<U> {
         PointLoad {
             point: self.point,
             force: cast_vec(&self.force),
+            moment: cast_vec(&self.moment),
+            profile: self.profile.clone(),
         }
+    }
+
+    /// Whether it varies in time.
+    pub fn varies(&self) -> bool {
+        self.profile != LoadProfile::Constant
+    }
+
+    /// Whether it has a moment.
+    pub fn turns(&self) -> bool {
+        self.moment != Vec3::zeros()
+    }
+
+    /// What a stepper needs beyond constant forces to apply these loads.
+    pub fn needs(loads: &[Self]) -> crate::Capabilities {
+        use crate::Capability;
+        crate::Capabilities::NONE
+            .with_if(Capability::VaryingLoads, loads.iter().any(Self::varies))
+            .with_if(Capability::Moments, loads.iter().any(Self::turns))
     }
 }
 
@@ -256,6 +406,45 @@ impl Default for StiffSettings {
             axial_fallback: true,
             reuse_contact_queries: true,
             integrator: Integrator::ImplicitEuler,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::LoadProfile;
+
+    #[test]
+    fn profiles_give_their_factors() {
+        let ramp = LoadProfile::Ramp {
+            start: 1.0,
+            duration: 2.0,
+        };
+        assert_eq!(
+            [0.5, 1.0, 2.0, 3.0, 9.0].map(|t| ramp.factor(t)),
+            [0.0, 0.0, 0.5, 1.0, 1.0]
+        );
+        let sine = LoadProfile::Sine {
+            offset: 0.5,
+            amplitude: 2.0,
+            frequency: 0.25,
+            phase: 0.0,
+        };
+        assert!((sine.factor(1.0) - 2.5).abs() < 1e-15 && (sine.factor(3.0) + 1.5).abs() < 1e-15);
+        assert_eq!(sine.max_factor(), 2.5);
+        let table = LoadProfile::table(vec![[1.0, 2.0], [3.0, -2.0]]).unwrap();
+        assert_eq!(
+            [0.0, 1.0, 1.5, 3.0, 5.0].map(|t| table.factor(t)),
+            [2.0, 2.0, 1.0, -2.0, -2.0]
+        );
+        assert_eq!(table.max_factor(), 2.0);
+        for (bad, why) in [
+            (vec![], "at least one"),
+            (vec![[0.0, 1.0], [0.0, 2.0]], "must increase"),
+            (vec![[0.0, f64::NAN]], "not finite"),
+        ] {
+            let e = LoadProfile::table(bad).unwrap_err();
+            assert!(e.contains(why), "{e}");
         }
     }
 }

@@ -105,7 +105,7 @@ fn released_decay(mode: Mode, c: f64, settle_dt: f64, dt: f64) -> (f64, f64, f64
         Mode::Bending => Vec3::new(0.0, 0.0, -1e-3 * 3.0 * k / (length * length)),
         Mode::Axial => Vec3::new(1e-4 * k, 0.0, 0.0),
     };
-    let load = PointLoad { point: n, force };
+    let load = PointLoad::new(n, force);
     let ends = [EndCondition::clamped(), EndCondition::free()];
     let mut rod = CpuRod::new(s, par, ends, vec![load]);
     let extensible = matches!(mode, Mode::Axial);

@@ -820,7 +820,7 @@ fn step_fixed<T: Real>(
         // energy without changing static equilibria.
         w.velocities(hs, drag);
         if rod.reaction.is_some() {
-            record_reactions(rod, w, k, hs, h, &gravity, &coupled.loads);
+            record_reactions(rod, w, k, hs, h, t + 0.5 * h, &gravity, &coupled.loads);
         }
         if let Some(c) = contacts.as_deref_mut() {
             c.record_forces(w, k, &w.lambda_prev[0], hs);
@@ -898,6 +898,7 @@ fn record_reactions<T: Real>(
     k: &Consts,
     h: f64,
     advance: f64,
+    mid: f64,
     gravity: &Vec3<f64>,
     coupling_loads: &[(usize, Vec3<f64>)],
 ) {
@@ -910,7 +911,9 @@ fn record_reactions<T: Real>(
             .loads
             .iter()
             .filter(|l| l.point == p)
-            .fold(Vec3::zeros(), |a, l| a + v64(&l.force));
+            .fold(Vec3::zeros(), |a, l| {
+                a + v64(&l.force) * l.profile.factor(mid)
+            });
         coupling_loads
             .iter()
             .filter(|l| l.0 == p)
@@ -1048,15 +1051,19 @@ fn solve_step<T: Real>(
         w.constraints(k);
         w.keep_constraint_values();
     }
+    // Loads at the middle of the step, as the explicit scheme's.
+    let mid = t + 0.5 * h;
     let loads = rod
         .loads
         .iter()
-        .map(|l| (l.point, v64(&l.force)))
+        .map(|l| (l.point, v64(&l.force) * l.profile.factor(mid)))
         .chain(ctx.loads.iter().copied());
     let ends = &rod.ends;
     // Also without clamps: a clamp released since the last step leaves none behind.
     let omega = [0, 1].map(|e| v64(&ends[e].velocities_over(t, h).1));
     w.clamp_begin(k, h, ctx.advance, omega);
+    // Point moments are the explicit schemes' (`Capability::Moments`): kicked into a frame's
+    // tiny inertia at a haptic step they would turn it by radians before the solve.
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
