@@ -1,7 +1,7 @@
 """Type stubs of the native module (``python/src/lib.rs``)."""
 
 from os import PathLike
-from typing import Any, Mapping, Optional, Sequence, Tuple
+from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -96,8 +96,30 @@ class Simulation:
         """Moves a held end to ``position`` (and frame) in ``duration`` seconds."""
     def hold_end(self, end: int, kind: str, rod: int = 0) -> None:
         """Holds an end as ``"free"``, ``"pinned"`` or ``"clamped"``."""
-    def set_loads(self, loads: Sequence[Tuple[int, Sequence[float]]], rod: int = 0) -> None:
-        """Replaces the point loads: ``[(point, (fx, fy, fz)), ...]`` [N]."""
+    def set_loads(
+        self,
+        loads: Sequence[
+            Union[
+                Tuple[int, Sequence[float]],
+                Tuple[int, Sequence[float], Sequence[float]],
+            ]
+        ],
+        rod: int = 0,
+    ) -> None:
+        """Replaces the point loads: ``[(point, (fx, fy, fz)), ...]`` [N], or
+        ``(point, force, (mx, my, mz))`` with a moment [N m] (explicit scheme)."""
+    def set_end_path(
+        self,
+        end: int,
+        times: Sequence[float],
+        displacement: Optional[Sequence[Sequence[float]]] = None,
+        rotation: Optional[Sequence[Sequence[float]]] = None,
+        rod: int = 0,
+    ) -> None:
+        """Drives a held end along keyframes from now: displacement [m] and rotation vector
+        [rad] at each time [s from now], zero at the first (0), linear between, held after."""
+    def slide_end(self, end: int, axis: Optional[Sequence[float]], rod: int = 0) -> None:
+        """Lets a held end slide freely along ``axis`` (world), or holds it again with ``None``."""
     def end_reaction(
         self, end: int, rod: int = 0
     ) -> Optional[Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:

@@ -14,8 +14,8 @@
 
 use cosserat::scene::parse_scene;
 use cosserat::{
-    Backend, ControlError as LibControlError, EndKind, RodHandle, Simulation, SimulationSnapshot,
-    StateField,
+    Backend, ControlError as LibControlError, EndCondition, EndKind, EndPath, PointLoad, RodHandle,
+    Simulation, SimulationSnapshot, StateField,
 };
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods,
@@ -536,17 +536,82 @@ impl PySimulation {
         sim.hold_end(h, end, kind).map_err(control_err)
     }
 
-    /// Replaces the point loads of rod `rod`: a list of `(point, (fx, fy, fz))` [N]; an empty
-    /// list removes them.
+    /// Replaces the point loads of rod `rod`: a list of `(point, (fx, fy, fz))` [N], or of
+    /// `(point, (fx, fy, fz), (mx, my, mz))` with a moment [N m] (world axes; half on each
+    /// frame beside an interior point, all on an end point's; explicit scheme); an empty list
+    /// removes them.
     #[pyo3(signature = (loads, rod=0))]
-    fn set_loads(&self, loads: Vec<(usize, Vec<f64>)>, rod: usize) -> PyResult<()> {
-        let loads: Vec<(usize, [f64; 3])> = loads
-            .into_iter()
-            .map(|(p, f)| Ok((p, vec3("load force", &f)?)))
+    fn set_loads(&self, loads: Vec<Bound<'_, PyAny>>, rod: usize) -> PyResult<()> {
+        let loads: Vec<PointLoad<f64>> = loads
+            .iter()
+            .map(|l| {
+                let (point, force, moment) = match l.extract::<(usize, Vec<f64>)>() {
+                    Ok((p, f)) => (p, f, vec![0.0; 3]),
+                    Err(_) => l.extract::<(usize, Vec<f64>, Vec<f64>)>().map_err(|_| {
+                        PyValueError::new_err("a load is (point, force) or (point, force, moment)")
+                    })?,
+                };
+                Ok(PointLoad::new(point, vec3("load force", &force)?.into())
+                    .with_moment(vec3("load moment", &moment)?.into()))
+            })
             .collect::<PyResult<_>>()?;
         let mut sim = self.lock();
         let h = Self::handle(&sim, rod)?;
-        sim.set_loads(h, &loads).map_err(control_err)
+        sim.set_point_loads(h, &loads).map_err(control_err)
+    }
+
+    /// Drives held end `end` of rod `rod` along a keyframed path from now on: at each of
+    /// `times` [s from now] the end has moved by `displacement` [m] and turned by `rotation`
+    /// (rotation vectors, axis times angle [rad]; clamped ends) from where it is now, both world
+    /// axes and zero at the first time (0); linear in between, held after the last. Followed
+    /// exactly at every step (CPU backends).
+    #[pyo3(signature = (end, times, displacement=None, rotation=None, rod=0))]
+    fn set_end_path(
+        &self,
+        end: usize,
+        times: Vec<f64>,
+        displacement: Option<Vec<Vec<f64>>>,
+        rotation: Option<Vec<Vec<f64>>>,
+        rod: usize,
+    ) -> PyResult<()> {
+        let n = times.len();
+        let rows = |name: &str, v: Option<Vec<Vec<f64>>>| -> PyResult<Vec<[f64; 3]>> {
+            match v {
+                None => Ok(vec![[0.0; 3]; n]),
+                Some(rows) => rows.iter().map(|r| vec3(name, r)).collect(),
+            }
+        };
+        let (d, r) = (
+            rows("displacement", displacement)?,
+            rows("rotation", rotation)?,
+        );
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let path = EndPath::new(sim.time(), times, d, r)
+            .map_err(|why| ControlError::new_err(format!("end path: {why}")))?;
+        let condition = sim.end_condition(h, end).map_err(control_err)?;
+        sim.set_end_condition(h, end, condition.following(path))
+            .map_err(control_err)
+    }
+
+    /// Lets held end `end` of rod `rod` slide freely along `axis` (world axes; the rod and the
+    /// loads on the end point move it along it, its motion only across it), or holds it in
+    /// every direction again with `axis=None` (explicit CPU scheme).
+    #[pyo3(signature = (end, axis, rod=0))]
+    fn slide_end(&self, end: usize, axis: Option<Vec<f64>>, rod: usize) -> PyResult<()> {
+        let axis = axis.map(|a| vec3("axis", &a)).transpose()?;
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let mut condition = sim.end_condition(h, end).map_err(control_err)?;
+        condition = match axis {
+            Some(a) => condition.sliding_along(a.into()),
+            None => EndCondition {
+                slide: None,
+                ..condition
+            },
+        };
+        sim.set_end_condition(h, end, condition)
+            .map_err(control_err)
     }
 
     /// The filtered reaction at held end `end` of rod `rod` after the last step, the wrench the

@@ -128,6 +128,41 @@ def test_a_driven_end_moves_at_its_velocity():
     assert sim.positions()[0] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
 
 
+def test_an_end_follows_its_path_and_slides_along_its_axis():
+    sim = cosserat.Simulation.from_file(PENDULUM, {"rod.0.elements": 30})
+    # The pinned start follows a path 2 cm along y over 0.01 s and holds there.
+    sim.set_end_path(0, [0.0, 0.01], displacement=[[0.0, 0.0, 0.0], [0.0, 0.02, 0.0]])
+    sim.run(250)
+    assert sim.positions()[0] == pytest.approx([0.0, 0.01, 0.0], abs=1e-6)
+    sim.run(1000)
+    assert sim.positions()[0] == pytest.approx([0.0, 0.02, 0.0], abs=1e-6)
+    # Free along z, the pinned start falls with the rope; it stays on its line.
+    sim.slide_end(0, [0.0, 0.0, 1.0])
+    sim.run(1000)
+    start = sim.positions()[0]
+    assert start[2] < -1e-3
+    assert start[:2] == pytest.approx([0.0, 0.02], abs=1e-6)
+    with pytest.raises(cosserat.ControlError, match="free end"):
+        sim.hold_end(1, "free")
+        sim.slide_end(1, [1.0, 0.0, 0.0])
+
+
+def test_a_moment_turns_the_end_it_acts_on():
+    sim = cosserat.Simulation.from_toml(
+        CANTILEVER.replace('scheme = "stiff"', 'scheme = "explicit"').replace(
+            "dt = 1e-3", "dt = 9e-8"
+        ),
+        name="cantilever.toml",
+    )
+    sim.set_loads([(40, (0.0, 0.0, 0.0), (0.0, 0.0, 1e-4))])
+    sim.run(2000)
+    # A moment about z turns the free end towards +y.
+    assert sim.positions()[-1, 1] > 0.0
+    stiff = cantilever()
+    with pytest.raises(cosserat.ControlError, match="point moments"):
+        stiff.set_loads([(40, (0.0, 0.0, 0.0), (0.0, 0.0, 1e-4))])
+
+
 def test_written_state_is_read_back():
     sim = cosserat.Simulation.from_file(PENDULUM, {"rod.0.elements": 10})
     p = sim.positions()
