@@ -108,3 +108,41 @@ fn a_ramped_load_is_carried_as_it_rises() {
         );
     }
 }
+
+/// A uniform load along a cantilever (no gravity) sags it as beam theory says,
+/// `q L⁴ / (8 E I)` plus the shear of the parallel penalty `q L² / (2 G A)` (stiff scheme,
+/// 40 elements; the small-deflection case of `docs/validation.md`'s cantilever).
+#[test]
+fn a_distributed_load_sags_a_cantilever_as_beam_theory_says() {
+    let (length, n, q) = (0.1, 40, 0.02);
+    let material = Material::new(6e10, 6e10 / 2.66, 6450.0, 2e-4);
+    let ei = material.bend_twist_stiffness()[0];
+    let ga = material.shear_stiffness();
+    let rod = RodBuilder::straight([0.0; 3], [1.0, 0.0, 0.0], length, n, material)
+        .damping(0.0, 0.0, 30.0)
+        .clamp_start()
+        .distributed_load(PointLoad::new(0, [0.0, 0.0, -q].into()));
+    let mut sim = SimulationBuilder::new()
+        .double_precision(true)
+        .gravity([0.0; 3])
+        .stiff_solver(Some(StiffSettings::default()))
+        .dt(1e-3)
+        .with_rod(rod)
+        .build()
+        .unwrap();
+    let h = sim.rods().next().unwrap();
+    sim.run(3000).unwrap();
+    let mut x = vec![[0.0; 3]; n + 1];
+    sim.read(h, StateField::Positions, &mut x).unwrap();
+    let expected = q * length.powi(4) / (8.0 * ei) + q * length * length / (2.0 * ga);
+    assert!(
+        (-x[n][2] - expected).abs() < 2e-3 * expected,
+        "tip sags {} m, beam theory {expected} m",
+        -x[n][2]
+    );
+    let held = sim.end_reaction(h, 0).unwrap().force[2];
+    assert!(
+        (held - q * length).abs() < 1e-3 * q * length,
+        "the clamp holds {held} N"
+    );
+}

@@ -174,6 +174,11 @@ fn bad_values_name_file_field_and_value() {
             "rod[0].load[0].profile.points",
             "must increase",
         ),
+        (
+            GOOD.to_string() + "[[rod.distributed_load]]\npoint = 3\nforce = [0, 0, -1]\n",
+            "rod[0].distributed_load[0]",
+            "point = Some(3)",
+        ),
     ];
     for (text, field, value) in cases {
         let msg = error_for(&text);

@@ -357,9 +357,13 @@ pub struct RodSection {
     /// Condition at the last point.
     #[serde(default)]
     pub end: EndSection,
-    /// Constant point forces.
+    /// Point loads.
     #[serde(default, rename = "load")]
     pub loads: Vec<LoadSection>,
+    /// Loads spread along the whole rod, per unit length: `force` [N/m], `moment` [N m/m],
+    /// `profile` as a point load's (`point` and `at` are not taken).
+    #[serde(default, rename = "distributed_load")]
+    pub distributed_loads: Vec<LoadSection>,
     /// Direction the first frame's `d1` should point to.
     pub first_director: Option<[f64; 3]>,
     /// Whether the rod collides with the environment (default true).
@@ -675,6 +679,38 @@ impl Checker<'_> {
         } else {
             Err(self.invalid(field, v, "expected a finite number >= 0"))
         }
+    }
+
+    /// A load's force, moment and profile, checked; `field` names it (`rod[0].load[1]`).
+    fn load_values(
+        &self,
+        field: &str,
+        load: &LoadSection,
+    ) -> Result<([f64; 3], [f64; 3], LoadProfile), SceneError> {
+        let force = self.finite3(&format!("{field}.force"), load.force)?;
+        let moment = self.finite3(&format!("{field}.moment"), load.moment)?;
+        let field = format!("{field}.profile");
+        let profile = match &load.profile {
+            None => LoadProfile::Constant,
+            Some(ProfileSection::Ramp { start, duration }) => LoadProfile::Ramp {
+                start: self.finite(&format!("{field}.start"), *start)?,
+                duration: self.non_negative(&format!("{field}.duration"), *duration)?,
+            },
+            Some(ProfileSection::Sine {
+                offset,
+                amplitude,
+                frequency,
+                phase,
+            }) => LoadProfile::Sine {
+                offset: self.finite(&format!("{field}.offset"), *offset)?,
+                amplitude: self.finite(&format!("{field}.amplitude"), amplitude.unwrap_or(1.0))?,
+                frequency: self.non_negative(&format!("{field}.frequency"), *frequency)?,
+                phase: self.finite(&format!("{field}.phase"), *phase)?,
+            },
+            Some(ProfileSection::Table { points }) => LoadProfile::table(points.clone())
+                .map_err(|why| self.invalid(format!("{field}.points"), "the points", &why))?,
+        };
+        Ok((force, moment, profile))
     }
 
     fn finite(&self, field: &str, v: f64) -> Result<f64, SceneError> {
@@ -1480,32 +1516,25 @@ impl Checker<'_> {
                     ));
                 }
             };
-            let force = self.finite3(&f(&format!("load[{k}].force")), load.force)?;
-            let moment = self.finite3(&f(&format!("load[{k}].moment")), load.moment)?;
-            let field = f(&format!("load[{k}].profile"));
-            let profile = match &load.profile {
-                None => LoadProfile::Constant,
-                Some(ProfileSection::Ramp { start, duration }) => LoadProfile::Ramp {
-                    start: self.finite(&format!("{field}.start"), *start)?,
-                    duration: self.non_negative(&format!("{field}.duration"), *duration)?,
-                },
-                Some(ProfileSection::Sine {
-                    offset,
-                    amplitude,
-                    frequency,
-                    phase,
-                }) => LoadProfile::Sine {
-                    offset: self.finite(&format!("{field}.offset"), *offset)?,
-                    amplitude: self
-                        .finite(&format!("{field}.amplitude"), amplitude.unwrap_or(1.0))?,
-                    frequency: self.non_negative(&format!("{field}.frequency"), *frequency)?,
-                    phase: self.finite(&format!("{field}.phase"), *phase)?,
-                },
-                Some(ProfileSection::Table { points }) => LoadProfile::table(points.clone())
-                    .map_err(|why| self.invalid(format!("{field}.points"), "the points", &why))?,
-            };
+            let (force, moment, profile) = self.load_values(&f(&format!("load[{k}]")), load)?;
             rb = rb.load_with(
                 PointLoad::new(idx as usize, force.into())
+                    .with_moment(moment.into())
+                    .with_profile(profile),
+            );
+        }
+        for (k, load) in r.distributed_loads.iter().enumerate() {
+            let field = f(&format!("distributed_load[{k}]"));
+            if load.point.is_some() || load.at.is_some() {
+                return Err(self.invalid(
+                    field,
+                    format!("point = {:?}, at = {:?}", load.point, load.at),
+                    "a distributed load acts along the whole rod: no `point` or `at`",
+                ));
+            }
+            let (force, moment, profile) = self.load_values(&field, load)?;
+            rb = rb.distributed_load(
+                PointLoad::new(0, force.into())
                     .with_moment(moment.into())
                     .with_profile(profile),
             );

@@ -55,6 +55,9 @@ pub struct RodBuilder {
     spec: RodSpec,
     ends: [EndCondition<f64>; 2],
     loads: Vec<PointLoad<f64>>,
+    /// Loads per unit length (force [N/m] and moment [N m/m] as a [`PointLoad`] whose point is
+    /// unused), lumped onto the points when the rod is built.
+    distributed: Vec<PointLoad<f64>>,
     name: Option<String>,
     collides: bool,
     guide: Option<f64>,
@@ -83,6 +86,7 @@ impl RodBuilder {
             spec: RodSpec::new(material),
             ends: [EndCondition::free(), EndCondition::free()],
             loads: Vec::new(),
+            distributed: Vec::new(),
             name: None,
             collides: true,
             guide: None,
@@ -245,6 +249,41 @@ impl RodBuilder {
         self
     }
 
+    /// Adds a load spread along the whole rod: `per_length`'s force [N/m] and moment [N m/m]
+    /// (its `point` is not used) and profile. When the rod is built it becomes one point load per
+    /// point, of the load per length times the point's share of the rod (half of each element
+    /// beside it), so that it follows `--elements`.
+    pub fn distributed_load(mut self, per_length: PointLoad<f64>) -> Self {
+        self.distributed.push(per_length);
+        self
+    }
+
+    /// The point loads and the distributed loads lumped onto the points.
+    fn point_loads(&self) -> Vec<PointLoad<f64>> {
+        let n = self.points.len().saturating_sub(1);
+        let segment = |j: usize| -> f64 {
+            (0..3)
+                .map(|k| (self.points[j + 1][k] - self.points[j][k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let mut out = self.loads.clone();
+        for d in &self.distributed {
+            for i in 0..=n {
+                let share = 0.5
+                    * (i.checked_sub(1).map_or(0.0, segment)
+                        + if i < n { segment(i) } else { 0.0 });
+                out.push(PointLoad {
+                    point: i,
+                    force: d.force * share,
+                    moment: d.moment * share,
+                    profile: d.profile.clone(),
+                });
+            }
+        }
+        out
+    }
+
     fn build<T: Real>(
         &self,
         environment: Option<&Environment>,
@@ -255,7 +294,7 @@ impl RodBuilder {
             self.rest_lengths.as_deref(),
         )?;
         let ends = self.ends.each_ref().map(|e| e.cast());
-        let loads = self.loads.iter().map(PointLoad::cast).collect();
+        let loads = self.point_loads().iter().map(PointLoad::cast).collect();
         let mut rod = CpuRod::new(state, params, ends, loads);
         if let (Some(length), [a, b, ..]) = (self.guide, self.points.as_slice()) {
             let direction = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
@@ -664,7 +703,7 @@ impl SimulationBuilder {
             warnings,
             scratch: Vec::new(),
             collides: self.rods.iter().map(|r| r.collides).collect(),
-            loads: self.rods.iter().map(|r| r.loads.clone()).collect(),
+            loads: self.rods.iter().map(RodBuilder::point_loads).collect(),
             // The stiff scheme is not watched (`crate::energy_watch` says why).
             energy: EnergyWatch::new(
                 self.energy_check && self.stiff.is_none(),
@@ -716,7 +755,7 @@ impl SimulationBuilder {
             .union(
                 self.rods
                     .iter()
-                    .map(|r| PointLoad::needs(&r.loads))
+                    .map(|r| PointLoad::needs(&r.point_loads()))
                     .fold(Capabilities::NONE, Capabilities::union),
             )
             .union(
