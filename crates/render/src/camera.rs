@@ -237,7 +237,10 @@ impl Camera {
                 let distance = 2.0 * half_d + size;
                 let eye = add(centre, scale(back, distance));
                 let view = look(eye, right, up, back);
-                let (near, far) = (distance - half_d - 0.01 * size, distance + half_d + 0.01 * size);
+                let (near, far) = (
+                    distance - half_d - 0.01 * size,
+                    distance + half_d + 0.01 * size,
+                );
                 let proj = [
                     [1.0 / half_w, 0.0, 0.0, 0.0],
                     [0.0, 1.0 / half_h, 0.0, 0.0],
@@ -298,7 +301,9 @@ fn look(eye: [f64; 3], right: [f64; 3], up: [f64; 3], back: [f64; 3]) -> Mat4 {
 
 /// `a · b` for column-major matrices.
 fn mul(a: &Mat4, b: &Mat4) -> Mat4 {
-    std::array::from_fn(|col| std::array::from_fn(|row| (0..4).map(|k| a[k][row] * b[col][k]).sum()))
+    std::array::from_fn(|col| {
+        std::array::from_fn(|row| (0..4).map(|k| a[k][row] * b[col][k]).sum())
+    })
 }
 
 fn to_f32(m: Mat4) -> [[f32; 4]; 4] {
@@ -358,18 +363,28 @@ mod tests {
                 let mut reach = 0.0f64;
                 for c in b.corners() {
                     let p = clip(&cam.view_projection, c);
-                    assert!(p[0].abs() <= 1.0 && p[1].abs() <= 1.0, "{view} {projection:?} {p:?}");
-                    assert!((0.0..=1.0).contains(&p[2]), "{view} {projection:?} depth {p:?}");
+                    assert!(
+                        p[0].abs() <= 1.0 && p[1].abs() <= 1.0,
+                        "{view} {projection:?} {p:?}"
+                    );
+                    assert!(
+                        (0.0..=1.0).contains(&p[2]),
+                        "{view} {projection:?} depth {p:?}"
+                    );
                     reach = reach.max(p[0].abs()).max(p[1].abs());
                 }
-                assert!(reach > 0.8, "{view} {projection:?}: the box fills only {reach}");
+                assert!(
+                    reach > 0.8,
+                    "{view} {projection:?}: the box fills only {reach}"
+                );
             }
         }
     }
 
     #[test]
     fn auto_looks_along_the_thinnest_axis() {
-        let cam = Camera::framing(&unit_box(), View::Auto, Projection::Orthographic, 10, 10).unwrap();
+        let cam =
+            Camera::framing(&unit_box(), View::Auto, Projection::Orthographic, 10, 10).unwrap();
         assert_eq!(cam.towards_camera, [0.0, 0.0, 1.0]);
     }
 
@@ -380,6 +395,8 @@ mod tests {
         assert!(View::parse("10,95").is_err());
         let e = Projection::parse("fisheye").unwrap_err().to_string();
         assert!(e.contains("fisheye"), "{e}");
-        assert!(Camera::framing(&Bounds::EMPTY, View::Auto, Projection::Orthographic, 8, 8).is_err());
+        assert!(
+            Camera::framing(&Bounds::EMPTY, View::Auto, Projection::Orthographic, 8, 8).is_err()
+        );
     }
 }

@@ -53,9 +53,14 @@ pub fn read_png(path: &Path) -> Result<Image, RenderError> {
         .read_info()
         .map_err(|e| bad(e.to_string()))?;
     let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).map_err(|e| bad(e.to_string()))?;
+    let info = reader
+        .next_frame(&mut buf)
+        .map_err(|e| bad(e.to_string()))?;
     if info.bit_depth != png::BitDepth::Eight {
-        return Err(bad(format!("{:?} bits per channel, expected 8", info.bit_depth)));
+        return Err(bad(format!(
+            "{:?} bits per channel, expected 8",
+            info.bit_depth
+        )));
     }
     let pixels = (info.width * info.height) as usize;
     let rgba = match info.color_type {
@@ -178,7 +183,15 @@ impl AnimationWriter {
             }
             AnimationFormat::Mp4 => {
                 let child = Command::new("ffmpeg")
-                    .args(["-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgba"])
+                    .args([
+                        "-y",
+                        "-loglevel",
+                        "error",
+                        "-f",
+                        "rawvideo",
+                        "-pix_fmt",
+                        "rgba",
+                    ])
                     .args(["-s", &format!("{width}x{height}")])
                     .args(["-framerate", &fps.to_string(), "-i", "-"])
                     // yuv420p needs even sizes; the filter crops a pixel where needed.
@@ -217,10 +230,12 @@ impl AnimationWriter {
                     None,
                 );
                 frame.delay = *delay_cs;
-                encoder.write_frame(&frame).map_err(|e| RenderError::Encode {
-                    path: self.path.clone(),
-                    message: e.to_string(),
-                })
+                encoder
+                    .write_frame(&frame)
+                    .map_err(|e| RenderError::Encode {
+                        path: self.path.clone(),
+                        message: e.to_string(),
+                    })
             }
             Sink::Ffmpeg { child } => child
                 .stdin
@@ -330,17 +345,28 @@ mod tests {
     #[test]
     fn the_dither_keeps_the_mean_colour() {
         let p = palette();
-        for colour in [[40u8, 90, 200], [200, 120, 30], [0, 0, 0], [255, 255, 255], [247, 247, 245]] {
+        for colour in [
+            [40u8, 90, 200],
+            [200, 120, 30],
+            [0, 0, 0],
+            [255, 255, 255],
+            [247, 247, 245],
+        ] {
             let image = Image {
                 width: 8,
                 height: 8,
-                rgba: (0..64).flat_map(|_| [colour[0], colour[1], colour[2], 255]).collect(),
+                rgba: (0..64)
+                    .flat_map(|_| [colour[0], colour[1], colour[2], 255])
+                    .collect(),
             };
             let mut idx = Vec::new();
             dither_to_palette(&image, &mut idx);
             for k in 0..3 {
-                let mean: f64 =
-                    idx.iter().map(|&i| f64::from(p[3 * i as usize + k])).sum::<f64>() / 64.0;
+                let mean: f64 = idx
+                    .iter()
+                    .map(|&i| f64::from(p[3 * i as usize + k]))
+                    .sum::<f64>()
+                    / 64.0;
                 let step = 255.0 / (LEVELS[k] - 1) as f64;
                 assert!(
                     (mean - f64::from(colour[k])).abs() <= step / 16.0 + 1.0,

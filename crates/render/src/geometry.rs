@@ -74,7 +74,7 @@ const TOUCH_COLOUR: [f32; 3] = [1.0, 0.85, 0.05];
 const PRESSED_COLOUR: [f32; 3] = [0.80, 0.0, 0.0];
 
 /// Colour of the vessel (linear RGB) and its opacity.
-pub const MESH_COLOUR: [f32; 4] = [0.85, 0.35, 0.35, 0.28];
+pub const MESH_COLOUR: [f32; 4] = [0.80, 0.25, 0.25, 0.35];
 
 /// A vertex as the shaders read it.
 #[repr(C)]

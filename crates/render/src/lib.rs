@@ -48,7 +48,9 @@ use std::path::{Path, PathBuf};
 #[non_exhaustive]
 pub enum RenderError {
     /// wgpu found no adapter, or the adapter gave no device.
-    #[error("no GPU adapter for rendering: {0} (Mesa's lavapipe works without a GPU: apt-get install mesa-vulkan-drivers)")]
+    #[error(
+        "no GPU adapter for rendering: {0} (Mesa's lavapipe works without a GPU: apt-get install mesa-vulkan-drivers)"
+    )]
     NoAdapter(String),
     /// The device reported an error.
     #[error("rendering failed on the device: {0}")]

@@ -46,6 +46,6 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let n = normalize(in.normal);
     let facing = abs(dot(n, light_direction(in.world)));
     let rgb = in.colour.rgb * (0.45 + 0.55 * facing);
-    let alpha = clamp(in.colour.a * (0.6 + 1.4 * (1.0 - facing)), 0.0, 1.0);
+    let alpha = clamp(in.colour.a * (1.0 + 1.5 * (1.0 - facing)), 0.0, 1.0);
     return vec4<f32>(rgb, alpha);
 }

@@ -154,8 +154,7 @@ impl Renderer {
     /// [`RenderError::Option`] for a zero or oversized picture or a sample count other than
     /// 1 or 4; [`RenderError::Device`] if the device refuses the pipelines.
     pub fn new(settings: RenderSettings) -> Result<Self, RenderError> {
-        if !(1..=4 * 4096).contains(&settings.width) || !(1..=4 * 4096).contains(&settings.height)
-        {
+        if !(1..=4 * 4096).contains(&settings.width) || !(1..=4 * 4096).contains(&settings.height) {
             return Err(RenderError::Option {
                 option: "size",
                 value: format!("{}x{}", settings.width, settings.height),
@@ -202,7 +201,9 @@ impl Renderer {
             required_limits: limits,
             ..Default::default()
         }))
-        .map_err(|e| RenderError::NoAdapter(format!("adapter `{}` gave no device: {e}", info.name)))?;
+        .map_err(|e| {
+            RenderError::NoAdapter(format!("adapter `{}` gave no device: {e}", info.name))
+        })?;
         let errors = Arc::new(Mutex::new(None));
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
@@ -415,7 +416,12 @@ impl Renderer {
                 camera.towards_camera[2],
                 0.0,
             ],
-            eye: [eye[0], eye[1], eye[2], f32::from(u8::from(camera.eye.is_some()))],
+            eye: [
+                eye[0],
+                eye[1],
+                eye[2],
+                f32::from(u8::from(camera.eye.is_some())),
+            ],
         };
         self.queue
             .write_buffer(&self.camera_buffer, 0, bytemuck::bytes_of(&uniform));
@@ -504,12 +510,7 @@ impl Renderer {
                 timeout: None,
             })
             .map_err(|e| RenderError::Device(format!("waiting for the frame: {e}")))?;
-        if let Some(e) = self
-            .errors
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take()
-        {
+        if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
             return Err(RenderError::Device(e));
         }
         {
