@@ -67,7 +67,7 @@ pub(crate) struct RenderOptions {
     /// Samples per pixel: 4 (smooth edges; default) or 1.
     #[arg(long, default_value_t = 4)]
     samples: u32,
-    /// Render only the last frame (a still of the run's end), as `last.png`.
+    /// Render only the last frame (a still of the run's end, framed on it), as `last.png`.
     #[arg(long)]
     last_only: bool,
 }
@@ -176,7 +176,13 @@ fn render_with(
     if let Some(m) = &mesh {
         m.include_in(&mut bounds);
     }
-    for frame in 0..traj.n_frames() {
+    let frames: Vec<usize> = if args.options.last_only {
+        vec![traj.n_frames() - 1]
+    } else {
+        (0..traj.n_frames()).collect()
+    };
+    // The camera frames every drawn frame, so it stays still while the rods move.
+    for &frame in &frames {
         for rod in poses(&traj, frame) {
             include_rod(&mut bounds, &rod);
         }
@@ -192,11 +198,6 @@ fn render_with(
     let mut renderer = Renderer::new(opts.settings).map_err(|e| e.to_string())?;
     renderer.set_mesh(mesh.as_ref());
 
-    let frames: Vec<usize> = if args.options.last_only {
-        vec![traj.n_frames() - 1]
-    } else {
-        (0..traj.n_frames()).collect()
-    };
     let animation = match (opts.format, args.options.last_only) {
         (Some(format), false) => Some(out.join(format!(
             "{}.{}",

@@ -4,8 +4,9 @@
 //! have to look up coordinates to see it. A [`Camera`] is built from the [`Bounds`] of
 //! everything drawn (every frame's rods and the mesh, so that the camera stays still while the
 //! video plays), a [`View`] direction and a [`Projection`], and fits the box into the picture
-//! with a small margin. World "up" is `+z` (the scenes' gravity points along `-z`), except when
-//! looking along `z`, where it is `+y`.
+//! with a small margin. For views given by angles, world "up" is `+z` (the scenes' gravity
+//! points along `-z`), except when looking along `z`, where it is `+y`; the automatic view
+//! turns the scene so that its longest extent runs across the (wide) picture.
 //!
 //! The matrices follow wgpu's clip space (depth from 0 to 1) and are handed to WGSL column by
 //! column.
@@ -101,7 +102,7 @@ impl Projection {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum View {
     /// Along the box's thinnest axis, so the scene's two largest extents fill the picture (a
-    /// vessel tree that spreads in a plane is seen face on).
+    /// vessel tree that spreads in a plane is seen face on), with the longest across.
     Auto,
     /// From a direction given as azimuth (degrees about `+z`, 0 looking along `+y` from the
     /// `-y` side) and elevation (degrees above the horizontal plane, 90 looking down).
@@ -144,26 +145,37 @@ impl View {
         }
     }
 
-    /// Unit vector from the scene towards the camera.
-    fn towards_camera(self, bounds: &Bounds) -> [f64; 3] {
+    /// Unit vector from the scene towards the camera, and the direction that is up in the
+    /// picture (before it is made perpendicular to the first).
+    fn axes(self, bounds: &Bounds) -> ([f64; 3], [f64; 3]) {
         match self {
             Self::Auto => {
                 let ext: [f64; 3] = std::array::from_fn(|k| bounds.max[k] - bounds.min[k]);
-                // The thinnest axis; ties go to z (look down), then y (look from the front).
-                let k = if ext[2] <= ext[0] && ext[2] <= ext[1] {
-                    2
-                } else if ext[1] <= ext[0] {
-                    1
+                // Look along the thinnest axis; the longest of the other two runs across the
+                // picture (which is wider than tall), the third up. Ties keep the order z, y, x
+                // for the view and x, y, z across.
+                let mut order = [2usize, 1, 0];
+                order.sort_by(|&a, &b| ext[a].total_cmp(&ext[b]));
+                let (thin, up, across) = (order[0], order[1], order[2]);
+                let (mut back, mut upward) = ([0.0; 3], [0.0; 3]);
+                upward[up] = 1.0;
+                // The sign that makes `across` point right: right = up × back.
+                back[thin] = if (up + 1) % 3 == thin && (thin + 1) % 3 == across {
+                    1.0
                 } else {
-                    0
+                    -1.0
                 };
-                let mut d = [0.0; 3];
-                d[k] = if k == 2 { 1.0 } else { -1.0 };
-                d
+                (back, upward)
             }
             Self::Angles { azimuth, elevation } => {
                 let (a, e) = (azimuth.to_radians(), elevation.to_radians());
-                [-a.sin() * e.cos(), -a.cos() * e.cos(), e.sin()]
+                let back = [-a.sin() * e.cos(), -a.cos() * e.cos(), e.sin()];
+                let up = if back[2].abs() > 0.999 {
+                    [0.0, 1.0, 0.0]
+                } else {
+                    [0.0, 0.0, 1.0]
+                };
+                (back, up)
             }
         }
     }
@@ -206,12 +218,7 @@ impl Camera {
                 expected: "something to frame (a rod or a mesh)",
             });
         }
-        let back = view.towards_camera(bounds);
-        let up_hint = if back[2].abs() > 0.999 {
-            [0.0, 1.0, 0.0]
-        } else {
-            [0.0, 0.0, 1.0]
-        };
+        let (back, up_hint) = view.axes(bounds);
         let right = normalize(cross(up_hint, back));
         let up = cross(back, right);
         let centre = bounds.centre();

@@ -58,8 +58,8 @@ pub fn include_rod(bounds: &mut Bounds, rod: &RodPose<'_>) {
     }
 }
 
-/// Base colour of rod `i` is `ROD_COLOURS[i % len]` (linear RGB): a blue guidewire, an
-/// orange catheter, then green, purple and grey.
+/// Base colour of rod `i` is `ROD_COLOURS[i % len]` (linear RGB): the scene's first rod blue,
+/// the second orange, then green, purple and grey.
 pub const ROD_COLOURS: [[f32; 3]; 5] = [
     [0.10, 0.30, 0.85],
     [0.95, 0.50, 0.10],
@@ -74,7 +74,7 @@ const TOUCH_COLOUR: [f32; 3] = [1.0, 0.85, 0.05];
 const PRESSED_COLOUR: [f32; 3] = [0.80, 0.0, 0.0];
 
 /// Colour of the vessel (linear RGB) and its opacity.
-pub const MESH_COLOUR: [f32; 4] = [0.80, 0.25, 0.25, 0.35];
+pub const MESH_COLOUR: [f32; 4] = [0.75, 0.16, 0.16, 0.38];
 
 /// A vertex as the shaders read it.
 #[repr(C)]

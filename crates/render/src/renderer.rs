@@ -32,8 +32,9 @@ pub struct RenderSettings {
     pub height: u32,
     /// Samples per pixel: 1, or 4 for antialiased edges (if the adapter cannot, 1 is used).
     pub samples: u32,
-    /// Tubes thinner than this many pixels in radius are drawn this thick, so that a 0.4 mm
-    /// guidewire in a 30 cm vessel stays visible; their true radius is used when larger.
+    /// The thinnest tube is drawn at least this many pixels in radius, so that a 0.4 mm
+    /// guidewire in a 30 cm vessel stays visible; every tube is thickened by the same factor
+    /// (a wire stays thinner than its catheter). Tubes already thick enough keep their radius.
     pub min_radius_px: f64,
     /// Normal contact force [N] drawn fully red; lighter touches shade from yellow.
     pub force_scale: f64,
@@ -384,12 +385,27 @@ impl Renderer {
         rods: &[RodPose<'_>],
         out: &mut Image,
     ) -> Result<(), RenderError> {
+        // Every tube is thickened by the factor that brings the thinnest up to the minimum, so
+        // that a wire inside a catheter stays thinner than the catheter.
         let min_radius = self.settings.min_radius_px * camera.pixel_size;
+        let thinnest = rods
+            .iter()
+            .map(|r| r.radius)
+            .filter(|r| *r > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let thicken = if thinnest.is_finite() {
+            (min_radius / thinnest).max(1.0)
+        } else {
+            1.0
+        };
         self.scratch_vertices.clear();
         self.scratch_indices.clear();
         for (i, rod) in rods.iter().enumerate() {
             push_tube(
-                rod,
+                &RodPose {
+                    radius: rod.radius * thicken,
+                    ..*rod
+                },
                 ROD_COLOURS[i % ROD_COLOURS.len()],
                 min_radius,
                 self.settings.force_scale,

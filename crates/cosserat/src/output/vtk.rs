@@ -64,7 +64,7 @@ pub fn vtp_frame_file_name(frame: usize) -> String {
 /// environment's triangles name missing vertices; [`OutputError::Io`] if a
 /// directory or file cannot be written.
 pub fn write_vtp_series(dir: &Path, traj: &Trajectory) -> Result<(), OutputError> {
-    check(traj).map_err(|source| OutputError::Inconsistent {
+    check(traj, 0).map_err(|source| OutputError::Inconsistent {
         path: dir.to_path_buf(),
         source,
     })?;
@@ -148,7 +148,7 @@ impl VtpSeries {
     /// [`OutputError::Inconsistent`] (nothing written) if the trajectory is malformed or holds
     /// values VTK cannot read; [`OutputError::Io`] naming a file that cannot be written.
     pub fn append(&mut self, traj: &Trajectory) -> Result<(), OutputError> {
-        check(traj).map_err(|source| OutputError::Inconsistent {
+        check(traj, self.written).map_err(|source| OutputError::Inconsistent {
             path: self.dir.clone(),
             source,
         })?;
@@ -192,33 +192,38 @@ fn index_text(entries: &str) -> String {
     )
 }
 
-/// Shapes, and finiteness of every value (ParaView's filters misbehave on
-/// `nan`/`inf`).
-fn check(traj: &Trajectory) -> Result<(), ShapeError> {
+/// Shapes, and finiteness of every value of frames `from..` (ParaView's
+/// filters misbehave on `nan`/`inf`). A series checks each frame once, as it
+/// is written, so a run of `T` frames costs `T` checks, not `T²`.
+fn check(traj: &Trajectory, from: usize) -> Result<(), ShapeError> {
     traj.validate()?;
-    let non_finite = |frame, what: String, value: f64| {
+    let non_finite = |frame, what: &dyn Fn() -> String, value: f64| {
         if value.is_finite() {
             Ok(())
         } else {
-            Err(ShapeError::NonFinite { frame, what, value })
+            Err(ShapeError::NonFinite {
+                frame,
+                what: what(),
+                value,
+            })
         }
     };
-    for (frame, &time) in traj.times.iter().enumerate() {
-        non_finite(frame, "time".into(), time)?;
+    for (frame, &time) in traj.times.iter().enumerate().skip(from) {
+        non_finite(frame, &|| "time".into(), time)?;
     }
     for (i, rod) in traj.rods.iter().enumerate() {
-        non_finite(0, format!("rod {i} radius"), rod.radius)?;
+        non_finite(0, &|| format!("rod {i} radius"), rod.radius)?;
         let groups: [(&str, &[[f64; 3]], usize); 3] = [
             ("point", &rod.points, rod.n_points()),
             ("director", &rod.directors, rod.n_elements),
             ("velocity", &rod.velocities, rod.n_points()),
         ];
         for (what, values, per_frame) in groups {
-            for (k, v) in values.iter().enumerate() {
+            for (k, v) in values.iter().enumerate().skip(from * per_frame) {
                 for &x in v {
                     non_finite(
                         k / per_frame,
-                        format!("rod {i} {what} {}", k % per_frame),
+                        &|| format!("rod {i} {what} {}", k % per_frame),
                         x,
                     )?;
                 }
@@ -229,10 +234,10 @@ fn check(traj: &Trajectory) -> Result<(), ShapeError> {
             ("strain", &rod.strains, rod.n_elements),
         ];
         for (what, values, per_frame) in scalars {
-            for (k, &x) in values.iter().enumerate() {
+            for (k, &x) in values.iter().enumerate().skip(from * per_frame) {
                 non_finite(
                     k / per_frame,
-                    format!("rod {i} {what} {}", k % per_frame),
+                    &|| format!("rod {i} {what} {}", k % per_frame),
                     x,
                 )?;
             }
