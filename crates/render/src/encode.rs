@@ -9,7 +9,11 @@
 //! and the usual way to pick them (NeuQuant, per frame) costs about a tenth of a second per
 //! 720p frame; a fixed palette (6 levels of red, 7 of green, 6 of blue and 4 greys) with a 4×4
 //! ordered dither costs a few milliseconds, keeps every frame on the same palette (no flicker)
-//! and is deterministic.
+//! and is deterministic. Because the dither depends only on a pixel's colour and position, a
+//! pixel that did not change keeps its palette index, so each frame after the first stores only
+//! the rectangle that changed since the one before (drawn over it, `DisposalMethod::Keep`): in a
+//! run the vessel and the background stay still and only the rods move, and the rectangle is a
+//! small part of the picture.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -127,6 +131,8 @@ enum Sink {
         encoder: gif::Encoder<BufWriter<File>>,
         delay_cs: u16,
         indices: Vec<u8>,
+        /// The last frame pushed (empty before the first).
+        previous: Vec<u8>,
     },
     Ffmpeg {
         child: Child,
@@ -179,6 +185,7 @@ impl AnimationWriter {
                     // GIF delays are in hundredths of a second.
                     delay_cs: (100 / fps).max(1) as u16,
                     indices: Vec::new(),
+                    previous: Vec::new(),
                 }
             }
             AnimationFormat::Mp4 => {
@@ -221,21 +228,41 @@ impl AnimationWriter {
                 encoder,
                 delay_cs,
                 indices,
+                previous,
             } => {
-                dither_to_palette(image, indices);
+                let whole = Rect {
+                    left: 0,
+                    top: 0,
+                    width: image.width as usize,
+                    height: image.height as usize,
+                };
+                let rect = if previous.len() == image.rgba.len() {
+                    // An unchanged frame still takes its time on screen: one pixel is rewritten.
+                    changed_rect(previous, &image.rgba, image.width as usize).unwrap_or(Rect {
+                        width: 1,
+                        height: 1,
+                        ..whole
+                    })
+                } else {
+                    whole
+                };
+                dither_to_palette(image, rect, indices);
                 let mut frame = gif::Frame::from_indexed_pixels(
-                    image.width as u16,
-                    image.height as u16,
+                    rect.width as u16,
+                    rect.height as u16,
                     indices,
                     None,
                 );
+                frame.left = rect.left as u16;
+                frame.top = rect.top as u16;
                 frame.delay = *delay_cs;
-                encoder
-                    .write_frame(&frame)
-                    .map_err(|e| RenderError::Encode {
-                        path: self.path.clone(),
-                        message: e.to_string(),
-                    })
+                frame.dispose = gif::DisposalMethod::Keep;
+                previous.clear();
+                previous.extend_from_slice(&image.rgba);
+                encoder.write_frame(&frame).map_err(|e| RenderError::Encode {
+                    path: self.path.clone(),
+                    message: e.to_string(),
+                })
             }
             Sink::Ffmpeg { child } => child
                 .stdin
@@ -301,30 +328,78 @@ fn palette() -> Vec<u8> {
 /// The 4×4 Bayer matrix, thresholds in sixteenths.
 const BAYER: [[u8; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
 
-/// Indices into [`palette`] for `image`, with an ordered dither on the colour cube; pixels
-/// near the background's light greys take the nearest grey undithered.
-fn dither_to_palette(image: &Image, out: &mut Vec<u8>) {
-    out.clear();
-    out.reserve((image.width * image.height) as usize);
-    let w = image.width as usize;
-    for (i, px) in image.rgba.chunks_exact(4).enumerate() {
-        let (x, y) = (i % w, i / w);
-        let (r, g, b) = (px[0], px[1], px[2]);
-        let (hi, lo) = (r.max(g).max(b), r.min(g).min(b));
-        if lo >= 229 && hi <= 252 && hi - lo <= 4 {
-            let k = ((usize::from(lo) + usize::from(hi)) / 2 - 229) / 6;
-            out.push((LEVELS[0] * LEVELS[1] * LEVELS[2] + k.min(GREYS - 1)) as u8);
-            continue;
+/// A rectangle of pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Rect {
+    left: usize,
+    top: usize,
+    width: usize,
+    height: usize,
+}
+
+/// The smallest rectangle holding every pixel where the RGBA pictures `a` and `b` (rows of
+/// `width` pixels) differ, or `None` if they are equal.
+fn changed_rect(a: &[u8], b: &[u8], width: usize) -> Option<Rect> {
+    let row = 4 * width;
+    let rows_differ = |y: &usize| a[y * row..(y + 1) * row] != b[y * row..(y + 1) * row];
+    let height = a.len() / row;
+    let top = (0..height).find(rows_differ)?;
+    let bottom = (0..height).rev().find(rows_differ)?;
+    let (mut left, mut right) = (width, 0);
+    for y in top..=bottom {
+        let (ra, rb) = (&a[y * row..(y + 1) * row], &b[y * row..(y + 1) * row]);
+        if let Some(x) = (0..left).find(|&x| ra[4 * x..4 * x + 4] != rb[4 * x..4 * x + 4]) {
+            left = x;
         }
-        let t = u32::from(BAYER[y % 4][x % 4]) * 2 + 1; // (0..32) / 32 steps
-        let q = |v: u8, n: usize| -> usize {
-            let steps = (n - 1) as u32;
-            // floor(v * steps / 255 + t / 32): on average over the 16 thresholds, v itself.
-            ((u32::from(v) * steps * 32 + t * 255) / (255 * 32)).min(steps) as usize
-        };
-        let (ri, gi, bi) = (q(r, LEVELS[0]), q(g, LEVELS[1]), q(b, LEVELS[2]));
-        out.push(((ri * LEVELS[1] + gi) * LEVELS[2] + bi) as u8);
+        if let Some(x) = (right..width)
+            .rev()
+            .find(|&x| ra[4 * x..4 * x + 4] != rb[4 * x..4 * x + 4])
+        {
+            right = x;
+        }
     }
+    let right = right.max(left);
+    Some(Rect {
+        left,
+        top,
+        width: right - left + 1,
+        height: bottom - top + 1,
+    })
+}
+
+/// Indices into [`palette`] for the pixels of `image` inside `rect`, row by row, with an
+/// ordered dither on the colour cube (by the pixel's position in the whole picture, so a pixel
+/// gets the same index whatever rectangle it is encoded in); pixels near the background's light
+/// greys take the nearest grey undithered.
+fn dither_to_palette(image: &Image, rect: Rect, out: &mut Vec<u8>) {
+    out.clear();
+    out.reserve(rect.width * rect.height);
+    let w = image.width as usize;
+    for y in rect.top..rect.top + rect.height {
+        let row = &image.rgba[4 * (y * w + rect.left)..4 * (y * w + rect.left + rect.width)];
+        for (i, px) in row.chunks_exact(4).enumerate() {
+            let x = rect.left + i;
+            out.push(palette_index(px, x, y));
+        }
+    }
+}
+
+/// The palette index of the pixel `px` (RGBA) at `(x, y)`.
+fn palette_index(px: &[u8], x: usize, y: usize) -> u8 {
+    let (r, g, b) = (px[0], px[1], px[2]);
+    let (hi, lo) = (r.max(g).max(b), r.min(g).min(b));
+    if lo >= 229 && hi <= 252 && hi - lo <= 4 {
+        let k = ((usize::from(lo) + usize::from(hi)) / 2 - 229) / 6;
+        return (LEVELS[0] * LEVELS[1] * LEVELS[2] + k.min(GREYS - 1)) as u8;
+    }
+    let t = u32::from(BAYER[y % 4][x % 4]) * 2 + 1; // (0..32) / 32 steps
+    let q = |v: u8, n: usize| -> usize {
+        let steps = (n - 1) as u32;
+        // floor(v * steps / 255 + t / 32): on average over the 16 thresholds, v itself.
+        ((u32::from(v) * steps * 32 + t * 255) / (255 * 32)).min(steps) as usize
+    };
+    let (ri, gi, bi) = (q(r, LEVELS[0]), q(g, LEVELS[1]), q(b, LEVELS[2]));
+    ((ri * LEVELS[1] + gi) * LEVELS[2] + bi) as u8
 }
 
 #[cfg(test)]
@@ -360,7 +435,13 @@ mod tests {
                     .collect(),
             };
             let mut idx = Vec::new();
-            dither_to_palette(&image, &mut idx);
+            let whole = Rect {
+                left: 0,
+                top: 0,
+                width: 8,
+                height: 8,
+            };
+            dither_to_palette(&image, whole, &mut idx);
             for k in 0..3 {
                 let mean: f64 = idx
                     .iter()
@@ -374,6 +455,78 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_changed_rectangle_holds_every_difference_and_no_more() {
+        let (w, h) = (7usize, 5usize);
+        let a = vec![200u8; 4 * w * h];
+        assert_eq!(changed_rect(&a, &a, w), None);
+        let mut b = a.clone();
+        for (x, y) in [(2, 1), (5, 3), (3, 2)] {
+            b[4 * (y * w + x) + 1] = 0;
+        }
+        let r = changed_rect(&a, &b, w).unwrap();
+        assert_eq!(
+            r,
+            Rect {
+                left: 2,
+                top: 1,
+                width: 4,
+                height: 3
+            }
+        );
+    }
+
+    /// A GIF written frame by frame decodes back to the pictures' palette colours: each
+    /// stored rectangle drawn over the last gives every frame whole.
+    #[test]
+    fn a_gif_of_changed_rectangles_decodes_to_every_frame() {
+        let (w, h) = (12u32, 9u32);
+        let frames: Vec<Image> = (0..4)
+            .map(|f| Image {
+                width: w,
+                height: h,
+                rgba: (0..w * h)
+                    .flat_map(|i| {
+                        let (x, y) = (i % w, i / w);
+                        let on = x == 2 + 2 * f && y >= 3 && y < 6;
+                        if on { [200, 30, 30, 255] } else { [247, 247, 245, 255] }
+                    })
+                    .collect(),
+            })
+            .collect();
+        let path = std::env::temp_dir().join(format!("cosserat-render-{}.gif", std::process::id()));
+        let mut writer = AnimationWriter::create(&path, AnimationFormat::Gif, w, h, 10).unwrap();
+        for f in &frames {
+            writer.push(f).unwrap();
+        }
+        writer.finish().unwrap();
+        let mut options = gif::DecodeOptions::new();
+        options.set_color_output(gif::ColorOutput::RGBA);
+        let mut decoder = options.read_info(File::open(&path).unwrap()).unwrap();
+        let p = palette();
+        let mut canvas = vec![0u8; (4 * w * h) as usize];
+        for (k, f) in frames.iter().enumerate() {
+            let frame = decoder.read_next_frame().unwrap().expect("a frame");
+            if k > 0 {
+                assert!(frame.width < w as u16, "frame {k} is stored whole");
+            }
+            for y in 0..frame.height as usize {
+                for x in 0..frame.width as usize {
+                    let (cx, cy) = (frame.left as usize + x, frame.top as usize + y);
+                    let src = 4 * (y * frame.width as usize + x);
+                    let dst = 4 * (cy * w as usize + cx);
+                    canvas[dst..dst + 4].copy_from_slice(&frame.buffer[src..src + 4]);
+                }
+            }
+            for (i, px) in f.rgba.chunks(4).enumerate() {
+                let (x, y) = (i % w as usize, i / w as usize);
+                let c = 3 * palette_index(px, x, y) as usize;
+                assert_eq!(&canvas[4 * i..4 * i + 3], &p[c..c + 3], "frame {k} pixel ({x}, {y})");
+            }
+        }
+        std::fs::remove_file(&path).ok();
     }
 
     #[test]
