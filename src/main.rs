@@ -434,8 +434,8 @@ impl Recorder {
             }
         });
         let mut probe = Vec::new();
-        let contacts = sim.environment().is_some()
-            && sim.rods().all(|h| sim.contacts(h, &mut probe).is_ok());
+        let contacts =
+            sim.environment().is_some() && sim.rods().all(|h| sim.contacts(h, &mut probe).is_ok());
         Ok(Self {
             schedule: cosserat::output::frame_steps(steps, frames),
             recorded: 0,
@@ -497,16 +497,11 @@ impl Recorder {
         self.last_captured = sim.steps();
         // The schedule moves past every step already reached (an interrupted run captures
         // off schedule).
-        while self
-            .next_step()
-            .is_some_and(|s| s <= self.last_captured)
-        {
+        while self.next_step().is_some_and(|s| s <= self.last_captured) {
             self.recorded += 1;
         }
         match self.series.as_mut() {
-            Some(series) => series
-                .append(&self.trajectory)
-                .map_err(|e| e.to_string()),
+            Some(series) => series.append(&self.trajectory).map_err(|e| e.to_string()),
             None => Ok(()),
         }
     }
@@ -589,10 +584,7 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
             if run_args.npz_only {
                 None
             } else {
-                Some(
-                    cosserat::output::VtpSeries::create(dir)
-                        .map_err(|e| format!("--out: {e}"))?,
-                )
+                Some(cosserat::output::VtpSeries::create(dir).map_err(|e| format!("--out: {e}"))?)
             }
         }
         None => None,
@@ -626,8 +618,7 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
     if let (true, Some(dir)) = (run_args.render, &run_args.out) {
         // The report went to stdout as one JSON object; the render's summary goes to stderr
         // then, so that stdout stays one object.
-        let render_args =
-            render::RenderArgs::for_run(dir, run_args.render_options.clone(), false);
+        let render_args = render::RenderArgs::for_run(dir, run_args.render_options.clone(), false);
         if args.json {
             render::render_quietly(&render_args)?;
         } else {

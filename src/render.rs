@@ -135,10 +135,7 @@ pub(crate) fn render_quietly(args: &RenderArgs) -> Result<std::process::ExitCode
     render_with(args, |line| eprintln!("{line}"))
 }
 
-fn render_with(
-    args: &RenderArgs,
-    say: impl Fn(&str),
-) -> Result<std::process::ExitCode, String> {
+fn render_with(args: &RenderArgs, say: impl Fn(&str)) -> Result<std::process::ExitCode, String> {
     let start = Instant::now();
     let npz = args.run_dir.join("trajectory.npz");
     if !npz.is_file() {
@@ -307,7 +304,11 @@ fn render_with(
             report.wall_s, report.read_s, report.render_s, report.png_s, report.animation_s
         ));
         say(&match &report.animation {
-            Some(a) => format!("wrote      {} and the frames in {}", a.display(), out.display()),
+            Some(a) => format!(
+                "wrote      {} and the frames in {}",
+                a.display(),
+                out.display()
+            ),
             None => format!("wrote      the frames in {}", out.display()),
         });
     }
@@ -368,12 +369,12 @@ impl Settled {
                 manifest.display()
             )
         };
-        let pick = |cli: Option<String>, scene: Option<String>, default: &str, field: &str| {
-            match (cli, scene) {
-                (Some(v), _) => (v, None),
-                (None, Some(v)) => (v, Some(field.to_string())),
-                (None, None) => (default.to_string(), None),
-            }
+        let pick = |cli: Option<String>, scene: Option<String>, default: &str, field: &str| match (
+            cli, scene,
+        ) {
+            (Some(v), _) => (v, None),
+            (None, Some(v)) => (v, Some(field.to_string())),
+            (None, None) => (default.to_string(), None),
         };
         let (camera_name, camera_field) =
             pick(cli.camera.clone(), scene.camera.clone(), "ortho", "camera");
@@ -384,10 +385,10 @@ impl Settled {
         };
         let mut projection =
             Projection::parse(&camera_name).map_err(|e| blame(&camera_field, e))?;
-        if let Projection::Perspective { fov_y_degrees } = &mut projection {
-            if let Some(fov) = cli.fov.or(scene.fov) {
-                *fov_y_degrees = fov;
-            }
+        if let (Projection::Perspective { fov_y_degrees }, Some(fov)) =
+            (&mut projection, cli.fov.or(scene.fov))
+        {
+            *fov_y_degrees = fov;
         }
         let view = View::parse(&view_name).map_err(|e| blame(&view_field, e))?;
         let format = match cli.format.as_deref() {

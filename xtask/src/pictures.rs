@@ -102,7 +102,8 @@ pub(crate) fn run() -> Result<bool, String> {
         print!("{}", cosserat(&args)?);
         let from = dir.join("render").join("last.png");
         let to = docs.join(p.file);
-        std::fs::copy(&from, &to).map_err(|e| format!("{} → {}: {e}", from.display(), to.display()))?;
+        std::fs::copy(&from, &to)
+            .map_err(|e| format!("{} → {}: {e}", from.display(), to.display()))?;
         let size = std::fs::metadata(&to).map(|m| m.len()).unwrap_or(0);
         println!("wrote {} ({} kB)", to.display(), size / 1000);
     }
@@ -130,7 +131,14 @@ const CASES: &[Case] = &[
     },
     Case {
         what: "PNG frames + GIF, perspective, 4× MSAA",
-        args: &["--format", "gif", "--camera", "perspective", "--view", "iso"],
+        args: &[
+            "--format",
+            "gif",
+            "--camera",
+            "perspective",
+            "--view",
+            "iso",
+        ],
     },
 ];
 
@@ -174,7 +182,13 @@ pub(crate) fn bench() -> Result<bool, String> {
     for case in CASES {
         let out = dir.join("render");
         std::fs::remove_dir_all(&out).ok();
-        let mut args = vec!["render", path_arg(&dir)?, "--json", "--out", path_arg(&out)?];
+        let mut args = vec![
+            "render",
+            path_arg(&dir)?,
+            "--json",
+            "--out",
+            path_arg(&out)?,
+        ];
         args.extend_from_slice(case.args);
         eprintln!("{}…", case.what);
         let text = cosserat(&args)?;

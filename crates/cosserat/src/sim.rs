@@ -689,9 +689,13 @@ impl SimulationBuilder {
                 .rods
                 .iter()
                 .map(|r| {
-                    build_rod_with_rest_lengths::<f64>(&r.points, &r.spec, r.rest_lengths.as_deref())
-                        .map(|(_, params)| params.rest_lengths)
-                        .unwrap_or_default()
+                    build_rod_with_rest_lengths::<f64>(
+                        &r.points,
+                        &r.spec,
+                        r.rest_lengths.as_deref(),
+                    )
+                    .map(|(_, params)| params.rest_lengths)
+                    .unwrap_or_default()
                 })
                 .collect(),
         })
@@ -1416,7 +1420,10 @@ impl Simulation {
         p.windows(2)
             .zip(self.rest_lengths(h))
             .map(|(w, l0)| {
-                let l = (0..3).map(|k| (w[1][k] - w[0][k]).powi(2)).sum::<f64>().sqrt();
+                let l = (0..3)
+                    .map(|k| (w[1][k] - w[0][k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
                 l / l0 - 1.0
             })
             .collect()

@@ -259,10 +259,12 @@ impl AnimationWriter {
                 frame.dispose = gif::DisposalMethod::Keep;
                 previous.clear();
                 previous.extend_from_slice(&image.rgba);
-                encoder.write_frame(&frame).map_err(|e| RenderError::Encode {
-                    path: self.path.clone(),
-                    message: e.to_string(),
-                })
+                encoder
+                    .write_frame(&frame)
+                    .map_err(|e| RenderError::Encode {
+                        path: self.path.clone(),
+                        message: e.to_string(),
+                    })
             }
             Sink::Ffmpeg { child } => child
                 .stdin
@@ -490,8 +492,12 @@ mod tests {
                 rgba: (0..w * h)
                     .flat_map(|i| {
                         let (x, y) = (i % w, i / w);
-                        let on = x == 2 + 2 * f && y >= 3 && y < 6;
-                        if on { [200, 30, 30, 255] } else { [247, 247, 245, 255] }
+                        let on = x == 2 + 2 * f && (3..6).contains(&y);
+                        if on {
+                            [200, 30, 30, 255]
+                        } else {
+                            [247, 247, 245, 255]
+                        }
                     })
                     .collect(),
             })
@@ -523,7 +529,11 @@ mod tests {
             for (i, px) in f.rgba.chunks(4).enumerate() {
                 let (x, y) = (i % w as usize, i / w as usize);
                 let c = 3 * palette_index(px, x, y) as usize;
-                assert_eq!(&canvas[4 * i..4 * i + 3], &p[c..c + 3], "frame {k} pixel ({x}, {y})");
+                assert_eq!(
+                    &canvas[4 * i..4 * i + 3],
+                    &p[c..c + 3],
+                    "frame {k} pixel ({x}, {y})"
+                );
             }
         }
         std::fs::remove_file(&path).ok();

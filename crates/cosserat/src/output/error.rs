@@ -46,7 +46,9 @@ pub enum ShapeError {
         frames: usize,
     },
     /// A triangle of the environment mesh names a vertex that does not exist.
-    #[error("environment triangle {triangle} has indices {indices:?} but the mesh has {vertices} vertices")]
+    #[error(
+        "environment triangle {triangle} has indices {indices:?} but the mesh has {vertices} vertices"
+    )]
     MeshIndex {
         /// Index of the triangle.
         triangle: usize,

@@ -100,8 +100,17 @@ pub fn write_npz(path: &Path, traj: &Trajectory) -> Result<(), OutputError> {
             &[mesh.vertices.len(), 3],
             mesh.vertices.iter().flatten().copied(),
         )?;
-        let bytes: Vec<u8> = mesh.triangles.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
-        npz.start("mesh_triangles", &npy_header("<u4", &[mesh.triangles.len(), 3]), bytes.len())?;
+        let bytes: Vec<u8> = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
+        npz.start(
+            "mesh_triangles",
+            &npy_header("<u4", &[mesh.triangles.len(), 3]),
+            bytes.len(),
+        )?;
         npz.zip.write_all(&bytes).map_err(OutputError::io(path))?;
     }
     let inner = npz.zip.finish().map_err(|source| OutputError::Zip {
@@ -266,14 +275,19 @@ pub fn read_npz(path: &Path) -> Result<Trajectory, OutputError> {
         )));
     }
     let t = times.len();
-    let triples = |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect() };
+    let triples =
+        |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect() };
     let mut rods = Vec::with_capacity(radii.len());
     for (i, (name, radius)) in names.into_iter().zip(radii).enumerate() {
         let key = format!("rod{i}");
         let points = take(&key)?;
         let n_points = match points.shape.as_slice() {
             [frames, n, 3] if *frames == t && *n >= 2 => *n,
-            other => return Err(bad(format!("`{key}` has shape {other:?}, expected ({t}, n + 1, 3)"))),
+            other => {
+                return Err(bad(format!(
+                    "`{key}` has shape {other:?}, expected ({t}, n + 1, 3)"
+                )));
+            }
         };
         let mut rod = RodTrajectory::new(name, radius, n_points - 1);
         rod.points = triples(points.f64s(&key, 3).map_err(&bad)?);
@@ -298,14 +312,24 @@ pub fn read_npz(path: &Path) -> Result<Trajectory, OutputError> {
             let vertices = triples(v.f64s("mesh_vertices", 2).map_err(&bad)?);
             let tri = take("mesh_triangles")?;
             if tri.descr != "<u4" {
-                return Err(bad(format!("`mesh_triangles` has dtype {}, expected <u4", tri.descr)));
+                return Err(bad(format!(
+                    "`mesh_triangles` has dtype {}, expected <u4",
+                    tri.descr
+                )));
             }
             let triangles = tri
                 .data
                 .chunks_exact(12)
-                .map(|c| std::array::from_fn(|k| u32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])))
+                .map(|c| {
+                    std::array::from_fn(|k| {
+                        u32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
+                    })
+                })
                 .collect();
-            Some(EnvironmentMesh { vertices, triangles })
+            Some(EnvironmentMesh {
+                vertices,
+                triangles,
+            })
         }
         Err(_) => None,
     };
@@ -314,10 +338,11 @@ pub fn read_npz(path: &Path) -> Result<Trajectory, OutputError> {
         rods,
         environment,
     };
-    traj.validate().map_err(|source| OutputError::Inconsistent {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    traj.validate()
+        .map_err(|source| OutputError::Inconsistent {
+            path: path.to_path_buf(),
+            source,
+        })?;
     Ok(traj)
 }
 
@@ -345,7 +370,9 @@ impl Npy {
             .and_then(|h| std::str::from_utf8(h).ok())
             .ok_or("truncated header")?;
         let field = |key: &str| -> Result<&str, String> {
-            let at = header.find(&format!("'{key}':")).ok_or(format!("no `{key}` in the header"))?;
+            let at = header
+                .find(&format!("'{key}':"))
+                .ok_or(format!("no `{key}` in the header"))?;
             Ok(header[at + key.len() + 3..].trim_start())
         };
         if !field("fortran_order")?.starts_with("False") {
@@ -385,7 +412,11 @@ impl Npy {
         }
         let count: usize = self.shape.iter().product();
         if self.data.len() != 8 * count {
-            return Err(format!("`{name}` holds {} bytes, expected {}", self.data.len(), 8 * count));
+            return Err(format!(
+                "`{name}` holds {} bytes, expected {}",
+                self.data.len(),
+                8 * count
+            ));
         }
         Ok(self
             .data
@@ -403,7 +434,11 @@ impl Npy {
             .ok_or(format!("`{name}` has dtype {}, expected <U…", self.descr))?;
         let n = match self.shape.as_slice() {
             [n] => *n,
-            other => return Err(format!("`{name}` has shape {other:?}, expected 1 dimension")),
+            other => {
+                return Err(format!(
+                    "`{name}` has shape {other:?}, expected 1 dimension"
+                ));
+            }
         };
         if self.data.len() != 4 * width * n {
             return Err(format!("`{name}` is truncated"));

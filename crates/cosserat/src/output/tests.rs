@@ -382,7 +382,10 @@ fn read_vtp(path: &Path) -> (Element, Vec<u8>) {
         .expect("appended data");
     let head = std::str::from_utf8(&bytes[..at]).unwrap();
     let tail = b"\n</AppendedData>\n</VTKFile>\n";
-    assert!(bytes.ends_with(tail), "file does not end with the appended data");
+    assert!(
+        bytes.ends_with(tail),
+        "file does not end with the appended data"
+    );
     let data = bytes[at + marker.len()..bytes.len() - tail.len()].to_vec();
     let root = parse_xml(&format!("{head}</VTKFile>"));
     assert_eq!(root.attrs["header_type"], "UInt64");
@@ -408,8 +411,17 @@ fn appended_bytes(array: &Element, data: &[u8]) -> Vec<u8> {
         let mut z = flate2::read::ZlibDecoder::new(&data[at..at + size]);
         let mut chunk = Vec::new();
         z.read_to_end(&mut chunk).unwrap();
-        let expected = if b + 1 == blocks && last != 0 { last } else { block };
-        assert_eq!(chunk.len(), expected, "block {b} of {}", array.attrs["Name"]);
+        let expected = if b + 1 == blocks && last != 0 {
+            last
+        } else {
+            block
+        };
+        assert_eq!(
+            chunk.len(),
+            expected,
+            "block {b} of {}",
+            array.attrs["Name"]
+        );
         out.extend_from_slice(&chunk);
         at += size;
     }
@@ -557,7 +569,10 @@ fn the_environment_mesh_is_written_beside_the_frames() {
     let piece = vtp.child("PolyData").child("Piece");
     assert_eq!(piece.attr::<usize>("NumberOfPolys"), n - 2);
     let points = f64_array(piece.child("Points").array("Points"), &data);
-    assert_eq!(points, vertices.iter().flatten().copied().collect::<Vec<_>>());
+    assert_eq!(
+        points,
+        vertices.iter().flatten().copied().collect::<Vec<_>>()
+    );
     let polys = piece.child("Polys");
     let connectivity = i64_array(polys.array("connectivity"), &data);
     assert_eq!(
@@ -568,7 +583,10 @@ fn the_environment_mesh_is_written_beside_the_frames() {
             .map(|&i| i64::from(i))
             .collect::<Vec<_>>()
     );
-    assert_eq!(i64_array(polys.array("offsets"), &data).last(), Some(&(3 * (n as i64 - 2))));
+    assert_eq!(
+        i64_array(polys.array("offsets"), &data).last(),
+        Some(&(3 * (n as i64 - 2)))
+    );
 
     // A triangle naming a missing vertex is refused before anything is written.
     let bad_dir = scratch("vtp-env-bad");
@@ -619,13 +637,23 @@ fn frame_steps_sample_evenly_to_the_end() {
     assert_eq!(frame_steps(2450, 1000).len(), 1001);
     assert_eq!(frame_steps(3, 100), [0, 1, 2, 3]);
     assert_eq!(frame_steps(700_000, 100).last(), Some(&700_000));
-    for (steps, frames) in [(10, 4), (2450, 1000), (700_000, 100), (1001, 1000), (7, 7), (1, 1)] {
+    for (steps, frames) in [
+        (10, 4),
+        (2450, 1000),
+        (700_000, 100),
+        (1001, 1000),
+        (7, 7),
+        (1, 1),
+    ] {
         let s = frame_steps(steps, frames);
         assert_eq!(s[0], 0);
         assert_eq!(*s.last().unwrap(), steps);
         let gaps: Vec<u64> = s.windows(2).map(|w| w[1] - w[0]).collect();
         let (lo, hi) = (gaps.iter().min().unwrap(), gaps.iter().max().unwrap());
-        assert!(*lo >= 1 && hi - lo <= 1, "{steps} steps, {frames} frames: gaps {lo}..{hi}");
+        assert!(
+            *lo >= 1 && hi - lo <= 1,
+            "{steps} steps, {frames} frames: gaps {lo}..{hi}"
+        );
     }
 }
 

@@ -288,9 +288,24 @@ impl Trajectory {
             // An optional quantity is recorded in every frame or in none; the
             // first frame decides.
             let optional = [
-                ("velocities", rod.velocities.is_empty(), frame.velocities.len(), rod.n_points()),
-                ("contact_forces", rod.contact_forces.is_empty(), frame.contact_forces.len(), rod.n_points()),
-                ("strains", rod.strains.is_empty(), frame.strains.len(), rod.n_elements),
+                (
+                    "velocities",
+                    rod.velocities.is_empty(),
+                    frame.velocities.len(),
+                    rod.n_points(),
+                ),
+                (
+                    "contact_forces",
+                    rod.contact_forces.is_empty(),
+                    frame.contact_forces.len(),
+                    rod.n_points(),
+                ),
+                (
+                    "strains",
+                    rod.strains.is_empty(),
+                    frame.strains.len(),
+                    rod.n_elements,
+                ),
             ];
             for (what, absent, found, per_frame) in optional {
                 let expected = if (first && found == 0) || (!first && absent) {

@@ -99,7 +99,11 @@ pub fn write_environment_vtp(path: &Path, mesh: &EnvironmentMesh) -> Result<(), 
         1,
         mesh.triangles.iter().flatten().map(|&i| i64::from(i)),
     );
-    doc.array_i64("offsets", 1, (1..=mesh.triangles.len() as i64).map(|t| 3 * t));
+    doc.array_i64(
+        "offsets",
+        1,
+        (1..=mesh.triangles.len() as i64).map(|t| 3 * t),
+    );
     doc.xml.push_str("</Polys>\n</Piece>\n</PolyData>\n");
     fs::write(path, doc.finish()).map_err(OutputError::io(path))
 }
@@ -270,7 +274,14 @@ impl Document {
     /// `bytes` there: a header of `u64`s (number of blocks, block size, size
     /// of the last block if partial or 0, compressed size of each block),
     /// then the zlib streams.
-    fn array(&mut self, ty: &str, name: &str, components: usize, tuples: Option<usize>, bytes: &[u8]) {
+    fn array(
+        &mut self,
+        ty: &str,
+        name: &str,
+        components: usize,
+        tuples: Option<usize>,
+        bytes: &[u8],
+    ) {
         let tuples = tuples.map_or(String::new(), |n| format!(" NumberOfTuples=\"{n}\""));
         let _ = writeln!(
             self.xml,
@@ -280,7 +291,8 @@ impl Document {
         let blocks: Vec<Vec<u8>> = bytes
             .chunks(BLOCK)
             .map(|chunk| {
-                let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
                 // Writing into a `Vec` cannot fail.
                 let _ = z.write_all(chunk);
                 z.finish().unwrap_or_default()
@@ -348,7 +360,11 @@ fn frame_vtp(traj: &Trajectory, frame: usize) -> Vec<u8> {
     let _ = writeln!(
         doc.xml,
         "<PointData Scalars=\"radius\"{}>",
-        if velocities { " Vectors=\"velocity\"" } else { "" }
+        if velocities {
+            " Vectors=\"velocity\""
+        } else {
+            ""
+        }
     );
     doc.array_f64(
         "radius",
@@ -422,7 +438,8 @@ fn frame_vtp(traj: &Trajectory, frame: usize) -> Vec<u8> {
             }),
         );
     }
-    doc.xml.push_str("</PointData>\n<CellData Vectors=\"d1\">\n");
+    doc.xml
+        .push_str("</PointData>\n<CellData Vectors=\"d1\">\n");
     doc.array_f64(
         "d1",
         3,
