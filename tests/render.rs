@@ -26,6 +26,14 @@ fn text(p: &Path) -> &str {
     p.to_str().expect("a UTF-8 temporary folder")
 }
 
+/// The width and height of a PNG file, from its header (the first chunk, IHDR).
+fn png_size(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && &bytes[12..16] == b"IHDR");
+    let word = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
+    (word(16), word(20))
+}
+
 /// Whether `out` failed for want of an adapter, which passes unless one is required.
 fn no_adapter(out: &Output) -> bool {
     let err = String::from_utf8_lossy(&out.stderr);
@@ -116,8 +124,7 @@ fn a_run_is_drawn_into_frames_and_a_gif() {
     let render = dir.join("render");
     for k in 0..5 {
         let png = render.join(format!("frame_{k:05}.png"));
-        let image = cosserat_render::read_png(&png).unwrap();
-        assert_eq!((image.width, image.height), (64, 40));
+        assert_eq!(png_size(&png), (64, 40));
     }
     assert!(!render.join("frame_00005.png").exists());
     let gif = std::fs::read(render.join("stiff-guidewire-insertion.gif")).unwrap();
@@ -159,8 +166,7 @@ fn run_render_draws_the_run_it_made() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let image = cosserat_render::read_png(&dir.join("render").join("last.png")).unwrap();
-    assert_eq!((image.width, image.height), (48, 32));
+    assert_eq!(png_size(&dir.join("render").join("last.png")), (48, 32));
     assert!(!dir.join("render").join("frame_00000.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
