@@ -97,6 +97,8 @@ pub(crate) fn run() -> Result<bool, String> {
             "960",
             "--height",
             "540",
+            "--samples",
+            "4",
         ];
         args.extend_from_slice(p.render);
         print!("{}", cosserat(&args)?);

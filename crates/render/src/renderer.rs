@@ -2,9 +2,12 @@
 //!
 //! A frame is drawn in one pass: the opaque tubes first (depth written), then the vessel
 //! translucent (alpha blended, depth tested but not written, back faces culled), so the rods
-//! show through the wall and the wall never hides the part of a rod behind it. With
-//! [`RenderSettings::samples`] = 4 the pass draws into a multisampled target resolved at its
-//! end (smooth edges on the thin tubes). The colour target is `Rgba8UnormSrgb`: shading and
+//! show through the wall and the wall never hides the part of a rod behind it. With 4 samples
+//! ([`RenderSettings::samples`]) the pass draws into a multisampled target resolved at its end
+//! (smooth edges on the thin tubes). Multisampling is cheap on a GPU but not on lavapipe,
+//! where a 1280×720 frame takes about 22 ms with 4 samples against 7 ms with one (most of it
+//! clearing and resolving the multisampled targets, not drawing: without the mesh it is still
+//! 21 ms), so by default a software adapter draws with one sample. The colour target is `Rgba8UnormSrgb`: shading and
 //! blending happen in linear light and the bytes read back are sRGB, as PNG expects.
 //!
 //! The vessel is uploaded once ([`Renderer::set_mesh`]); each frame uploads only the rods'
@@ -30,8 +33,10 @@ pub struct RenderSettings {
     pub width: u32,
     /// Picture height in pixels.
     pub height: u32,
-    /// Samples per pixel: 1, or 4 for antialiased edges (if the adapter cannot, 1 is used).
-    pub samples: u32,
+    /// Samples per pixel: 1, or 4 for antialiased edges (if the adapter cannot, 1 is used);
+    /// `None` picks 4 on a GPU and 1 on a software adapter such as lavapipe, where 4 samples
+    /// cost three times as much ([`Renderer::samples`] says what was used).
+    pub samples: Option<u32>,
     /// The thinnest tube is drawn at least this many pixels in radius, so that a 0.4 mm
     /// guidewire in a 30 cm vessel stays visible; every tube is thickened by the same factor
     /// (a wire stays thinner than its catheter). Tubes already thick enough keep their radius.
@@ -47,7 +52,7 @@ impl Default for RenderSettings {
         Self {
             width: 1280,
             height: 720,
-            samples: 4,
+            samples: None,
             min_radius_px: 1.5,
             force_scale: 0.05,
             background: [0.97, 0.97, 0.96],
@@ -128,6 +133,7 @@ pub struct Renderer {
     queue: wgpu::Queue,
     adapter: String,
     settings: RenderSettings,
+    samples: u32,
     errors: Arc<Mutex<Option<String>>>,
     tube_pipeline: wgpu::RenderPipeline,
     mesh_pipeline: wgpu::RenderPipeline,
@@ -162,10 +168,10 @@ impl Renderer {
                 expected: "a width and height from 1 to 16384 pixels",
             });
         }
-        if settings.samples != 1 && settings.samples != 4 {
+        if let Some(n @ (0 | 2 | 3 | 5..)) = settings.samples {
             return Err(RenderError::Option {
                 option: "samples",
-                value: settings.samples.to_string(),
+                value: n.to_string(),
                 expected: "1 or 4",
             });
         }
@@ -184,13 +190,15 @@ impl Renderer {
         }))
         .map_err(|e| RenderError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
-        let mut settings = settings;
+        let software = info.device_type == wgpu::DeviceType::Cpu
+            || info.name.to_ascii_lowercase().contains("llvmpipe");
+        let mut samples = settings.samples.unwrap_or(if software { 1 } else { 4 });
         if !adapter
             .get_texture_format_features(COLOUR_FORMAT)
             .flags
-            .sample_count_supported(settings.samples)
+            .sample_count_supported(samples)
         {
-            settings.samples = 1;
+            samples = 1;
         }
         let limits = wgpu::Limits {
             max_texture_dimension_2d: settings.width.max(settings.height).max(2048),
@@ -250,7 +258,7 @@ impl Renderer {
             &layout,
             "tube.wgsl",
             include_str!("tube.wgsl"),
-            settings.samples,
+            samples,
             false,
         );
         let mesh_pipeline = pipeline(
@@ -258,7 +266,7 @@ impl Renderer {
             &layout,
             "mesh.wgsl",
             include_str!("mesh.wgsl"),
-            settings.samples,
+            samples,
             true,
         );
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -289,11 +297,11 @@ impl Renderer {
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
         let resolved_view = resolved.create_view(&Default::default());
-        let multisampled = (settings.samples > 1).then(|| {
+        let multisampled = (samples > 1).then(|| {
             target(
                 "picture (multisampled)",
                 COLOUR_FORMAT,
-                settings.samples,
+                samples,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             )
             .create_view(&Default::default())
@@ -301,7 +309,7 @@ impl Renderer {
         let depth = target(
             "depth",
             DEPTH_FORMAT,
-            settings.samples,
+            samples,
             wgpu::TextureUsages::RENDER_ATTACHMENT,
         )
         .create_view(&Default::default());
@@ -319,6 +327,7 @@ impl Renderer {
             device,
             queue,
             settings,
+            samples,
             errors,
             tube_pipeline,
             mesh_pipeline,
@@ -343,9 +352,15 @@ impl Renderer {
         &self.adapter
     }
 
-    /// The settings in use (the sample count is 1 where the adapter cannot do 4).
+    /// The settings asked for.
     pub fn settings(&self) -> &RenderSettings {
         &self.settings
+    }
+
+    /// Samples per pixel in use: as asked, or chosen for the adapter, and 1 where the adapter
+    /// cannot do 4.
+    pub fn samples(&self) -> u32 {
+        self.samples
     }
 
     /// Uploads the mesh drawn behind every later frame (`None` draws none).

@@ -95,6 +95,7 @@ fn settings() -> RenderSettings {
         width: WIDTH,
         height: HEIGHT,
         force_scale: 1.0,
+        samples: Some(4),
         ..Default::default()
     }
 }
