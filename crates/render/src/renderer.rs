@@ -5,9 +5,10 @@
 //! show through the wall and the wall never hides the part of a rod behind it. With 4 samples
 //! ([`RenderSettings::samples`]) the pass draws into a multisampled target resolved at its end
 //! (smooth edges on the thin tubes). Multisampling is cheap on a GPU but not on lavapipe,
-//! where a 1280×720 frame takes about 22 ms with 4 samples against 7 ms with one (most of it
-//! clearing and resolving the multisampled targets, not drawing: without the mesh it is still
-//! 21 ms), so by default a software adapter draws with one sample. The colour target is `Rgba8UnormSrgb`: shading and
+//! where a 1280×720 frame took 37 ms with 4 samples against 7.6 ms with one on a busy 2-core
+//! machine, and still 24 ms with 4 samples and no mesh (clearing and resolving the
+//! multisampled targets, not drawing; `docs/rendering.md`), so by default a software adapter
+//! draws with one sample. The colour target is `Rgba8UnormSrgb`: shading and
 //! blending happen in linear light and the bytes read back are sRGB, as PNG expects.
 //!
 //! The vessel is uploaded once ([`Renderer::set_mesh`]); each frame uploads only the rods'
