@@ -2,7 +2,8 @@
 //! scenes by the `cosserat` command itself, so that they show what the code does today.
 //!
 //! Each picture runs a scene with `cosserat run --npz-only --out`, draws its last frame with
-//! `cosserat render --last-only --format png`, and copies it into `docs/pictures/`. The scenes
+//! `cosserat render --last-only --format png`, and copies it into `docs/pictures/`; the knot
+//! is also drawn as a small animated GIF of the whole run. The scenes
 //! with the explicit scheme's tiny steps are run with the stiff scheme at 1 ms (the runs take
 //! seconds instead of minutes; `docs/stiff-solver.md` compares the two schemes on them).
 //!
@@ -14,13 +15,18 @@ use std::path::{Path, PathBuf};
 
 use crate::bench::{cargo, conditions, machine, root};
 
-/// One picture: its file, the scene, the overrides and the camera.
+/// One picture: its file, the scene, the overrides and the camera, and whether a small
+/// animated GIF of the whole run is made too (the file's name with `.gif`).
 struct Picture {
     file: &'static str,
     scene: &'static str,
     run: &'static [&'static str],
     render: &'static [&'static str],
+    animate: bool,
 }
+
+/// Frames recorded for an animated picture (besides the initial state).
+const ANIMATION_FRAMES: &str = "48";
 
 /// The stiff scheme at 1 ms in `f64`, for scenes written for the explicit scheme.
 const STIFF: [&str; 6] = [
@@ -38,24 +44,28 @@ const PICTURES: &[Picture] = &[
         scene: "scenes/phantom-insertion.toml",
         run: &STIFF,
         render: &[],
+        animate: false,
     },
     Picture {
         file: "vessel-insertion.png",
         scene: "scenes/stiff-guidewire-insertion.toml",
         run: &[],
         render: &["--camera", "perspective"],
+        animate: false,
     },
     Picture {
         file: "catheter-guidewire.png",
         scene: "scenes/catheter-guidewire.toml",
         run: &STIFF,
         render: &[],
+        animate: false,
     },
     Picture {
         file: "fishermans-knot.png",
         scene: "scenes/fishermans-knot.toml",
         run: &[],
         render: &[],
+        animate: true,
     },
 ];
 
@@ -83,7 +93,8 @@ pub(crate) fn run() -> Result<bool, String> {
         let dir = scratch(p.file.trim_end_matches(".png"));
         std::fs::remove_dir_all(&dir).ok();
         eprintln!("{}: running {}", p.file, p.scene);
-        let mut args = vec!["run", p.scene, "--npz-only", "--frames", "10", "--out"];
+        let frames = if p.animate { ANIMATION_FRAMES } else { "10" };
+        let mut args = vec!["run", p.scene, "--npz-only", "--frames", frames, "--out"];
         args.push(path_arg(&dir)?);
         args.extend_from_slice(p.run);
         cosserat(&args)?;
@@ -108,6 +119,34 @@ pub(crate) fn run() -> Result<bool, String> {
             .map_err(|e| format!("{} → {}: {e}", from.display(), to.display()))?;
         let size = std::fs::metadata(&to).map(|m| m.len()).unwrap_or(0);
         println!("wrote {} ({} kB)", to.display(), size / 1000);
+        if p.animate {
+            let out = dir.join("animation");
+            let mut args = vec!["render", path_arg(&dir)?, "--out", path_arg(&out)?];
+            args.extend_from_slice(&[
+                "--format",
+                "gif",
+                "--width",
+                "480",
+                "--height",
+                "270",
+                "--samples",
+                "4",
+                "--fps",
+                "12",
+            ]);
+            args.extend_from_slice(p.render);
+            print!("{}", cosserat(&args)?);
+            let gif = std::fs::read_dir(&out)
+                .map_err(|e| format!("{}: {e}", out.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .find(|p| p.extension().is_some_and(|x| x == "gif"))
+                .ok_or_else(|| format!("{}: no GIF written", out.display()))?;
+            let to = docs.join(p.file.replace(".png", ".gif"));
+            std::fs::copy(&gif, &to)
+                .map_err(|e| format!("{} → {}: {e}", gif.display(), to.display()))?;
+            let size = std::fs::metadata(&to).map(|m| m.len()).unwrap_or(0);
+            println!("wrote {} ({} kB)", to.display(), size / 1000);
+        }
     }
     Ok(true)
 }
@@ -129,7 +168,14 @@ const CASES: &[Case] = &[
     },
     Case {
         what: "PNG frames + GIF, perspective, 1 sample",
-        args: &["--format", "gif", "--camera", "perspective", "--view", "iso"],
+        args: &[
+            "--format",
+            "gif",
+            "--camera",
+            "perspective",
+            "--view",
+            "iso",
+        ],
     },
     Case {
         what: "PNG frames + GIF, 4× MSAA",
