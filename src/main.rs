@@ -3,7 +3,9 @@
 //! `cosserat run SCENE` steps a scene and prints a summary (or one JSON object with `--json`,
 //! for scripts and benchmarks); `--out DIR` also writes the trajectory for NumPy and ParaView.
 //! `cosserat converge SCENE` estimates how accurate such a run is (`docs/convergence.md`).
-//! With no arguments it runs the built-in demo, the paper's free-space pendulum.
+//! `cosserat render RUN_DIR` draws a run's frames into pictures and a video
+//! (`docs/rendering.md`). With no arguments it runs the built-in demo, the paper's free-space
+//! pendulum.
 
 use clap::{Parser, Subcommand};
 use cosserat::convergence::{self, Refinement};
@@ -13,6 +15,9 @@ use cosserat::{Backend, Simulation};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
+
+#[cfg(feature = "render")]
+mod render;
 
 /// The demo run by `cosserat` with no arguments.
 const DEMO_SCENE: &str = include_str!("../scenes/pendulum.toml");
@@ -38,6 +43,10 @@ enum Command {
     /// Work with mesh files.
     #[command(subcommand)]
     Mesh(MeshCommand),
+    /// Draw a run written with `run --out` into PNG frames and an animation (MP4 through
+    /// ffmpeg when installed, else GIF), offscreen on any GPU or on Mesa's lavapipe.
+    #[cfg(feature = "render")]
+    Render(render::RenderArgs),
 }
 
 #[derive(Subcommand)]
@@ -89,12 +98,25 @@ struct SceneArgs {
 struct RunArgs {
     #[command(flatten)]
     scene: SceneArgs,
-    /// Write the trajectory (trajectory.npz, frame_*.vtp, trajectory.pvd) into this folder.
+    /// Write the trajectory (trajectory.npz, frame_*.vtp, environment.vtp, trajectory.pvd,
+    /// run.json) into this folder.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Frames to record with --out (evenly spaced, plus the initial state).
-    #[arg(long, default_value_t = 100)]
+    /// Frames to record with --out besides the initial state, evenly spaced over the run, the
+    /// last at its end.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
     frames: u64,
+    /// With --out, write only trajectory.npz and run.json (no VTK files).
+    #[arg(long, requires = "out")]
+    npz_only: bool,
+    /// After the run, draw it into DIR/render (needs --out; the options of `cosserat render`
+    /// apply).
+    #[cfg(feature = "render")]
+    #[arg(long, requires = "out")]
+    render: bool,
+    #[cfg(feature = "render")]
+    #[command(flatten)]
+    render_options: render::RenderOptions,
     /// Time every step on its own, as a haptic or real-time loop calls it, and report the
     /// median, 99th percentile and largest step time.
     #[arg(long)]
@@ -128,6 +150,8 @@ fn main() -> ExitCode {
         Some(Command::Run(args)) => run(&args),
         Some(Command::Converge(args)) => converge(&args),
         Some(Command::Mesh(MeshCommand::Inspect(args))) => inspect(&args),
+        #[cfg(feature = "render")]
+        Some(Command::Render(args)) => render::render(&args),
         None => demo(),
     };
     match result {
@@ -265,11 +289,18 @@ fn step_for(
     let mut wall = 0.0;
     let mut done = 0;
     let mut divergence = None;
-    let chunk = record.as_ref().map_or(1000, |r| r.every).max(1);
+    // Batches end at the recorder's next frame, or every 1000 steps without one.
+    let boundary = |done: u64, record: &Option<Recorder>| {
+        record
+            .as_ref()
+            .and_then(Recorder::next_step)
+            .unwrap_or((done / 1000 + 1) * 1000)
+            .min(steps)
+    };
     // The inside test against the lumen every few thousand steps (about 200 times a run) and
     // after the last: a wire that left the vessel stops the run, and the report's penetration
     // and escaped points are measured at any depth.
-    let check_every = (steps / 200).max(chunk).max(1000);
+    let check_every = (steps / 200).max(1000);
     let mut checked_at = 0;
     let capture = |sim: &Simulation, record: &mut Option<Recorder>| {
         if let Some(Err(e)) = record.as_mut().map(|r| r.capture(sim)) {
@@ -291,11 +322,8 @@ fn step_for(
             interrupted = true;
             break;
         }
-        let n = if time_each {
-            1
-        } else {
-            chunk.min(steps - done)
-        };
+        let end = boundary(done, record);
+        let n = if time_each { 1 } else { end - done };
         let t0 = Instant::now();
         let res = sim.run(n);
         let elapsed = t0.elapsed().as_secs_f64();
@@ -319,11 +347,13 @@ fn step_for(
         }
         if time_each {
             times.push(elapsed);
-            if done % chunk != 0 && done != steps {
+            if done != end {
                 continue;
             }
         }
-        capture(sim, record);
+        if record.as_ref().and_then(Recorder::next_step) == Some(done) {
+            capture(sim, record);
+        }
         if let Some(b) = &bar {
             b.set_position(done);
         }
@@ -369,10 +399,15 @@ fn step_for(
 
 /// Records frames of a run for `--out`.
 struct Recorder {
-    every: u64,
+    /// The steps (counted from the start of the run) after which frames are recorded
+    /// (`cosserat::output::frame_steps`), and how many of them were recorded.
+    schedule: Vec<u64>,
+    recorded: usize,
     trajectory: cosserat::output::Trajectory,
-    /// The `.vtp` files, written as frames are captured.
-    series: cosserat::output::VtpSeries,
+    /// The `.vtp` files, written as frames are captured (`None` with `--npz-only`).
+    series: Option<cosserat::output::VtpSeries>,
+    /// Whether every rod reports its contacts (a run with an environment on a CPU backend).
+    contacts: bool,
     /// The step of the last frame captured.
     last_captured: u64,
 }
@@ -382,7 +417,7 @@ impl Recorder {
         sim: &Simulation,
         steps: u64,
         frames: u64,
-        series: cosserat::output::VtpSeries,
+        series: Option<cosserat::output::VtpSeries>,
     ) -> Result<Self, String> {
         let mut trajectory = cosserat::output::Trajectory::new();
         for h in sim.rods() {
@@ -391,32 +426,84 @@ impl Recorder {
                 .add_rod(sim.rod_name(h), sim.rod_radius(h), n)
                 .map_err(|e| e.to_string())?;
         }
+        trajectory.environment = sim.environment().map(|env| {
+            let mesh = env.collider.mesh();
+            cosserat::output::EnvironmentMesh {
+                vertices: mesh.vertices().iter().map(|v| [v.x, v.y, v.z]).collect(),
+                triangles: mesh.triangles().to_vec(),
+            }
+        });
+        let mut probe = Vec::new();
+        let contacts =
+            sim.environment().is_some() && sim.rods().all(|h| sim.contacts(h, &mut probe).is_ok());
         Ok(Self {
-            every: (steps / frames.max(1)).max(1),
+            schedule: cosserat::output::frame_steps(steps, frames),
+            recorded: 0,
             trajectory,
             series,
+            contacts,
             last_captured: u64::MAX,
         })
     }
+
+    /// The step after which the next scheduled frame is due, if any is left.
+    fn next_step(&self) -> Option<u64> {
+        self.schedule.get(self.recorded).copied()
+    }
+
     fn capture(&mut self, sim: &Simulation) -> Result<(), String> {
+        let mut samples = Vec::new();
         let data: Vec<_> = sim
             .rods()
-            .map(|h| (sim.positions(h), sim.first_directors(h)))
+            .map(|h| {
+                let points = sim.positions(h);
+                let forces = if self.contacts {
+                    let mut f = vec![0.0; points.len()];
+                    if sim.contacts(h, &mut samples).is_ok() {
+                        for c in &samples {
+                            // The wall's push along its normal; friction is left out.
+                            let normal: f64 = (0..3).map(|k| c.force[k] * c.normal[k]).sum();
+                            if let Some(slot) = f.get_mut(c.point) {
+                                *slot = normal.max(0.0);
+                            }
+                        }
+                    }
+                    f
+                } else {
+                    Vec::new()
+                };
+                (
+                    points,
+                    sim.first_directors(h),
+                    sim.velocities(h),
+                    forces,
+                    sim.strains(h),
+                )
+            })
             .collect();
         let frames: Vec<_> = data
             .iter()
-            .map(|(p, d)| cosserat::output::RodFrame {
+            .map(|(p, d, v, f, e)| cosserat::output::RodFrame {
                 points: p,
                 directors: d,
+                velocities: v,
+                contact_forces: f,
+                strains: e,
             })
             .collect();
         self.trajectory
             .push_frame(sim.time(), &frames)
             .map_err(|e| e.to_string())?;
         self.last_captured = sim.steps();
-        self.series
-            .append(&self.trajectory)
-            .map_err(|e| e.to_string())
+        // The schedule moves past every step already reached (an interrupted run captures
+        // off schedule).
+        while self.next_step().is_some_and(|s| s <= self.last_captured) {
+            self.recorded += 1;
+        }
+        match self.series.as_mut() {
+            Some(series) => series.append(&self.trajectory).map_err(|e| e.to_string()),
+            None => Ok(()),
+        }
     }
 }
 
@@ -489,17 +576,26 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
             "--until-static {tol} is invalid: expected a positive speed in m/s"
         ));
     }
-    // An unwritable output directory is found before the run, not after it.
-    let series = run_args
-        .out
-        .as_ref()
-        .map(|dir| cosserat::output::VtpSeries::create(dir).map_err(|e| format!("--out: {e}")))
-        .transpose()?;
+    // An unwritable output directory is found before the run, not after it: the manifest is
+    // written first.
+    let series = match &run_args.out {
+        Some(dir) => {
+            write_manifest(dir, args, &name)?;
+            if run_args.npz_only {
+                None
+            } else {
+                Some(cosserat::output::VtpSeries::create(dir).map_err(|e| format!("--out: {e}"))?)
+            }
+        }
+        None => None,
+    };
     let mut sim = builder
         .build()
         .map_err(|e| format!("{}: {e}", args.scene.display()))?;
-    let mut recorder = series
-        .map(|series| Recorder::new(&sim, steps, run_args.frames, series))
+    let mut recorder = run_args
+        .out
+        .as_ref()
+        .map(|_| Recorder::new(&sim, steps, run_args.frames, series))
         .transpose()?;
     // Ctrl-C or SIGTERM stops the run between two batches; what was run is written and
     // reported. A second signal while the handler is installed does nothing more.
@@ -518,6 +614,17 @@ fn run(run_args: &RunArgs) -> Result<ExitCode, String> {
         write_output(dir, rec)?;
     }
     report(&sim, &name, &outcome, args.json);
+    #[cfg(feature = "render")]
+    if let (true, Some(dir)) = (run_args.render, &run_args.out) {
+        // The report went to stdout as one JSON object; the render's summary goes to stderr
+        // then, so that stdout stays one object.
+        let render_args = render::RenderArgs::for_run(dir, run_args.render_options.clone(), false);
+        if args.json {
+            render::render_quietly(&render_args)?;
+        } else {
+            render::render(&render_args)?;
+        }
+    }
     Ok(if outcome.divergence.is_some() {
         ExitCode::from(1)
     } else if outcome.interrupted {
@@ -761,6 +868,23 @@ fn count_rods(path: &Path) -> Result<usize, String> {
         .get("rod")
         .and_then(|r| r.as_array())
         .map_or(0, |a| a.len()))
+}
+
+/// Writes `run.json` into `dir` (created if needed): the scene and its `[render]` table, so
+/// that `cosserat render DIR` knows how the scene wants to be drawn.
+fn write_manifest(dir: &Path, args: &SceneArgs, name: &str) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("--out {}: {e}", dir.display()))?;
+    let render = cosserat::scene::load_render_section(&args.scene, &overrides(args)?)
+        .map_err(|e| e.to_string())?
+        .unwrap_or_default();
+    let manifest = serde_json::json!({
+        "scene": args.scene,
+        "name": name,
+        "render": render,
+    });
+    let path = dir.join("run.json");
+    std::fs::write(&path, format!("{manifest:#}\n"))
+        .map_err(|e| format!("--out: {}: {e}", path.display()))
 }
 
 /// Writes the NumPy file of the recorded frames (the `.vtp` files were written as the frames

@@ -436,8 +436,8 @@ fn a_terminated_run_leaves_its_frames_and_its_summary() {
         .collect();
     assert!(listed.len() >= 4, "{index}");
     for f in &listed {
-        let text = std::fs::read_to_string(dir.join(f)).unwrap();
-        assert!(text.trim_end().ends_with("</VTKFile>"), "{f} is cut short");
+        let bytes = std::fs::read(dir.join(f)).unwrap();
+        assert!(bytes.ends_with(b"</VTKFile>\n"), "{f} is cut short");
     }
     assert!(dir.join("trajectory.npz").is_file());
     std::fs::remove_dir_all(&dir).ok();
@@ -465,11 +465,25 @@ fn out_writes_the_trajectory() {
         for f in [
             "trajectory.npz",
             "trajectory.pvd",
+            "run.json",
             "frame_00000.vtp",
             "frame_00005.vtp",
         ] {
             assert!(dir.join(f).is_file(), "{tag}: missing {f}");
         }
+        // The frames are spread evenly, the last at the run's end.
+        let traj = cosserat::output::read_npz(&dir.join("trajectory.npz")).unwrap();
+        let dt = traj.times[1] - traj.times[0];
+        assert_eq!(traj.times.len(), 6, "{tag}");
+        for w in traj.times.windows(2) {
+            assert!(
+                ((w[1] - w[0]) / dt - 1.0).abs() < 1e-9,
+                "{tag}: {:?}",
+                traj.times
+            );
+        }
+        assert_eq!(traj.rods[0].velocities.len(), 6 * 17, "{tag}");
+        assert_eq!(traj.rods[0].strains.len(), 6 * 16, "{tag}");
         assert!(
             !dir.join("frame_00006.vtp").exists(),
             "{tag}: a frame too many"

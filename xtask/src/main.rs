@@ -27,6 +27,11 @@
 //!   a GPU host without a Rust toolchain, build the example here and run it there
 //!   (`docs/benchmarks/gpu-h100.md` says how the committed tables were made).
 //!
+//! - `cargo xtask pictures` — the README's and the docs' pictures, made from the shipped scenes
+//!   by `cosserat run` and `cosserat render`, into `docs/pictures/`.
+//! - `cargo xtask bench --render` — rendering 1000 frames of a 512-element insertion at
+//!   1280×720, into `docs/benchmarks/render.{md,json}`.
+//!
 //! The flag parser is deliberately small: a handful of commands and flags, no dependency.
 
 #[path = "../../tests/support/mod.rs"]
@@ -37,6 +42,7 @@ mod bench;
 mod haptic;
 mod literature;
 mod pareto;
+mod pictures;
 mod stability_map;
 mod torture;
 mod validate;
@@ -105,7 +111,7 @@ impl Args {
 const VALUE_OPTIONS: &[&str] = &["only"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --gpu [--quick]]\n       cargo xtask torture [--only TEXT]".into()
+    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --render | --gpu [--quick]]\n       cargo xtask torture [--only TEXT]\n       cargo xtask pictures".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -119,7 +125,15 @@ fn run() -> Result<bool, String> {
             validate::run(args.option("only"))
         }
         "bench" => {
-            args.reject_unknown(&["pareto", "insertion", "stiff", "haptic", "gpu", "quick"])?;
+            args.reject_unknown(&[
+                "pareto",
+                "insertion",
+                "stiff",
+                "haptic",
+                "render",
+                "gpu",
+                "quick",
+            ])?;
             if args.flag("pareto") {
                 pareto::run()
             } else if args.flag("insertion") {
@@ -128,6 +142,8 @@ fn run() -> Result<bool, String> {
                 bench::stiff()
             } else if args.flag("haptic") {
                 haptic::run()
+            } else if args.flag("render") {
+                pictures::bench()
             } else if args.flag("gpu") {
                 bench::gpu(args.flag("quick"))
             } else {
@@ -143,6 +159,10 @@ fn run() -> Result<bool, String> {
                     Ok(false)
                 }
             }
+        }
+        "pictures" => {
+            args.reject_unknown(&[])?;
+            pictures::run()
         }
         "help" | "--help" | "-h" => {
             println!("{}", usage());

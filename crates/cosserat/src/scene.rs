@@ -82,6 +82,30 @@ pub struct SceneFile {
     pub rod_contact: Option<RodContactSection>,
     /// Filtering of the reaction force reported at held ends.
     pub haptics: Option<HapticsSection>,
+    /// How `cosserat render` (and `cosserat run --render`) draws the run; the simulation
+    /// ignores it.
+    pub render: Option<RenderSection>,
+}
+
+/// `[render]`: the pictures' defaults for this scene; the command line overrides each. The
+/// values are checked when the run is rendered, and errors name `render.<field>`.
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSection {
+    /// `"ortho"` or `"perspective"`.
+    pub camera: Option<String>,
+    /// `"auto"`, `"front"`, `"top"`, `"iso"`, … or `"AZIMUTH,ELEVATION"` in degrees.
+    pub view: Option<String>,
+    /// Vertical field of view of the perspective camera [degrees].
+    pub fov: Option<f64>,
+    /// Picture width [pixels].
+    pub width: Option<u32>,
+    /// Picture height [pixels].
+    pub height: Option<u32>,
+    /// Frames per second of the animation.
+    pub fps: Option<u32>,
+    /// Normal contact force drawn fully red [N].
+    pub force_scale: Option<f64>,
 }
 
 /// `[[binding]]`: rod `inner` slides inside rod `outer`.
@@ -636,6 +660,29 @@ pub fn parse_scene(
     let checker = Checker { path };
     let (builder, run) = checker.build(&scene)?;
     Ok((builder, run, name))
+}
+
+/// The `[render]` table of the scene at `path` (after `overrides`), if it has one.
+///
+/// # Errors
+/// [`SceneError`] naming the file when it cannot be read or its `[render]` table holds an
+/// unknown field or a value of the wrong type.
+pub fn load_render_section(
+    path: &Path,
+    overrides: &[(String, String)],
+) -> Result<Option<RenderSection>, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.into(),
+        source,
+    })?;
+    let parse_err = |e: toml::de::Error| SceneError::Parse {
+        path: path.into(),
+        message: e.to_string().trim_end().to_string(),
+    };
+    let mut doc: toml::Value = toml::from_str(&text).map_err(parse_err)?;
+    apply_overrides(path, &mut doc, overrides)?;
+    let scene: SceneFile = doc.try_into().map_err(parse_err)?;
+    Ok(scene.render)
 }
 
 struct Checker<'a> {

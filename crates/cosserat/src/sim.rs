@@ -720,6 +720,19 @@ impl SimulationBuilder {
                     .collect(),
             ),
             outside: (0, 0.0),
+            rest_lengths: self
+                .rods
+                .iter()
+                .map(|r| {
+                    build_rod_with_rest_lengths::<f64>(
+                        &r.points,
+                        &r.spec,
+                        r.rest_lengths.as_deref(),
+                    )
+                    .map(|(_, params)| params.rest_lengths)
+                    .unwrap_or_default()
+                })
+                .collect(),
         })
     }
 
@@ -949,6 +962,8 @@ pub struct Simulation {
     loads: Vec<Vec<PointLoad<f64>>>,
     /// Energy that grows beyond the work done on the rods ([`crate::energy_watch`]).
     energy: EnergyWatch,
+    /// Per rod, the rest length of each element [m] (for [`Simulation::strains`]).
+    rest_lengths: Vec<Vec<f64>>,
 }
 
 /// Contact measurements of a whole simulation.
@@ -1455,6 +1470,26 @@ impl Simulation {
     /// not).
     pub fn first_directors(&self, h: RodHandle) -> Vec<[f64; 3]> {
         self.field(h, StateField::Director(0))
+    }
+
+    /// The rest length of each element of a rod [m].
+    pub fn rest_lengths(&self, h: RodHandle) -> &[f64] {
+        &self.rest_lengths[h.0]
+    }
+
+    /// The axial strain `l / l0 - 1` of each element of a rod now (allocates).
+    pub fn strains(&self, h: RodHandle) -> Vec<f64> {
+        let p = self.positions(h);
+        p.windows(2)
+            .zip(self.rest_lengths(h))
+            .map(|(w, l0)| {
+                let l = (0..3)
+                    .map(|k| (w[1][k] - w[0][k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                l / l0 - 1.0
+            })
+            .collect()
     }
 
     /// The environment, if the rods collide with one.

@@ -45,8 +45,21 @@ pub enum ShapeError {
         /// Frames recorded so far.
         frames: usize,
     },
-    /// A value that VTK ASCII files cannot hold (NaN or infinite) was found.
-    /// The `.npz` writer stores such values as they are.
+    /// A triangle of the environment mesh names a vertex that does not exist.
+    #[error(
+        "environment triangle {triangle} has indices {indices:?} but the mesh has {vertices} vertices"
+    )]
+    MeshIndex {
+        /// Index of the triangle.
+        triangle: usize,
+        /// Its vertex indices.
+        indices: [u32; 3],
+        /// Vertices in the mesh.
+        vertices: usize,
+    },
+    /// A value that VTK files must not hold (NaN or infinite: ParaView's
+    /// filters misbehave on them) was found. The `.npz` writer stores such
+    /// values as they are.
     #[error("frame {frame}: {what} is not finite ({value})")]
     NonFinite {
         /// Index of the frame.
@@ -84,6 +97,15 @@ pub enum OutputError {
     /// the trajectory is left unchanged.
     #[error("cannot record: {0}")]
     Record(#[source] ShapeError),
+    /// A file read back ([`read_npz`](super::read_npz)) is not what the
+    /// writers write.
+    #[error("cannot read `{}`: {message}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, naming the array or field.
+        message: String,
+    },
     /// The trajectory handed to a writer is inconsistent, so nothing (or, for
     /// a series, nothing further) was written to `path`.
     #[error("cannot write `{}`: {source}", path.display())]

@@ -13,11 +13,17 @@
 //!   for matplotlib plots of tip paths, curvature, energy post-processing or
 //!   comparison against a reference solution. Values are stored bit-exact
 //!   (little-endian float64), so tests and regression checks can compare them.
-//! * [`write_vtp_series`] — a VTK XML PolyData file per frame plus a
+//! * [`write_vtp_series`] — a binary (zlib-compressed) VTK XML PolyData file
+//!   per frame, the environment mesh as `environment.vtp`, and a
 //!   `trajectory.pvd` index, for ParaView (or VisIt, PyVista): open the `.pvd`,
 //!   press play, apply a *Tube* filter with radius from the `radius` array to
-//!   see the guidewire or catheter as a solid, and *Cell Centers* + *Glyph*
-//!   (oriented by `d1`) to see how the material frame twists.
+//!   see the guidewire or catheter as a solid, colour by `contact_force`,
+//!   `velocity` or `strain`, and *Cell Centers* + *Glyph* (oriented by `d1`)
+//!   to see how the material frame twists.
+//!
+//! [`read_npz`] reads an archive back (the `cosserat render` command draws
+//! a run from it), and [`frame_steps`] says at which steps a run of `N`
+//! steps records its frames.
 //!
 //! Recording is a matter of [`Trajectory::add_rod`] once per rod and
 //! [`Trajectory::push_frame`] once per output frame:
@@ -31,12 +37,13 @@
 //!     let t = step as f64 * 0.01;
 //!     let points = [[0.0, 0.0, 0.0], [0.1, 0.0, t], [0.2, 0.0, 2.0 * t]];
 //!     let d1 = [[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
-//!     traj.push_frame(t, &[RodFrame { points: &points, directors: &d1 }])?;
+//!     traj.push_frame(t, &[RodFrame { points: &points, directors: &d1, ..Default::default() }])?;
 //! }
 //! assert_eq!(traj.rods[wire].n_frames(), 3);
 //! let dir = std::env::temp_dir().join("cosserat-output-doctest");
 //! write_vtp_series(&dir, &traj)?; // creates `dir`
 //! write_npz(&dir.join("trajectory.npz"), &traj)?;
+//! assert_eq!(cosserat::output::read_npz(&dir.join("trajectory.npz"))?, traj);
 //! # std::fs::remove_dir_all(&dir).ok();
 //! # Ok(())
 //! # }
@@ -56,6 +63,9 @@ mod vtk;
 mod tests;
 
 pub use error::{OutputError, ShapeError};
-pub use npz::write_npz;
-pub use trajectory::{RodFrame, RodTrajectory, Trajectory};
-pub use vtk::{PVD_FILE_NAME, VtpSeries, vtp_frame_file_name, write_vtp_series};
+pub use npz::{read_npz, write_npz};
+pub use trajectory::{EnvironmentMesh, RodFrame, RodTrajectory, Trajectory, frame_steps};
+pub use vtk::{
+    ENVIRONMENT_FILE_NAME, PVD_FILE_NAME, VtpSeries, vtp_frame_file_name, write_environment_vtp,
+    write_vtp_series,
+};

@@ -8,7 +8,9 @@ use super::error::{OutputError, ShapeError};
 /// centreline points (frame 0's `n + 1` points, then frame 1's, …) and
 /// `directors` holds `T * n` vectors: the first director `d1` of each element
 /// (the material frame's first axis, perpendicular to the tangent in an
-/// unsheared rod).
+/// unsheared rod). The optional per-point and per-element quantities
+/// (`velocities`, `contact_forces`, `strains`) are either recorded for every
+/// frame or empty: the first frame decides.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RodTrajectory {
     /// Human-readable name (e.g. `"guidewire"`); written to the `.npz` as
@@ -22,6 +24,15 @@ pub struct RodTrajectory {
     pub directors: Vec<[f64; 3]>,
     /// Number of elements (segments) `n`; the rod has `n + 1` points.
     pub n_elements: usize,
+    /// Point velocities [m/s], `T * (n + 1)`, or empty when not recorded.
+    pub velocities: Vec<[f64; 3]>,
+    /// Normal force of the wall on each point [N] (zero where it touches
+    /// nothing), `T * (n + 1)`, or empty when not recorded (a run without an
+    /// environment, or a backend that does not report contacts).
+    pub contact_forces: Vec<f64>,
+    /// Axial strain `l / l0 - 1` of each element, `T * n`, or empty when not
+    /// recorded.
+    pub strains: Vec<f64>,
 }
 
 impl RodTrajectory {
@@ -33,6 +44,9 @@ impl RodTrajectory {
             points: Vec::new(),
             directors: Vec::new(),
             n_elements,
+            velocities: Vec::new(),
+            contact_forces: Vec::new(),
+            strains: Vec::new(),
         }
     }
 
@@ -58,6 +72,25 @@ impl RodTrajectory {
         self.directors.get(frame * n..(frame + 1) * n)
     }
 
+    /// Point velocities of frame `frame`, or `None` if not recorded.
+    pub fn frame_velocities(&self, frame: usize) -> Option<&[[f64; 3]]> {
+        let n = self.n_points();
+        self.velocities.get(frame * n..(frame + 1) * n)
+    }
+
+    /// Contact forces on the points of frame `frame`, or `None` if not
+    /// recorded.
+    pub fn frame_contact_forces(&self, frame: usize) -> Option<&[f64]> {
+        let n = self.n_points();
+        self.contact_forces.get(frame * n..(frame + 1) * n)
+    }
+
+    /// Element strains of frame `frame`, or `None` if not recorded.
+    pub fn frame_strains(&self, frame: usize) -> Option<&[f64]> {
+        let n = self.n_elements;
+        self.strains.get(frame * n..(frame + 1) * n)
+    }
+
     /// Checks this rod (index `rod` in its trajectory) holds exactly
     /// `frames` frames.
     pub(crate) fn check(&self, rod: usize, frames: usize) -> Result<(), ShapeError> {
@@ -80,7 +113,18 @@ impl RodTrajectory {
             "directors",
             frames * self.n_elements,
             self.directors.len(),
-        )
+        )?;
+        let optional = [
+            ("velocities", self.velocities.len(), self.n_points()),
+            ("contact_forces", self.contact_forces.len(), self.n_points()),
+            ("strains", self.strains.len(), self.n_elements),
+        ];
+        for (what, found, per_frame) in optional {
+            if found != 0 {
+                check_len(self, rod, what, frames * per_frame, found)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -105,16 +149,75 @@ fn check_len(
 }
 
 /// The state of one rod at one output time, borrowed from the simulation;
-/// the argument of [`Trajectory::push_frame`].
-#[derive(Debug, Clone, Copy)]
+/// the argument of [`Trajectory::push_frame`]. The optional quantities are
+/// empty slices when not recorded (`..Default::default()`).
+#[derive(Debug, Clone, Copy, Default)]
 pub struct RodFrame<'a> {
     /// The `n + 1` centreline points.
     pub points: &'a [[f64; 3]],
     /// The first director `d1` of each of the `n` elements.
     pub directors: &'a [[f64; 3]],
+    /// The `n + 1` point velocities [m/s], or empty.
+    pub velocities: &'a [[f64; 3]],
+    /// The normal force of the wall on each of the `n + 1` points [N], or
+    /// empty.
+    pub contact_forces: &'a [f64],
+    /// The strain `l / l0 - 1` of each of the `n` elements, or empty.
+    pub strains: &'a [f64],
 }
 
-/// Recorded frames of a set of rods at common output times.
+/// A triangle mesh written beside the rods: the environment the rods
+/// collide with, as the simulation sees it (normals pointing into the lumen).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EnvironmentMesh {
+    /// Vertex positions [m].
+    pub vertices: Vec<[f64; 3]>,
+    /// Vertex indices of each triangle.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl EnvironmentMesh {
+    /// Checks every index names a vertex and every coordinate is finite.
+    pub(crate) fn check(&self) -> Result<(), ShapeError> {
+        let n = self.vertices.len();
+        if let Some((t, &tri)) = self
+            .triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&i| i as usize >= n))
+        {
+            return Err(ShapeError::MeshIndex {
+                triangle: t,
+                indices: tri,
+                vertices: n,
+            });
+        }
+        for (v, p) in self.vertices.iter().enumerate() {
+            if let Some(&x) = p.iter().find(|x| !x.is_finite()) {
+                return Err(ShapeError::NonFinite {
+                    frame: 0,
+                    what: format!("environment vertex {v}"),
+                    value: x,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The steps after which a run of `steps` steps records `frames` frames
+/// besides its initial state (step 0, listed first), evenly: frame `k` at
+/// step `round(k * steps / frames)`, so the last frame is the run's end and
+/// no interval is more than one step longer than another. With more frames
+/// than steps, every step is a frame.
+pub fn frame_steps(steps: u64, frames: u64) -> Vec<u64> {
+    let frames = frames.clamp(1, steps.max(1));
+    let (s, f) = (u128::from(steps), u128::from(frames));
+    (0..=f).map(|k| ((k * s + f / 2) / f) as u64).collect()
+}
+
+/// Recorded frames of a set of rods at common output times, and the
+/// environment they move in.
 ///
 /// Build it with [`Trajectory::new`] and [`Trajectory::add_rod`], record with
 /// [`Trajectory::push_frame`], then hand it to [`write_npz`](super::write_npz)
@@ -126,6 +229,8 @@ pub struct Trajectory {
     pub times: Vec<f64>,
     /// The rods, in the order given to [`Trajectory::add_rod`].
     pub rods: Vec<RodTrajectory>,
+    /// The static mesh the rods collide with, if any.
+    pub environment: Option<EnvironmentMesh>,
 }
 
 impl Trajectory {
@@ -173,16 +278,50 @@ impl Trajectory {
                 found: rods.len(),
             }));
         }
+        let first = self.times.is_empty();
         for (i, (rod, frame)) in self.rods.iter().zip(rods).enumerate() {
             check_len(rod, i, "points", rod.n_points(), frame.points.len())
                 .and_then(|()| {
                     check_len(rod, i, "directors", rod.n_elements, frame.directors.len())
                 })
                 .map_err(OutputError::Record)?;
+            // An optional quantity is recorded in every frame or in none; the
+            // first frame decides.
+            let optional = [
+                (
+                    "velocities",
+                    rod.velocities.is_empty(),
+                    frame.velocities.len(),
+                    rod.n_points(),
+                ),
+                (
+                    "contact_forces",
+                    rod.contact_forces.is_empty(),
+                    frame.contact_forces.len(),
+                    rod.n_points(),
+                ),
+                (
+                    "strains",
+                    rod.strains.is_empty(),
+                    frame.strains.len(),
+                    rod.n_elements,
+                ),
+            ];
+            for (what, absent, found, per_frame) in optional {
+                let expected = if (first && found == 0) || (!first && absent) {
+                    0
+                } else {
+                    per_frame
+                };
+                check_len(rod, i, what, expected, found).map_err(OutputError::Record)?;
+            }
         }
         for (rod, frame) in self.rods.iter_mut().zip(rods) {
             rod.points.extend_from_slice(frame.points);
             rod.directors.extend_from_slice(frame.directors);
+            rod.velocities.extend_from_slice(frame.velocities);
+            rod.contact_forces.extend_from_slice(frame.contact_forces);
+            rod.strains.extend_from_slice(frame.strains);
         }
         self.times.push(time);
         Ok(())
@@ -200,6 +339,9 @@ impl Trajectory {
         self.rods
             .iter()
             .enumerate()
-            .try_for_each(|(i, rod)| rod.check(i, frames))
+            .try_for_each(|(i, rod)| rod.check(i, frames))?;
+        self.environment
+            .as_ref()
+            .map_or(Ok(()), EnvironmentMesh::check)
     }
 }
