@@ -99,9 +99,21 @@ fn a_solid_must_enclose_a_volume() {
     // Inside the drum is inside the solid; beside it is free space.
     let out = drum.outside(&[[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]], 1e-3);
     assert_eq!((out.count, out.deepest_point), (1, Some(0)));
+    // A capsule's ends are inside it up to its radius beyond the cylinder's length.
+    let pill = Environment::capsule([0.0; 3], [0.0, 0.0, 1.0], 0.1, 0.2, 64).unwrap();
+    let out = pill.outside(
+        &[[0.0, 0.0, 0.19], [0.0, 0.0, 0.21], [0.0, 0.0, -0.19]],
+        1e-3,
+    );
+    assert_eq!(out.count, 2);
+    assert!(
+        (out.deepest - 0.011).abs() < 1e-3,
+        "deepest {}",
+        out.deepest
+    );
 }
 
-/// A rope dropped across a sphere and across a turned box comes to rest on top of it, its
+/// A rope dropped across a sphere, a turned box and a capsule comes to rest on top of it, its
 /// middle one rope radius above the top, no point inside.
 #[test]
 fn a_rope_rests_on_a_sphere_and_on_a_box() {
@@ -111,6 +123,10 @@ fn a_rope_rests_on_a_sphere_and_on_a_box() {
         (
             Environment::cuboid([0.0; 3], [0.1, 0.1, 0.1], [0.0, 0.0, 0.3]).unwrap(),
             0.05,
+        ),
+        (
+            Environment::capsule([0.0; 3], [0.0, 1.0, 0.0], 0.03, 0.1, 64).unwrap(),
+            0.03,
         ),
     ];
     for (env, top) in cases {

@@ -285,6 +285,61 @@ impl Environment {
         Self::solid_of(vertices, triangles, "sphere")
     }
 
+    /// A capsule, a cylinder of `radius` and `length` [m] between the centres of its two
+    /// hemispherical ends, centred on `center` along `axis`, as a solid the rods stay outside
+    /// of: `segments` faces around, `segments / 4` rings on each end.
+    pub fn capsule(
+        center: [f64; 3],
+        axis: [f64; 3],
+        radius: f64,
+        length: f64,
+        segments: usize,
+    ) -> Result<Self, MeshError> {
+        let a = nalgebra::Vector3::from(axis).normalize();
+        let (u, v) = across(axis);
+        let c = nalgebra::Vector3::from(center);
+        let (k, cap) = (segments as u32, (segments / 4).max(2) as u32);
+        // Rings from the −axis pole to the +axis pole: `cap` on the lower end (its equator
+        // last), `cap` on the upper end (its equator first).
+        let mut vertices = vec![];
+        let pole = |s: f64| c + a * (s * (0.5 * length + radius));
+        let lower = pole(-1.0);
+        vertices.push([lower.x, lower.y, lower.z]);
+        let mut rings = 0u32;
+        for (end, from, to) in [(-1.0, 1, cap + 1), (1.0, 0, cap)] {
+            for ring in from..to {
+                // Polar angle from the end's pole (−1) or from its equator (+1).
+                let theta = std::f64::consts::FRAC_PI_2 * ring as f64 / cap as f64;
+                let (along, out) = if end < 0.0 {
+                    (-theta.cos(), theta.sin())
+                } else {
+                    (theta.sin(), theta.cos())
+                };
+                let base = c + a * (end * 0.5 * length + along * radius);
+                for s in 0..k {
+                    let phi = 2.0 * std::f64::consts::PI * s as f64 / k as f64;
+                    let p = base + (u * phi.cos() + v * phi.sin()) * (out * radius);
+                    vertices.push([p.x, p.y, p.z]);
+                }
+                rings += 1;
+            }
+        }
+        let upper = pole(1.0);
+        vertices.push([upper.x, upper.y, upper.z]);
+        let top = 1 + rings * k;
+        let at = |ring: u32, s: u32| 1 + ring * k + s % k;
+        let mut triangles = Vec::new();
+        for s in 0..k {
+            triangles.push([0, at(0, s + 1), at(0, s)]);
+            triangles.push([top, at(rings - 1, s), at(rings - 1, s + 1)]);
+            for ring in 0..rings - 1 {
+                triangles.push([at(ring, s), at(ring, s + 1), at(ring + 1, s + 1)]);
+                triangles.push([at(ring, s), at(ring + 1, s + 1), at(ring + 1, s)]);
+            }
+        }
+        Self::solid_of(vertices, triangles, "capsule")
+    }
+
     /// A box of `size` [m] (full edge lengths along its own axes) about `center`, turned by the
     /// rotation vector `rotation` [rad], as a solid the rods stay outside of.
     pub fn cuboid(center: [f64; 3], size: [f64; 3], rotation: [f64; 3]) -> Result<Self, MeshError> {

@@ -184,19 +184,12 @@ pub enum MeshSection {
         /// Where a wire enters the lumen, in file units: `{ point = [..], direction = [..] }`.
         entry: Option<EntrySection>,
     },
-    /// A closed cylinder the rods stay outside of (a post, a capstan drum).
-    Cylinder {
-        /// Centre of the axis [m].
-        center: [f64; 3],
-        /// Direction of the axis.
-        axis: [f64; 3],
-        /// Radius [m].
-        radius: f64,
-        /// Length along the axis [m].
-        length: f64,
-        /// Flat faces around (default 256).
-        segments: Option<usize>,
-    },
+    /// A closed cylinder the rods stay outside of (a post, a capstan drum); `length` along the
+    /// axis, 256 faces around by default.
+    Cylinder(RoundSection),
+    /// A capsule (a cylinder with hemispherical ends) the rods stay outside of; `length`
+    /// between the centres of its ends, 128 faces around by default.
+    Capsule(RoundSection),
     /// A sphere the rods stay outside of.
     Sphere {
         /// Centre [m].
@@ -224,6 +217,31 @@ pub enum MeshSection {
         /// Side length [m].
         size: f64,
     },
+}
+
+/// `environment.mesh` of kind `cylinder` or `capsule`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoundSection {
+    /// Centre of the axis [m].
+    pub center: [f64; 3],
+    /// Direction of the axis.
+    pub axis: [f64; 3],
+    /// Radius [m].
+    pub radius: f64,
+    /// Length [m] (see the kind).
+    pub length: f64,
+    /// Flat faces around.
+    pub segments: Option<usize>,
+}
+
+/// A [`RoundSection`], checked, with its default number of faces filled in.
+struct Round {
+    center: [f64; 3],
+    axis: [f64; 3],
+    radius: f64,
+    length: f64,
+    segments: usize,
 }
 
 /// `environment.mesh.entry`.
@@ -760,6 +778,33 @@ impl Checker<'_> {
         Ok((force, moment, profile))
     }
 
+    /// A cylinder's or a capsule's centre, axis, radius, length and faces around (`default`
+    /// when not given), checked.
+    fn round_solid(&self, r: &RoundSection, default: usize) -> Result<Round, SceneError> {
+        let center = self.finite3("environment.mesh.center", r.center)?;
+        let axis = self.finite3("environment.mesh.axis", r.axis)?;
+        if !(axis.iter().map(|x| x * x).sum::<f64>() > 0.0) {
+            return Err(self.invalid("environment.mesh.axis", axis, "expected a non-zero vector"));
+        }
+        let radius = self.positive("environment.mesh.radius", r.radius)?;
+        let length = self.positive("environment.mesh.length", r.length)?;
+        let segments = r.segments.unwrap_or(default);
+        if !(8..=100_000).contains(&segments) {
+            return Err(self.invalid(
+                "environment.mesh.segments",
+                segments,
+                "expected 8 ..= 100 000",
+            ));
+        }
+        Ok(Round {
+            center,
+            axis,
+            radius,
+            length,
+            segments,
+        })
+    }
+
     fn finite(&self, field: &str, v: f64) -> Result<f64, SceneError> {
         if v.is_finite() {
             Ok(v)
@@ -1093,33 +1138,14 @@ impl Checker<'_> {
                 Environment::from_file(&full, scale, entry)
                     .map_err(|err| mesh_err("environment.mesh.path", err))?
             }
-            MeshSection::Cylinder {
-                center,
-                axis,
-                radius,
-                length,
-                segments,
-            } => {
-                let center = self.finite3("environment.mesh.center", *center)?;
-                let axis = self.finite3("environment.mesh.axis", *axis)?;
-                if !(axis.iter().map(|x| x * x).sum::<f64>() > 0.0) {
-                    return Err(self.invalid(
-                        "environment.mesh.axis",
-                        axis,
-                        "expected a non-zero vector",
-                    ));
-                }
-                let radius = self.positive("environment.mesh.radius", *radius)?;
-                let length = self.positive("environment.mesh.length", *length)?;
-                let segments = segments.unwrap_or(256);
-                if !(8..=100_000).contains(&segments) {
-                    return Err(self.invalid(
-                        "environment.mesh.segments",
-                        segments,
-                        "expected 8 ..= 100 000",
-                    ));
-                }
-                Environment::cylinder(center, axis, radius, length, segments)
+            MeshSection::Cylinder(r) => {
+                let r = self.round_solid(r, 256)?;
+                Environment::cylinder(r.center, r.axis, r.radius, r.length, r.segments)
+                    .map_err(|err| mesh_err("environment.mesh", err))?
+            }
+            MeshSection::Capsule(r) => {
+                let r = self.round_solid(r, 128)?;
+                Environment::capsule(r.center, r.axis, r.radius, r.length, r.segments)
                     .map_err(|err| mesh_err("environment.mesh", err))?
             }
             MeshSection::Sphere {
@@ -1203,7 +1229,10 @@ impl Checker<'_> {
             (None, _)
             | (
                 Some("solid"),
-                MeshSection::Cylinder { .. } | MeshSection::Sphere { .. } | MeshSection::Box { .. },
+                MeshSection::Cylinder(_)
+                | MeshSection::Capsule(_)
+                | MeshSection::Sphere { .. }
+                | MeshSection::Box { .. },
             ) => {}
             (Some("lumen"), MeshSection::Vessel { .. } | MeshSection::File { .. }) => {}
             (Some("solid"), MeshSection::File { entry: None, .. }) => {
@@ -1215,7 +1244,8 @@ impl Checker<'_> {
                 let kind = match mesh {
                     MeshSection::Vessel { .. } => "a generated vessel is a lumen",
                     MeshSection::File { .. } => "a mesh with an entry is a lumen",
-                    MeshSection::Cylinder { .. } => "a cylinder is a solid",
+                    MeshSection::Cylinder(_) => "a cylinder is a solid",
+                    MeshSection::Capsule(_) => "a capsule is a solid",
                     MeshSection::Sphere { .. } => "a sphere is a solid",
                     MeshSection::Box { .. } => "a box is a solid",
                     MeshSection::Plane { .. } => {
