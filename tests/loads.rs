@@ -3,7 +3,10 @@
 //! force ramped slowly is carried by the clamp as it rises.
 
 use cosserat::cosserat_model::Material;
-use cosserat::{LoadProfile, PointLoad, RodBuilder, SimulationBuilder, StateField, StiffSettings};
+use cosserat::{
+    LoadProfile, PointLoad, RodBuilder, RodHandle, Simulation, SimulationBuilder, StateField,
+    StiffSettings,
+};
 
 /// The tip of a cantilever of `n` elements, `length` long along x, clamped at the origin, with
 /// the moment `m` about y at point `at`, after `seconds`; explicit or stiff scheme.
@@ -30,6 +33,20 @@ fn arc_tip(n: usize, at: usize, m: f64, stiff: bool, seconds: f64) -> ([f64; 3],
     let mut x = vec![[0.0; 3]; n + 1];
     sim.read(h, StateField::Positions, &mut x).unwrap();
     (x[n], ei)
+}
+
+/// `rod` alone, weightless, on the stiff scheme at 1 ms, in f64.
+fn stiff_weightless(rod: RodBuilder) -> (Simulation, RodHandle) {
+    let sim = SimulationBuilder::new()
+        .double_precision(true)
+        .gravity([0.0; 3])
+        .stiff_solver(Some(StiffSettings::default()))
+        .dt(1e-3)
+        .with_rod(rod)
+        .build()
+        .unwrap();
+    let h = sim.rods().next().unwrap();
+    (sim, h)
 }
 
 /// `M` about y turns the tip by `θ = M L / (E I)` = 1 rad about y, so it ends at
@@ -88,15 +105,7 @@ fn a_ramped_load_is_carried_as_it_rises() {
                 duration: 4.0,
             }),
         );
-    let mut sim = SimulationBuilder::new()
-        .double_precision(true)
-        .gravity([0.0; 3])
-        .stiff_solver(Some(StiffSettings::default()))
-        .dt(1e-3)
-        .with_rod(rod)
-        .build()
-        .unwrap();
-    let h = sim.rods().next().unwrap();
+    let (mut sim, h) = stiff_weightless(rod);
     for quarter in 1..=3 {
         sim.run(1000).unwrap();
         let held = sim.end_reaction(h, 0).unwrap().force[2];
@@ -122,15 +131,7 @@ fn a_distributed_load_sags_a_cantilever_as_beam_theory_says() {
         .damping(0.0, 0.0, 30.0)
         .clamp_start()
         .distributed_load(PointLoad::new(0, [0.0, 0.0, -q].into()));
-    let mut sim = SimulationBuilder::new()
-        .double_precision(true)
-        .gravity([0.0; 3])
-        .stiff_solver(Some(StiffSettings::default()))
-        .dt(1e-3)
-        .with_rod(rod)
-        .build()
-        .unwrap();
-    let h = sim.rods().next().unwrap();
+    let (mut sim, h) = stiff_weightless(rod);
     sim.run(3000).unwrap();
     let mut x = vec![[0.0; 3]; n + 1];
     sim.read(h, StateField::Positions, &mut x).unwrap();

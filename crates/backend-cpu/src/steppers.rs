@@ -12,8 +12,8 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::ends::cast_vec;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_rod, check_write, condition_needs, read_state_field,
-    read_state_frames, unit_frames,
+    check_capabilities, check_condition, check_end, check_rod, check_write, condition_needs,
+    read_state_field, read_state_frames, unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
@@ -548,14 +548,12 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
     ) -> Result<(), ControlError> {
         check_end(end)?;
         check_condition(&condition)?;
-        let missing = S::capabilities().missing(condition_needs(&condition));
-        if !missing.is_empty() {
-            let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
-            return Err(ControlError::Unsupported {
-                stepper: S::NAME,
-                what: format!("drive an end with {}", list.join(", ")),
-            });
-        }
+        check_capabilities(
+            S::NAME,
+            S::capabilities(),
+            condition_needs(&condition),
+            "drive an end with",
+        )?;
         let allows = self.scheme.allows_kind_changes();
         let r = self.rod_mut(rod)?;
         if r.ends[end].kind != condition.kind && !allows {
@@ -590,14 +588,7 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
                 why: "forces and moments must be finite".into(),
             });
         }
-        let missing = S::capabilities().missing(PointLoad::needs(loads));
-        if !missing.is_empty() {
-            let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
-            return Err(ControlError::Unsupported {
-                stepper: S::NAME,
-                what: format!("set {}", list.join(", ")),
-            });
-        }
+        check_capabilities(S::NAME, S::capabilities(), PointLoad::needs(loads), "set")?;
         r.loads.clear();
         r.loads.extend(loads.iter().map(PointLoad::cast));
         Ok(())

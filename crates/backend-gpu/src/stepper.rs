@@ -5,8 +5,8 @@ use cosserat_model::energy::{Energies, ForceModel, energies};
 use cosserat_model::{RodParams, RodState, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::stepper::{
-    check_condition, check_end, check_rod, check_write, condition_needs, read_state_field,
-    read_state_frames, unit_frames,
+    check_capabilities, check_condition, check_end, check_rod, check_write, condition_needs,
+    read_state_field, read_state_frames, unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Clock, CollisionStats, ContactSample, ControlError, CouplingStats, Divergence,
@@ -254,14 +254,12 @@ impl Stepper for GpuStepper {
         check_end(end)?;
         check_rod(rod, self.ends.len())?;
         check_condition(&condition)?;
-        let needs = condition_needs(&condition);
-        if needs != cosserat_problem::Capabilities::NONE {
-            let list: Vec<&str> = needs.iter().map(|c| c.describe()).collect();
-            return Err(ControlError::Unsupported {
-                stepper: NAME,
-                what: format!("drive an end with {}", list.join(", ")),
-            });
-        }
+        check_capabilities(
+            NAME,
+            self.capabilities(),
+            condition_needs(&condition),
+            "drive an end with",
+        )?;
         let old = &self.ends[rod][end];
         if old.kind != condition.kind {
             return Err(ControlError::Unsupported {
@@ -288,14 +286,7 @@ impl Stepper for GpuStepper {
                 why: "forces must be finite".into(),
             });
         }
-        let needs = PointLoad::needs(loads);
-        if needs != cosserat_problem::Capabilities::NONE {
-            let list: Vec<&str> = needs.iter().map(|c| c.describe()).collect();
-            return Err(ControlError::Unsupported {
-                stepper: NAME,
-                what: format!("set {}", list.join(", ")),
-            });
-        }
+        check_capabilities(NAME, self.capabilities(), PointLoad::needs(loads), "set")?;
         let loads: Vec<PointLoad<f32>> = loads.iter().map(PointLoad::cast).collect();
         self.sim
             .set_loads(rod, &loads)

@@ -195,7 +195,7 @@ impl Environment {
 
     /// A square floor of side `size` through `point`, facing `normal`.
     pub fn plane(point: [f64; 3], normal: [f64; 3], size: f64) -> Result<Self, MeshError> {
-        let (u, v) = across(normal);
+        let (_, u, v) = across(normal);
         let c = nalgebra::Vector3::from(point);
         let h = size / 2.0;
         let corners = [
@@ -223,8 +223,7 @@ impl Environment {
         length: f64,
         segments: usize,
     ) -> Result<Self, MeshError> {
-        let a = nalgebra::Vector3::from(axis).normalize();
-        let (u, v) = across(axis);
+        let (a, u, v) = across(axis);
         let c = nalgebra::Vector3::from(center);
         let k = segments as u32;
         let mut vertices = Vec::with_capacity(2 * segments + 2);
@@ -295,8 +294,7 @@ impl Environment {
         length: f64,
         segments: usize,
     ) -> Result<Self, MeshError> {
-        let a = nalgebra::Vector3::from(axis).normalize();
-        let (u, v) = across(axis);
+        let (a, u, v) = across(axis);
         let c = nalgebra::Vector3::from(center);
         let (k, cap) = (segments as u32, (segments / 4).max(2) as u32);
         // Rings from the −axis pole to the +axis pole: `cap` on the lower end (its equator
@@ -496,9 +494,15 @@ impl Environment {
     }
 }
 
-/// Two unit vectors across `direction` that make a right-handed frame with it (`u × v` along
-/// `direction`).
-fn across(direction: [f64; 3]) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+/// `direction` normalised, and two unit vectors across it that make a right-handed frame with
+/// it (`u × v` along `direction`).
+fn across(
+    direction: [f64; 3],
+) -> (
+    nalgebra::Vector3<f64>,
+    nalgebra::Vector3<f64>,
+    nalgebra::Vector3<f64>,
+) {
     let n = nalgebra::Vector3::from(direction).normalize();
     let helper = if n.x.abs() < 0.9 {
         nalgebra::Vector3::x()
@@ -506,7 +510,7 @@ fn across(direction: [f64; 3]) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64
         nalgebra::Vector3::y()
     };
     let u = helper.cross(&n).normalize();
-    (u, n.cross(&u))
+    (n, u, n.cross(&u))
 }
 
 /// Points of a rod outside the lumen ([`Environment::outside`]).

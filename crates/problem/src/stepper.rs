@@ -391,6 +391,25 @@ pub fn check_finite<const N: usize>(
     }
 }
 
+/// `Ok` when `has` covers `needs`; else [`ControlError::Unsupported`] for `stepper`, saying
+/// `"{doing} {what is missing}"` ("drive an end with sliding ends (…)").
+pub fn check_capabilities(
+    stepper: &'static str,
+    has: Capabilities,
+    needs: Capabilities,
+    doing: &str,
+) -> Result<(), ControlError> {
+    let missing = has.missing(needs);
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let list: Vec<&str> = missing.iter().map(|c| c.describe()).collect();
+    Err(ControlError::Unsupported {
+        stepper,
+        what: format!("{doing} {}", list.join(", ")),
+    })
+}
+
 /// The capabilities an end condition needs beyond holding and constant motions.
 pub fn condition_needs(condition: &EndCondition<f64>) -> Capabilities {
     Capabilities::NONE
