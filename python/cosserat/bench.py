@@ -40,7 +40,6 @@ try:
         Cylinder,
         End,
         EndCondition,
-        Motion,
         Plane,
         Rod,
         Scenario,
@@ -117,66 +116,6 @@ def _toml(value: Any) -> str:
     return "[" + ", ".join(_toml(v) for v in value) + "]"
 
 
-def _rotation(vectors: np.ndarray) -> np.ndarray:
-    """Rotation matrices [k, 3, 3] of rotation vectors [k, 3] (Rodrigues)."""
-    angle = np.linalg.norm(vectors, axis=1)
-    k = np.zeros((len(vectors), 3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -vectors[:, 2], vectors[:, 1], -vectors[:, 0]
-    k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = vectors[:, 2], -vectors[:, 1], vectors[:, 0]
-    small = angle < 1e-12
-    safe = np.where(small, 1.0, angle)
-    a = np.where(small, 1.0, np.sin(safe) / safe)[:, None, None]
-    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)[:, None, None]
-    return np.eye(3) + a * k + b * (k @ k)
-
-
-def _log(rotations: np.ndarray) -> np.ndarray:
-    """Rotation vectors [k, 3] of rotation matrices [k, 3, 3] (angles below π)."""
-    cos = np.clip((np.trace(rotations, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    axial = np.stack(
-        [
-            rotations[:, 2, 1] - rotations[:, 1, 2],
-            rotations[:, 0, 2] - rotations[:, 2, 0],
-            rotations[:, 1, 0] - rotations[:, 0, 1],
-        ],
-        axis=1,
-    )
-    sin = np.sin(angle)
-    scale = np.where(angle < 1e-8, 0.5, angle / (2.0 * np.where(sin == 0.0, 1.0, sin)))
-    return axial * scale[:, None]
-
-
-def _poses(motion: Motion, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``Motion.pose`` at many times: displacements [k, 3] and rotation matrices [k, 3, 3]."""
-    knots = np.asarray(motion.times, dtype=float)
-    d = np.asarray(motion.displacement, dtype=float)
-    r = np.asarray(motion.rotation, dtype=float)
-    i = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, len(knots) - 2)
-    f = np.clip((times - knots[i]) / (knots[i + 1] - knots[i]), 0.0, 1.0)[:, None]
-    return d[i] + f * (d[i + 1] - d[i]), _rotation(r[i] + f * (r[i + 1] - r[i]))
-
-
-@dataclass
-class _Drive:
-    """A driven clamp: rod ``rod``'s end ``end`` (0 first point, 1 last) follows ``motion``."""
-
-    rod: int
-    end: int
-    motion: Motion
-    last: Optional[np.ndarray] = None  # the (v, ω) set last, 6 numbers
-
-    def rates(self, start: float, dt: float, steps: int) -> np.ndarray:
-        """The constant velocity and world angular velocity [steps, 6] that take the end from
-        its pose at each step's start to its pose at the step's end exactly: the clamp point
-        moves by ``h v`` and the clamp frame turns by ``exp(h ω)`` in a step."""
-        times = start + dt * np.arange(steps + 1)
-        d, rot = _poses(self.motion, times)
-        v = np.diff(d, axis=0) / dt
-        w = _log(rot[1:] @ np.transpose(rot[:-1], (0, 2, 1))) / dt
-        return np.concatenate([v, w], axis=1)
-
-
 @dataclass
 class _Plan:
     """The numerical choices for one scenario at one resolution, and the scene they make."""
@@ -187,7 +126,6 @@ class _Plan:
     steps_per_frame: int
     drag: float
     scene: str
-    drives: list[_Drive] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
 
@@ -404,12 +342,8 @@ class CosseratSolver:
                 f"self_collisions = {_toml(bool(scenario.self_contact))}",
                 "friction = " + _toml({"static": friction, "kinetic": friction}),
             ]
-        drives = []
         for k, rod in enumerate(scenario.rods):
             lines += self._rod_lines(k, rod, n_elements, drag, obstacle)
-            for e, end in enumerate(End):
-                if (motion := rod.motion(end)) is not None:
-                    drives.append(_Drive(rod=k, end=e, motion=motion))
         return _Plan(
             scheme="stiff" if stiff else "explicit",
             extensible=extensible,
@@ -417,7 +351,6 @@ class CosseratSolver:
             steps_per_frame=steps_per_frame,
             drag=drag,
             scene="\n".join(lines) + "\n",
-            drives=drives,
             notes=notes,
         )
 
@@ -460,12 +393,20 @@ class CosseratSolver:
             "damping = " + _toml({"drag": drag}),
         ]
         for end, key in ((End.START, "start"), (End.END, "end")):
-            held = {"kind": rod.condition(end).value}
+            held: dict = {"kind": rod.condition(end).value}
             motion = rod.motion(end)
-            if motion is not None and motion.slides_along is not None:
-                # Free along the axis, where the rod and the end's loads move it; the drive
-                # moves it only across the axis (cosseratbench's Motion checks that).
-                held["slide"] = [float(x) for x in motion.axis]
+            if motion is not None:
+                # cosseratbench's Motion is an end path: keyframes from 0, linear between,
+                # held after the last, followed exactly at every step.
+                held["path"] = {
+                    "times": [float(t) for t in motion.times],
+                    "displacement": [list(map(float, d)) for d in motion.displacement],
+                    "rotation": [list(map(float, r)) for r in motion.rotation],
+                }
+                if motion.slides_along is not None:
+                    # Free along the axis, where the rod and the end's loads move it; the path
+                    # moves it only across the axis (cosseratbench's Motion checks that).
+                    held["slide"] = [float(x) for x in motion.axis]
             lines.append(f"{key} = " + _toml(held))
         for load in rod.loads:
             lines += [
@@ -510,11 +451,8 @@ class CosseratSolver:
         positions = [[sim.positions(k)] for k in range(n_rods)]
         directors = [[sim.directors(k)[:, 0, :]] for k in range(n_rods)]
         try:
-            for frame in range(n_frames - 1):
-                if plan.drives:
-                    self._driven_frame(sim, plan, frame)
-                else:
-                    sim.run(plan.steps_per_frame)
+            for _ in range(n_frames - 1):
+                sim.run(plan.steps_per_frame)
                 for k in range(n_rods):
                     positions[k].append(sim.positions(k))
                     directors[k].append(sim.directors(k)[:, 0, :])
@@ -525,29 +463,3 @@ class CosseratSolver:
             tuple(np.stack(p) for p in positions),
             tuple(np.stack(d) for d in directors),
         )
-
-    @staticmethod
-    def _driven_frame(sim: Any, plan: _Plan, frame: int) -> None:
-        """One frame's steps with driven clamps: each clamp's velocity is set whenever it
-        changes, and the steps between changes run in one call."""
-        steps, dt = plan.steps_per_frame, plan.time_step
-        start = frame * steps * dt
-        rates = [d.rates(start, dt, steps) for d in plan.drives]
-        # Rates taken from poses carry round-off of order 1e-16 / dt; a change smaller than a
-        # billionth of the frame's largest rate is that, not a change of the motion.
-        tolerances = [1e-9 * float(np.abs(r).max()) + 1e-12 for r in rates]
-        step = 0
-        while step < steps:
-            for drive, r, tol in zip(plan.drives, rates, tolerances):
-                now = r[step]
-                if drive.last is None or np.any(np.abs(now - drive.last) > tol):
-                    sim.set_end_velocity(drive.end, now[:3], now[3:], rod=drive.rod)
-                    drive.last = now
-            # Run up to the next step at which some clamp's rates change.
-            until = steps
-            for drive, r, tol in zip(plan.drives, rates, tolerances):
-                changes = np.flatnonzero(np.any(np.abs(r[step:] - drive.last) > tol, axis=1))
-                if len(changes):
-                    until = min(until, step + int(changes[0]))
-            sim.run(until - step)
-            step = until
