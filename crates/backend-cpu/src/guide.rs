@@ -63,8 +63,23 @@ impl Guide {
     }
 
     /// The unit axis.
-    pub(crate) fn axis(&self) -> Vector3<f64> {
+    pub fn axis(&self) -> Vector3<f64> {
         self.axis
+    }
+
+    /// Where the axis starts.
+    pub fn origin(&self) -> Vector3<f64> {
+        self.origin
+    }
+
+    /// Length along the axis [m].
+    pub fn length(&self) -> f64 {
+        self.length
+    }
+
+    /// Largest distance from the axis of a point the guide holds [m].
+    pub fn clearance(&self) -> f64 {
+        self.clearance
     }
 
     /// Puts the guided points (from index 1, the first point being held) on the axis and

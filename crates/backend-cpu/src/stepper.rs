@@ -172,6 +172,16 @@ impl<T: Real> CpuRod<T> {
         self
     }
 
+    /// The introducer the rod is fed through, if any.
+    pub fn guide(&self) -> Option<&Guide> {
+        self.guide.as_ref()
+    }
+
+    /// What the rod touches, if it has a mesh.
+    pub fn mesh_settings(&self) -> Option<&MeshContactSettings> {
+        self.mesh.as_ref().map(|m| &m.settings)
+    }
+
     /// Replaces the iterative distance-constraint sweeps by the exact direct solver
     /// (`cosserat_constraints::direct`: Newton iterations on the tridiagonal system `J M⁻¹ Jᵀ λ = b`),
     /// which leaves every segment at its rest length to the solver's tolerance after each

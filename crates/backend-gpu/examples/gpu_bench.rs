@@ -65,6 +65,8 @@ fn pendulum(n: usize, angle: f64) -> GpuRodInput {
         params,
         ends: [EndCondition::pinned(), EndCondition::free()],
         loads: vec![],
+        wall: None,
+        guide: None,
     }
 }
 

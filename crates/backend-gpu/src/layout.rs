@@ -203,15 +203,32 @@ gpu_struct! {
     }
 }
 
+gpu_struct! {
+    /// What a rod touches (`touch`, binding 20, bound only to kernels built with `MESH` or
+    /// `GUIDE`), one per rod.
+    struct TouchG as "Touch" {
+        /// Static and kinetic friction with the wall, the contact margin and the rod's radius.
+        wall: [f32; 4],
+        /// The guide's origin and length.
+        guide_o: [f32; 4],
+        /// The guide's unit axis and clearance.
+        guide_a: [f32; 4],
+        /// Whether the rod has a wall and a guide (0 / 1), the contact sweeps of a step without
+        /// distance sweeps, and 0.
+        on: [u32; 4],
+    }
+}
+
 /// Every struct the host uploads, for the layout test.
 #[cfg(test)]
-pub(crate) const SHARED: [GpuLayout; 6] = [
+pub(crate) const SHARED: [GpuLayout; 7] = [
     ParamsU::LAYOUT,
     ChunkG::LAYOUT,
     SlotG::LAYOUT,
     ItemG::LAYOUT,
     DriveG::LAYOUT,
     ClampG::LAYOUT,
+    TouchG::LAYOUT,
 ];
 
 #[cfg(test)]
@@ -312,6 +329,7 @@ mod tests {
             ),
             (1, vec!["PERSTEP", "LOADS", "FAST", "REGC", "CLAMP"]),
             (32, vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC"]),
+            (1, vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "CLAMP"]),
         ] {
             let cfg = KernelConfig {
                 threads: 64,
@@ -336,6 +354,34 @@ mod tests {
                     wgsl,
                     "{flags:?}: the Rust layout of `{}` (left) differs from the WGSL one (right)",
                     layout.wgsl
+                );
+            }
+            // The wall's tree and triangles are uploaded as the collide crate lays them out.
+            if flags.contains(&"MESH") {
+                let offsets = |name: &str| {
+                    let (members, size) = wgsl_struct(&module, name).expect("wall struct");
+                    (members.iter().map(|m| m.offset).collect::<Vec<_>>(), size)
+                };
+                let node = offsets("WallNode");
+                assert_eq!(node, (vec![0, 12, 16, 28], 32), "WallNode against BvhNode");
+                assert_eq!(
+                    std::mem::size_of::<cosserat_collide::BvhNode>(),
+                    node.1,
+                    "BvhNode's size"
+                );
+                let tri = offsets("WallTri");
+                assert_eq!(
+                    tri,
+                    (
+                        vec![0, 12, 16, 28, 32, 44, 48, 64, 80, 96, 112, 128, 144],
+                        160
+                    ),
+                    "WallTri against GpuWallTriangle"
+                );
+                assert_eq!(
+                    std::mem::size_of::<cosserat_collide::GpuWallTriangle>(),
+                    tri.1,
+                    "GpuWallTriangle's size"
                 );
             }
         }

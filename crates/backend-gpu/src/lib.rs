@@ -71,6 +71,41 @@ pub struct GpuRodInput {
     pub ends: [EndCondition<f32>; 2],
     /// Constant point forces.
     pub loads: Vec<PointLoad<f32>>,
+    /// Contact with the environment's mesh (`None`: none, and no contact code runs for it).
+    pub wall: Option<GpuWall>,
+    /// A straight introducer the rod is fed through from its first point.
+    pub guide: Option<GpuGuide>,
+}
+
+/// A rod's contact with a static triangle mesh (a vessel's lumen, or a solid's outside): the
+/// CPU's `MeshContactSettings`. Every rod of a simulation that touches a mesh touches the same
+/// one (one tree is uploaded).
+#[derive(Clone, Debug)]
+pub struct GpuWall {
+    /// The mesh and its tree.
+    pub collider: std::sync::Arc<cosserat_collide::MeshCollider>,
+    /// Coulomb friction: sticking holds while the friction impulse stays within
+    /// `static_friction` times the normal one; sliding takes `kinetic_friction` times it.
+    pub static_friction: f32,
+    /// See `static_friction`.
+    pub kinetic_friction: f32,
+    /// Speculative margin [m]: points this close to the wall get a contact that stops them
+    /// reaching it within the step.
+    pub margin: f32,
+}
+
+/// A straight introducer (the CPU's `cosserat_backend_cpu::Guide`): the points from the second
+/// one up to the first one outside it are held on its axis and move only along it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuGuide {
+    /// Where the axis starts [m].
+    pub origin: [f64; 3],
+    /// Unit direction of the axis.
+    pub axis: [f64; 3],
+    /// Length along the axis [m].
+    pub length: f64,
+    /// Largest distance from the axis of a point it holds [m].
+    pub clearance: f64,
 }
 
 /// Which kernel path steps the rods.

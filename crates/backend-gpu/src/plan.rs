@@ -142,6 +142,18 @@ impl Plan {
         {
             flags.push("CLAMP");
         }
+        // Contact with a mesh and the introducer: only in the workgroup layout of the
+        // single-workgroup path (their per-step counts and the guide's extent are agreed
+        // through workgroup memory).
+        let mesh = rods.iter().any(|r| r.wall.is_some());
+        let guide = rods.iter().any(|r| r.guide.is_some());
+        if mesh {
+            flags.push("MESH");
+        }
+        if guide {
+            flags.push("GUIDE");
+        }
+        let contact = mesh || guide;
         let iterations = if extensible {
             0
         } else {
@@ -171,7 +183,9 @@ impl Plan {
         // The subgroup layout: every rod on one subgroup, a few rods per workgroup, no barriers.
         let subgroup = adapter
             .subgroup_size
-            .filter(|_| tuning.subgroups && rods.len() as u32 >= tuning.subgroup_min_rods)
+            .filter(|_| {
+                tuning.subgroups && !contact && rods.len() as u32 >= tuning.subgroup_min_rods
+            })
             .map(|sg| (sg, round_up(points.div_ceil(sg), 2).max(2)))
             .filter(|&(_, ept)| ept <= tuning.subgroup_points_per_thread.max(2));
         // Windows of the two multi-workgroup paths. Information travels `2 · iterations + 1` points
@@ -270,7 +284,7 @@ impl Plan {
                 // with 256 threads); beyond that, windows over several co-resident workgroups
                 // where the adapter allows them (H200, 1000 elements: 5.5 µs/step against 6.6 for
                 // one workgroup with four points per thread).
-                if single_ept <= 2 || subgroup.is_some() {
+                if single_ept <= 2 || subgroup.is_some() || (contact && single_ept <= 64) {
                     KernelPath::SingleWorkgroup
                 } else if grid_ok.is_ok() {
                     KernelPath::MultiWorkgroup
@@ -282,6 +296,12 @@ impl Plan {
             }
             p => p,
         };
+        if contact && path != KernelPath::SingleWorkgroup {
+            return Err(GpuError::PathUnavailable {
+                path,
+                reason: "mesh contact and guides run on the single-workgroup path only".into(),
+            });
+        }
         if path == KernelPath::SingleWorkgroup && single_ept > 64 {
             return Err(GpuError::PathUnavailable {
                 path,
@@ -397,7 +417,10 @@ impl Plan {
                 4 * ept + 64
             } else {
                 0
-            };
+            }
+            // A tree walk per point (nodes and triangles visited), counted generously for the
+            // small meshes of software runs.
+            + if mesh { ept * 256 } else { 0 };
         let mut spd = options.max_steps_per_dispatch.max(1);
         if adapter.software {
             spd = spd.min((SOFTWARE_LOOP_BUDGET / loops_per_step).max(1));
@@ -482,6 +505,8 @@ pub(crate) mod fixtures {
                     params,
                     ends: [EndCondition::pinned(), EndCondition::free()],
                     loads: vec![],
+                    wall: None,
+                    guide: None,
                 }
             })
             .collect()

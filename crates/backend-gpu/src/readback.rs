@@ -13,7 +13,7 @@
 //! [`GpuOptions::spin_wait_us`]: crate::GpuOptions::spin_wait_us
 
 use crate::layout::{ClampG, DriveG};
-use crate::sim::EndTrack;
+use crate::sim::{EndTrack, WALL_STATS, WallRead};
 use crate::{DivergedQuantity, Divergence, GpuError, GpuSimulation};
 use cosserat_model::{Quat, Vec3};
 use std::collections::VecDeque;
@@ -22,7 +22,7 @@ use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 use std::time::{Duration, Instant};
 
 /// A device buffer a blocking read copies from.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Part {
     Positions,
     Velocities,
@@ -31,6 +31,9 @@ enum Part {
     Status,
     /// Every rod's clamps ([`ClampG`], two per rod).
     Clamps,
+    /// Wall contact: per-rod statistics and per-slot contacts.
+    WallStats,
+    Contacts,
 }
 
 /// A position read in flight.
@@ -307,6 +310,16 @@ impl GpuSimulation {
                 Part::AngularVelocities => &st.omg,
                 Part::Status => &self.status_buf,
                 Part::Clamps => &self.clamps_buf,
+                Part::WallStats | Part::Contacts => {
+                    let Some(w) = self.wall.as_ref() else {
+                        unreachable!("wall parts are read only with wall buffers")
+                    };
+                    if part == Part::WallStats {
+                        &w.stats
+                    } else {
+                        &w.contacts
+                    }
+                }
             };
             enc.copy_buffer_to_buffer(source, 0, staging, offset, size);
             offset += size;
@@ -354,7 +367,31 @@ impl GpuSimulation {
     /// [`Self::read_positions`].
     pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
         use cosserat_model::RodState;
-        let all = self.read_whole_state()?;
+        let all = if self.wall.is_some() {
+            // The wall's statistics and contacts come in the same round trip.
+            let bytes = 16 * self.slots;
+            let rods = self.rods.len() as u64;
+            let mut all = self.read_buffers(&[
+                (Part::Positions, bytes),
+                (Part::Velocities, bytes),
+                (Part::Frames, bytes),
+                (Part::AngularVelocities, bytes),
+                (Part::Status, self.status_bytes() as u64),
+                (Part::Clamps, self.clamp_bytes() as u64),
+                (Part::WallStats, 4 * WALL_STATS as u64 * rods),
+                (Part::Contacts, 32 * self.slots),
+            ])?;
+            let wall_at = 4 * bytes as usize + self.status_bytes() + self.clamp_bytes();
+            let wall = all.split_off(wall_at);
+            let (stats, contacts) = wall.split_at(4 * WALL_STATS * self.rods.len());
+            self.wall_read = Some(WallRead {
+                stats: bytemuck::pod_collect_to_vec(stats),
+                contacts: bytemuck::pod_collect_to_vec(contacts),
+            });
+            all
+        } else {
+            self.read_whole_state()?
+        };
         let b = (16 * self.slots) as usize;
         let clamps_at = 4 * b + self.status_bytes();
         self.status_error(bytemuck::cast_slice(&all[4 * b..clamps_at]))?;

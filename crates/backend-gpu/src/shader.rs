@@ -19,10 +19,12 @@
 pub(crate) const COMMON_WGSL: &str = include_str!("shaders/common.wgsl");
 /// The time-step kernel.
 pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
+/// The wall-contact queries, composed after `common.wgsl` into kernels with `MESH`.
+pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 10] = [
+pub(crate) const FLAGS: [&str; 12] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -33,6 +35,8 @@ pub(crate) const FLAGS: [&str; 10] = [
     "PERSTEP",
     "SUBGROUP",
     "SHFL",
+    "MESH",
+    "GUIDE",
 ];
 
 /// Flags of `rod_step.wgsl` chosen by [`crate::KernelVariant`], each validated with every scene
@@ -94,7 +98,12 @@ impl KernelConfig {
         );
         let body = preprocess(kernel, &self.flags);
         let body = expand_loops(&body, self.per_thread, self.unroll);
-        format!("{prelude}{COMMON_WGSL}\n{body}")
+        let wall = if self.flags.contains(&"MESH") {
+            WALL_CONTACT_WGSL
+        } else {
+            ""
+        };
+        format!("{prelude}{COMMON_WGSL}\n{wall}\n{body}")
     }
 }
 
@@ -418,6 +427,14 @@ mod tests {
                 );
                 continue;
             }
+            if file.file_name().is_some_and(|f| f == "wall_contact.wgsl") {
+                validate(&name, &text);
+                assert_eq!(
+                    text, WALL_CONTACT_WGSL,
+                    "wall_contact.wgsl on disk differs from the compiled-in copy"
+                );
+                continue;
+            }
             kernels += 1;
             if file.file_name().is_some_and(|f| f == "rod_step.wgsl") {
                 assert_eq!(
@@ -438,12 +455,22 @@ mod tests {
                     || (has("GRID") && has("PERSTEP"))
                     || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
                     || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
+                    || ((has("MESH") || has("GUIDE"))
+                        && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
                 {
                     continue;
                 }
                 // The variant flags, with every scene/path combination they can meet.
                 let mut variants = vec![flags.clone()];
-                for v in VARIANT_FLAGS {
+                // Contact kernels are composed only with the production variant flags.
+                let contact = has("MESH") || has("GUIDE");
+                if contact {
+                    variants[0].push("REGC");
+                    if !has("EXTENSIBLE") {
+                        variants[0].push("FAST");
+                    }
+                }
+                for v in VARIANT_FLAGS.iter().filter(|_| !contact) {
                     let inextensible_only = v.iter().any(|f| *f != "REGC");
                     if (inextensible_only && has("EXTENSIBLE"))
                         || ((v.contains(&"NBR_SYNC") || v.contains(&"COHERENT")) && !has("GRID"))
@@ -457,7 +484,9 @@ mod tests {
                 for (v, flags) in variants.into_iter().enumerate() {
                     let group = if has("SUBGROUP") { 32 } else { 1 };
                     // Every shape for the scene's own flags, one for each variant on top.
-                    let shapes: &[(u32, u32, bool)] = if v == 0 {
+                    let shapes: &[(u32, u32, bool)] = if contact {
+                        &[(32, 2, true), (64, 6, false)]
+                    } else if v == 0 {
                         &[(32, 2, true), (256, 4, true), (64, 6, false)]
                     } else {
                         &[(32, 2, true)]

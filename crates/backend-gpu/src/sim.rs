@@ -9,7 +9,7 @@
 //! through `readback.rs`.
 
 use crate::device::{AdapterSummary, Gpu};
-use crate::layout::{ChunkG, ClampG, DriveG, ParamsU, SlotG, TABLE_CAPACITY};
+use crate::layout::{ChunkG, ClampG, DriveG, ParamsU, SlotG, TABLE_CAPACITY, TouchG};
 use crate::plan::{Plan, Tuning};
 use crate::readback::Readback;
 use crate::{
@@ -81,7 +81,33 @@ pub struct GpuSimulation {
     pub(crate) query: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(crate) gpu_time_pending: Vec<wgpu::Buffer>,
     pub(crate) timestamp_period_ns: f64,
+    /// Wall contact (kernels with `MESH`): per-rod statistics and per-slot contacts.
+    pub(crate) wall: Option<WallBuffers>,
+    /// The wall's statistics and contacts as last read with the state.
+    pub(crate) wall_read: Option<WallRead>,
 }
+
+/// The wall buffers as read back with the state ([`GpuSimulation::read_state`]).
+pub(crate) struct WallRead {
+    /// [`WALL_STATS`] words per rod.
+    pub(crate) stats: Vec<u32>,
+    /// Two `[f32; 4]` per slot.
+    pub(crate) contacts: Vec<[f32; 4]>,
+}
+
+/// The buffers a kernel with wall contact writes (see `shaders/rod_step.wgsl`).
+pub(crate) struct WallBuffers {
+    /// Per rod, [`WALL_STATS`] words.
+    pub(crate) stats: wgpu::Buffer,
+    /// Per slot, two `vec4`: the last step's contact normal (and whether there is one) and the
+    /// wall's impulse as a velocity change.
+    pub(crate) contacts: wgpu::Buffer,
+    /// Which rods touch the wall.
+    pub(crate) touching: Vec<bool>,
+}
+
+/// Statistics words per rod of a kernel with wall contact.
+pub(crate) const WALL_STATS: usize = 9;
 
 /// First step index `s` with `s * dt >= t`, matching the CPU's `time = steps as f64 * dt`.
 fn first_step_at(t: f64, dt: f64) -> u32 {
@@ -324,6 +350,36 @@ impl GpuSimulation {
             .collect();
         let has_loads = plan.cfg.flags.contains(&"LOADS");
         let has_clamps = plan.cfg.flags.contains(&"CLAMP");
+        let has_mesh = plan.cfg.flags.contains(&"MESH");
+        let has_touch = has_mesh || plan.cfg.flags.contains(&"GUIDE");
+        let touch: Vec<TouchG> = rods
+            .iter()
+            .map(|r| {
+                let mut t = TouchG::default();
+                if let Some(w) = &r.wall {
+                    t.wall = [
+                        w.static_friction,
+                        w.kinetic_friction,
+                        w.margin,
+                        r.params.radius,
+                    ];
+                    t.on[0] = 1;
+                }
+                if let Some(g) = &r.guide {
+                    let f = |v: f64| v as f32;
+                    t.guide_o = [f(g.origin[0]), f(g.origin[1]), f(g.origin[2]), f(g.length)];
+                    t.guide_a = [f(g.axis[0]), f(g.axis[1]), f(g.axis[2]), f(g.clearance)];
+                    t.on[1] = 1;
+                }
+                t.on[2] = settings.iterations.max(1) as u32;
+                t
+            })
+            .collect();
+        // One mesh for every rod that touches one (checked by `validate`).
+        let collider = rods
+            .iter()
+            .find_map(|r| r.wall.as_ref())
+            .map(|w| &w.collider);
         let perstep = plan.path == KernelPath::DispatchPerStep;
         let grid = plan.path == KernelPath::MultiWorkgroup;
 
@@ -383,6 +439,41 @@ impl GpuSimulation {
             states.push(make_state("b"));
         }
         let clamps_buf = init("clamps", bytemuck::cast_slice(&clamps), storage);
+        let touch_buf = has_touch.then(|| {
+            init(
+                "touch",
+                bytemuck::cast_slice(&touch),
+                wgpu::BufferUsages::STORAGE,
+            )
+        });
+        let wall_bufs = match (has_mesh, collider) {
+            (true, Some(c)) => {
+                let nodes = c.bvh().node_words();
+                let tris: Vec<u32> = c.wall_triangles().iter().flat_map(wall_words).collect();
+                Some((
+                    init(
+                        "wall nodes",
+                        bytemuck::cast_slice(&nodes),
+                        wgpu::BufferUsages::STORAGE,
+                    ),
+                    init(
+                        "wall triangles",
+                        bytemuck::cast_slice(&tris),
+                        wgpu::BufferUsages::STORAGE,
+                    ),
+                    WallBuffers {
+                        stats: init(
+                            "wall stats",
+                            &vec![0u8; 4 * WALL_STATS * rods.len()],
+                            storage,
+                        ),
+                        contacts: init("contacts", &vec![0u8; 32 * slots_n], storage),
+                        touching: rods.iter().map(|r| r.wall.is_some()).collect(),
+                    },
+                ))
+            }
+            _ => None,
+        };
         let n_items = plan.items.len();
         let status_buf = init("status", &vec![0u8; 16 * n_items], storage);
         // Word 0: the grid-wide arrival counter; words 1..: per-item flags (NBR_SYNC).
@@ -452,6 +543,12 @@ impl GpuSimulation {
         }
         if has_clamps {
             entries.push(rw(17));
+        }
+        if has_mesh {
+            entries.extend([ro(18), ro(19), rw(21), rw(22)]);
+        }
+        if has_touch {
+            entries.push(ro(20));
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -570,6 +667,20 @@ impl GpuSimulation {
                     resource: whole(&clamps_buf),
                 });
             }
+            if let Some((nodes, tris, w)) = &wall_bufs {
+                for (binding, b) in [(18, nodes), (19, tris), (21, &w.stats), (22, &w.contacts)] {
+                    e.push(wgpu::BindGroupEntry {
+                        binding,
+                        resource: whole(b),
+                    });
+                }
+            }
+            if let Some(t) = &touch_buf {
+                e.push(wgpu::BindGroupEntry {
+                    binding: 20,
+                    resource: whole(t),
+                });
+            }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rod step"),
                 layout: &bgl,
@@ -638,6 +749,8 @@ impl GpuSimulation {
             query,
             gpu_time_pending: Vec::new(),
             timestamp_period_ns,
+            wall: wall_bufs.map(|(_, _, w)| w),
+            wall_read: None,
         })
     }
 
@@ -670,6 +783,51 @@ impl GpuSimulation {
     /// Number of rods.
     pub fn rods(&self) -> usize {
         self.rods.len()
+    }
+
+    /// Rod `rod`'s contact statistics as of the last [`Self::read_state`] (`None` for a rod
+    /// that touches no mesh, or before the first read): the CPU's `CollisionStats`, with
+    /// `detection_seconds` 0 (detection is not timed on its own on the GPU) and `queries` the
+    /// sphere queries run (the points the clearance did not excuse).
+    pub fn collision_stats(&self, rod: usize) -> Option<cosserat_problem::CollisionStats> {
+        let touching = self.wall.as_ref()?.touching.get(rod).copied()?;
+        let read = self.wall_read.as_ref().filter(|_| touching)?;
+        let w = &read.stats[WALL_STATS * rod..WALL_STATS * (rod + 1)];
+        Some(cosserat_problem::CollisionStats {
+            max_penetration: f64::from(f32::from_bits(w[0])),
+            escaped_points: w[1] as usize,
+            contacts: w[2] as usize,
+            max_contacts: w[3] as usize,
+            steps: u64::from(w[4]),
+            swept_catches: u64::from(w[5]),
+            segment_contacts: u64::from(w[8]),
+            ..Default::default()
+        })
+    }
+
+    /// Sphere queries run for rod `rod` and queries whose tree walk overflowed its stack, as of
+    /// the last [`Self::read_state`].
+    pub fn wall_queries(&self, rod: usize) -> Option<(u64, u64)> {
+        let read = self.wall_read.as_ref()?;
+        let w = read.stats.get(WALL_STATS * rod..WALL_STATS * (rod + 1))?;
+        Some((u64::from(w[6]), u64::from(w[7])))
+    }
+
+    /// Rod `rod`'s points in contact with the wall at the last step before the last
+    /// [`Self::read_state`]: point, unit normal (into the lumen), and the wall's impulse on the
+    /// point over that step as a velocity change [m/s] (normal and friction).
+    pub fn wall_contacts(&self, rod: usize) -> Vec<(usize, [f32; 3], [f32; 3])> {
+        let (Some(read), Some(&(base, n))) = (self.wall_read.as_ref(), self.rods.get(rod)) else {
+            return Vec::new();
+        };
+        (0..=n as usize)
+            .filter_map(|i| {
+                let s = base as usize + i;
+                let [nx, ny, nz, on] = *read.contacts.get(2 * s)?;
+                let [ix, iy, iz, _] = *read.contacts.get(2 * s + 1)?;
+                (on > 0.5).then_some((i, [nx, ny, nz], [ix, iy, iz]))
+            })
+            .collect()
     }
 
     /// Replaces the point loads of rod `rod` from the next batch on. The kernel reads loads
@@ -994,6 +1152,25 @@ pub(crate) fn validate(
                 "rod {r}: state and parameter arrays do not match its {n} elements"
             )));
         }
+        if let (Some(w), Some(first)) = (&rod.wall, rods.iter().find_map(|r| r.wall.as_ref())) {
+            if !std::sync::Arc::ptr_eq(&w.collider, &first.collider) {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {r} touches another mesh than the rods before it; the GPU backend uploads one mesh per simulation"
+                )));
+            }
+            let ok = |x: f32| x.is_finite() && x >= 0.0;
+            let valid = ok(w.static_friction)
+                && ok(w.kinetic_friction)
+                && ok(w.margin)
+                && rod.params.radius.is_finite()
+                && rod.params.radius > 0.0;
+            if !valid {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {r}: wall contact needs a radius > 0 and finite friction and margin >= 0 (radius {}, friction {} / {}, margin {})",
+                    rod.params.radius, w.static_friction, w.kinetic_friction, w.margin
+                )));
+            }
+        }
         if let Some(l) = rod.loads.iter().find(|l| l.point > n) {
             return Err(GpuError::InvalidInput(format!(
                 "rod {r}: load on point {} of {}",
@@ -1003,6 +1180,29 @@ pub(crate) fn validate(
         }
     }
     Ok(())
+}
+
+/// A wall triangle as the `u32` words of its WGSL twin `WallTri` (`shaders/wall_contact.wgsl`).
+fn wall_words(t: &cosserat_collide::GpuWallTriangle) -> [u32; 40] {
+    let mut w = [0u32; 40];
+    let f = |x: f32| x.to_bits();
+    for k in 0..3 {
+        w[k] = f(t.a[k]);
+        w[4 + k] = f(t.b[k]);
+        w[8 + k] = f(t.c[k]);
+    }
+    w[3] = t.boundary;
+    w[7] = t.index;
+    w[11] = t.pad;
+    let rows = std::iter::once(&t.normal)
+        .chain(&t.edge_normals)
+        .chain(&t.vertex_normals);
+    for (i, row) in rows.enumerate() {
+        for k in 0..4 {
+            w[12 + 4 * i + k] = f(row[k]);
+        }
+    }
+    w
 }
 
 #[cfg(test)]

@@ -9,9 +9,9 @@ use cosserat_problem::stepper::{
     read_state_field, read_state_frames, unit_frames,
 };
 use cosserat_problem::{
-    Capabilities, Clock, CollisionStats, ContactSample, ControlError, CouplingStats, Divergence,
-    EndCondition, EndReaction, PointLoad, Snapshot, SolverSettings, StateField, StepError, Stepper,
-    StepperInfo, StiffSummary,
+    Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
+    Divergence, EndCondition, EndReaction, PointLoad, Snapshot, SolverSettings, StateField,
+    StepError, Stepper, StepperInfo, StiffSummary,
 };
 
 use crate::{GpuError, GpuField, GpuOptions, GpuRodInput, GpuSimulation, GpuSnapshot};
@@ -97,6 +97,12 @@ impl GpuStepper {
         })
     }
 
+    /// What the GPU stepper runs besides free rods: contact with one static mesh and the
+    /// introducer guide (on the single-workgroup path).
+    pub fn supported() -> Capabilities {
+        Capabilities::of(&[Capability::MeshContact, Capability::Guide])
+    }
+
     /// The simulation underneath, for what the trait does not cover (adapter, kernel path).
     pub fn simulation(&self) -> &GpuSimulation {
         &self.sim
@@ -117,7 +123,7 @@ impl Stepper for GpuStepper {
     }
 
     fn capabilities(&self) -> Capabilities {
-        Capabilities::NONE
+        Self::supported()
     }
 
     fn clock(&self) -> Clock {
@@ -307,11 +313,26 @@ impl Stepper for GpuStepper {
     fn contacts(&self, rod: usize, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {
         check_rod(rod, self.states.len())?;
         out.clear();
+        let dt = f64::from(self.settings.dt);
+        let masses = &self.params[rod].masses;
+        out.extend(
+            self.sim
+                .wall_contacts(rod)
+                .into_iter()
+                .map(|(point, n, impulse)| {
+                    let m = f64::from(masses[point]);
+                    ContactSample {
+                        point,
+                        normal: n.map(f64::from),
+                        force: impulse.map(|i| f64::from(i) * m / dt),
+                    }
+                }),
+        );
         Ok(())
     }
 
-    fn collision_stats(&self, _rod: usize) -> Option<CollisionStats> {
-        None
+    fn collision_stats(&self, rod: usize) -> Option<CollisionStats> {
+        self.sim.collision_stats(rod)
     }
 
     fn coupling_stats(&self) -> Option<CouplingStats> {

@@ -113,6 +113,8 @@ impl Case {
                 params: p.clone(),
                 ends: e.clone(),
                 loads: l.clone(),
+                wall: None,
+                guide: None,
             })
             .collect()
     }

@@ -56,6 +56,8 @@ fn rods() -> Vec<GpuRodInput> {
                 params,
                 ends: [EndCondition::clamped().driven(motion), EndCondition::free()],
                 loads: vec![PointLoad::new(n, Vec3::new(0.0, 0.0, 0.05))],
+                wall: None,
+                guide: None,
             }
         })
         .collect()

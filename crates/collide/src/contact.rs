@@ -422,7 +422,7 @@ impl MeshCollider {
     }
 
     /// Whether `feature` of the triangle in leaf-order slot `slot` lies on the mesh's boundary.
-    fn on_boundary(&self, slot: usize, feature: Feature) -> bool {
+    pub(crate) fn on_boundary(&self, slot: usize, feature: Feature) -> bool {
         match feature {
             Feature::Face => false,
             Feature::Edge(k) => self.edge_on_boundary[slot][k as usize],

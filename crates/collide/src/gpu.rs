@@ -8,7 +8,7 @@
 //! leaf's `first..first + count` indexes the triangle array directly).
 
 use crate::bvh::BvhNode;
-use crate::contact::MeshCollider;
+use crate::contact::{Feature, MeshCollider};
 
 /// One triangle in leaf order, 48 bytes: three `f32` corners, each padded to 16 bytes, the first
 /// pad holding the original triangle index.
@@ -65,5 +65,75 @@ impl MeshCollider {
             triangles,
             depth: self.bvh().depth() as u32,
         }
+    }
+}
+
+/// One triangle in leaf order with what a contact query needs on the GPU, 160 bytes of `f32`
+/// and `u32` rows: the corners, the unit face normal (into the lumen), and the pseudo-normals of
+/// its three edges and three corners ([`crate::contact`]: the normal of the feature holding the
+/// closest point decides the side and the push).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuWallTriangle {
+    /// Corner a.
+    pub a: [f32; 3],
+    /// Which edges (bits 0–2, edge `k` from corner `k` to `k + 1`) and corners (bits 3–5) lie
+    /// on the mesh's boundary; bit 6: the triangle borders a ridge (an edge where the lumen is
+    /// not convex, where an element can come nearer the wall between its points than at them).
+    pub boundary: u32,
+    /// Corner b.
+    pub b: [f32; 3],
+    /// Index of this triangle in the source mesh.
+    pub index: u32,
+    /// Corner c.
+    pub c: [f32; 3],
+    /// Padding (0).
+    pub pad: u32,
+    /// Unit face normal (`w` = 0).
+    pub normal: [f32; 4],
+    /// Pseudo-normals of edges 0, 1, 2 (`w` = 0).
+    pub edge_normals: [[f32; 4]; 3],
+    /// Pseudo-normals of corners 0, 1, 2 (`w` = 0).
+    pub vertex_normals: [[f32; 4]; 3],
+}
+
+impl MeshCollider {
+    /// The triangles in leaf order with their pseudo-normals and boundary bits, for contact
+    /// queries on the GPU against [`Self::to_gpu`]'s nodes.
+    pub fn wall_triangles(&self) -> Vec<GpuWallTriangle> {
+        let f3 = |v: nalgebra::Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+        let f4 = |v: nalgebra::Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+        self.bvh()
+            .tri_indices()
+            .iter()
+            .enumerate()
+            .map(|(slot, &t)| {
+                let [a, b, c] = self.mesh().triangle(t as usize);
+                let mut boundary = 0u32;
+                for k in 0..3u8 {
+                    if self.on_boundary(slot, Feature::Edge(k)) {
+                        boundary |= 1 << k;
+                    }
+                    if self.on_boundary(slot, Feature::Vertex(k)) {
+                        boundary |= 1 << (3 + k);
+                    }
+                }
+                if self.ridges[slot] {
+                    boundary |= 1 << 6;
+                }
+                GpuWallTriangle {
+                    a: f3(a),
+                    boundary,
+                    b: f3(b),
+                    index: t,
+                    c: f3(c),
+                    pad: 0,
+                    normal: f4(self.pseudo_normal(slot, Feature::Face)),
+                    edge_normals: [0, 1, 2].map(|k| f4(self.pseudo_normal(slot, Feature::Edge(k)))),
+                    vertex_normals: [0, 1, 2]
+                        .map(|k| f4(self.pseudo_normal(slot, Feature::Vertex(k)))),
+                }
+            })
+            .collect()
     }
 }

@@ -891,18 +891,34 @@ fn cpu_stepper<T: Real>(
 fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Stepper>, BuildError> {
     require(
         "gpu explicit",
-        Capabilities::NONE,
+        cosserat_backend_gpu::GpuStepper::supported(),
         needs,
         "use --backend cpu",
     )?;
     let rods = cpu_rods::<f32>(b)?;
     let inputs = rods
         .into_iter()
-        .map(|r| cosserat_backend_gpu::GpuRodInput {
-            state: r.state,
-            params: r.params,
-            ends: r.ends,
-            loads: r.loads,
+        .map(|r| {
+            let wall = r.mesh_settings().map(|m| cosserat_backend_gpu::GpuWall {
+                collider: m.collider.clone(),
+                static_friction: m.friction.static_coefficient as f32,
+                kinetic_friction: m.friction.kinetic_coefficient as f32,
+                margin: m.margin as f32,
+            });
+            let guide = r.guide().map(|g| cosserat_backend_gpu::GpuGuide {
+                origin: g.origin().into(),
+                axis: g.axis().into(),
+                length: g.length(),
+                clearance: g.clearance(),
+            });
+            cosserat_backend_gpu::GpuRodInput {
+                state: r.state,
+                params: r.params,
+                ends: r.ends,
+                loads: r.loads,
+                wall,
+                guide,
+            }
         })
         .collect();
     let stepper = cosserat_backend_gpu::GpuStepper::new(

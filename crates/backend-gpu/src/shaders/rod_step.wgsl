@@ -12,6 +12,14 @@
 //   CLAMP         clamped ends: a clamp frame per clamped end (state, in `clamps`) turned by the
 //                 end's prescribed angular velocity, acting on the rod's end frame through its
 //                 bend–twist node (cosserat_model::rod::EndNode)
+//   MESH          contact with a static triangle mesh (wall_contact.wgsl): points detected once
+//                 per step (swept test, then sphere query unless the point's clearance from the
+//                 wall has not run out), each contact resolved with Coulomb friction after every
+//                 distance sweep, as the CPU's mesh_contact.rs and ContactSet (workgroup layout
+//                 of the single-workgroup path only)
+//   GUIDE         a straight introducer: the points from 1 up to the first one outside it are
+//                 held on its axis before the sweeps, their velocities along it after them
+//                 (backend-cpu guide.rs; workgroup layout of the single-workgroup path only)
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -133,6 +141,16 @@ struct Clamp {
     e: vec4<f32>,
 }
 
+// What a rod touches (MESH, GUIDE): `wall` = (static friction, kinetic friction, margin,
+// radius); the guide's origin and length, axis and clearance; `on` = (has a wall, has a guide,
+// contact sweeps when there are no distance sweeps, 0).
+struct Touch {
+    wall: vec4<f32>,
+    guide_o: vec4<f32>,
+    guide_a: vec4<f32>,
+    on: vec4<u32>,
+}
+
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<uniform> chunk: Chunk;
 @group(0) @binding(2) var<storage, read> slots: array<Slot>;
@@ -152,6 +170,29 @@ struct Clamp {
 // Read at the start of a dispatch and written at its end only by the thread that steps the
 // end frame in the item that owns it, so one copy serves every path.
 @group(0) @binding(17) var<storage, read_write> clamps: array<Clamp>;
+//#endif
+//#if MESH
+@group(0) @binding(20) var<storage, read> touch: array<Touch>;
+// Per rod, WALL_STATS words: 0 largest penetration (f32 bits), 1 most escaped points in a step,
+// 2 contacts at the last step, 3 most contacts in a step, 4 steps with detection, 5 swept
+// catches, 6 sphere queries, 7 queries whose tree walk overflowed its stack, 8 ridge (segment)
+// contacts.
+@group(0) @binding(21) var<storage, read_write> wall_stats: array<atomic<u32>>;
+// Per slot, two vec4: the contact's normal (w 1 in contact, 0 not) and the impulse the wall gave
+// the point in the last step as a velocity change (normal and friction).
+@group(0) @binding(22) var<storage, read_write> contact_out: array<vec4<f32>>;
+// Contacts and escaped points of the step, double-buffered by the step's parity.
+var<workgroup> wg_count: array<atomic<u32>, 4>;
+// Each thread's first and last point's own gap and clearance, for the elements between threads.
+var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
+//#else
+//#if GUIDE
+@group(0) @binding(20) var<storage, read> touch: array<Touch>;
+//#endif
+//#endif
+//#if GUIDE
+// The first point (from 1) outside the guide, double-buffered by the step's parity.
+var<workgroup> wg_guide: array<atomic<u32>, 2>;
 //#endif
 //#if PERSTEP
 @group(0) @binding(11) var<storage, read> src_pos: array<vec4<f32>>;
@@ -202,6 +243,43 @@ var<workgroup> wg_stop: u32;
 
 const NONE: u32 = 0xffffffffu;
 const XP: u32 = EPT + 2u;
+const WALL_STATS: u32 = 9u;
+// A point with no contact queries the tree out to this multiple of its reach, so that its
+// clearance lets it skip the next queries until it has moved that far.
+const WALL_LOOK: f32 = 2.0;
+
+//#if MESH
+struct Resolved {
+    v: vec3<f32>,
+    ln: f32,
+    lt: vec3<f32>,
+}
+
+// One contact resolved on its point's velocity `v` (constraints ContactSet::resolve_all): the
+// accumulated normal impulse `ln` clamped to a push that ends the step at the wall (`rate`: the
+// gap over the step), then the accumulated friction impulse `lt` that would stop the sliding,
+// kept inside the static cone, else scaled onto the kinetic cone. Impulses are velocity changes.
+fn resolve_contact(v: vec3<f32>, n: vec3<f32>, rate: f32, ln: f32, lt: vec3<f32>, mu_s: f32, mu_k: f32) -> Resolved {
+    let acc = max(ln + (-rate - dot(n, v)), 0.0);
+    let x = v + n * (acc - ln);
+    let want = lt - (x - n * dot(n, x));
+    let norm = length(want);
+    let friction = want * select(mu_k * acc / norm, 1.0, norm <= mu_s * acc);
+    return Resolved(x + (friction - lt), acc, friction);
+}
+//#endif
+
+//#if GUIDE
+// The lateral offset of `p` from the guide's axis, or w = -1 when `p` is outside the guide (past
+// its end or farther from the axis than the clearance).
+fn guide_offset(t: Touch, p: vec3<f32>) -> vec4<f32> {
+    let rel = p - t.guide_o.xyz;
+    let along = dot(rel, t.guide_a.xyz);
+    let lateral = rel - t.guide_a.xyz * along;
+    let inside = along < t.guide_o.w && dot(lateral, lateral) <= t.guide_a.w * t.guide_a.w;
+    return vec4<f32>(lateral, select(-1.0, 1.0, inside));
+}
+//#endif
 
 fn key_of(rel_step: u32, local_elem: u32, code: u32) -> u32 {
     return (rel_step << 16u) | (local_elem << 2u) | code;
@@ -380,6 +458,55 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
 //#endif
 
+//#if MESH
+    // Wall contact: per point, the contact of this step (normal, gap, accumulated normal and
+    // friction impulses), the point's inverse mass, and where its clearance was measured with
+    // its square (-1: query next step with the look-ahead, -2: it touched, query with the reach).
+    let tc = touch[it.rod];
+    let wall_on = tc.on.x != 0u;
+    let mu_s = tc.wall.x;
+    let mu_k = tc.wall.y;
+    let margin = tc.wall.z;
+    let radius = tc.wall.w;
+    let reach = radius + margin;
+    var ct_on: array<bool, EPT>;
+    var ct_n: array<vec3<f32>, EPT>;
+    var ct_gap: array<f32, EPT>;
+    var ct_ln: array<f32, EPT>;
+    var ct_lt: array<vec3<f32>, EPT>;
+    var pw: array<f32, EPT>;
+    var cl_at: array<vec3<f32>, EPT>;
+    var cl2: array<f32, EPT>;
+//#for e 0 EPT
+    {
+        let gp = it.w0 + b0 + {e};
+        ct_on[{e}] = false;
+        cl2[{e}] = -1.0;
+        pw[{e}] = 0.0;
+        if gp < it.w1 {
+            pw[{e}] = slots[it.base + gp].a.y;
+        }
+    }
+//#endfor
+    var queries = 0u;
+    var swept = 0u;
+    var ridges = 0u;
+    var overflows = 0u;
+    var max_pen = 0.0;
+    if lid == 0u {
+        for (var k = 0u; k < 4u; k++) {
+            atomicStore(&wg_count[k], 0u);
+        }
+    }
+//#endif
+//#if GUIDE
+    let tg = touch[it.rod];
+    let guide_on = tg.on.y != 0u;
+    if lid == 0u {
+        atomicStore(&wg_guide[0], NONE);
+        atomicStore(&wg_guide[1], NONE);
+    }
+//#endif
 //#if !SUBGROUP
     if lid == 0u {
         atomicStore(&wg_key, NONE);
@@ -779,6 +906,223 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#endfor
 
+//#if GUIDE
+        // The introducer holds the points from 1 up to the first one outside it on its axis,
+        // moving along it (backend-cpu guide.rs). Every thread applies it to its halo copies
+        // too, from the same values, as its neighbour does to its own points.
+        var guide_end = 0u;
+        {
+            let gpar = s & 1u;
+            if lid == 0u {
+                atomicStore(&wg_guide[gpar ^ 1u], NONE);
+            }
+            if guide_on {
+//#for e 0 EPT
+                {
+                    let gp = it.w0 + b0 + {e};
+                    if gp >= 1u && gp < it.w1 && guide_offset(tg, rx[{e+1}]).w < 0.0 {
+                        atomicMin(&wg_guide[gpar], gp);
+                    }
+                }
+//#endfor
+            }
+            workgroupBarrier();
+            if guide_on {
+                guide_end = atomicLoad(&wg_guide[gpar]);
+            }
+//#for x 0 XP
+            {
+                if b0 + {x} >= 2u {
+                    let gp = it.w0 + b0 + {x} - 1u;
+                    if gp < guide_end && gp < it.w1 {
+                        rx[{x}] -= guide_offset(tg, rx[{x}]).xyz;
+                        vx[{x}] = tg.guide_a.xyz * dot(vx[{x}], tg.guide_a.xyz);
+                    }
+                }
+            }
+//#endfor
+//#for e 0 EPT
+            r[{e}] = rx[{e+1}];
+//#endfor
+        }
+//#endif
+//#if MESH
+        // Wall contacts of this step, from where the points start it and how they would move
+        // (backend-cpu mesh_contact.rs): a point whose motion crosses into the wall beyond half
+        // its reach is put back on the wall it crossed; any other is queried as a sphere unless
+        // it is still within its clearance.
+        let cpar = s & 1u;
+        if wall_on {
+            if lid == 0u {
+                if s > 0u {
+                    let c = atomicExchange(&wg_count[(cpar ^ 1u) * 2u], 0u);
+                    let esc = atomicExchange(&wg_count[(cpar ^ 1u) * 2u + 1u], 0u);
+                    atomicStore(&wall_stats[it.rod * WALL_STATS + 2u], c);
+                    atomicMax(&wall_stats[it.rod * WALL_STATS + 3u], c);
+                    atomicMax(&wall_stats[it.rod * WALL_STATS + 1u], esc);
+                }
+                atomicAdd(&wall_stats[it.rod * WALL_STATS + 4u], 1u);
+            }
+            var n_escaped = 0u;
+//#for e 0 EPT
+            {
+                let gp = it.w0 + b0 + {e};
+                ct_on[{e}] = false;
+                ct_ln[{e}] = 0.0;
+                ct_lt[{e}] = vec3<f32>(0.0);
+                if gp < it.w1 {
+                    let p = rx[{e+1}];
+                    let dp = vx[{e+1}] * h;
+                    var crossed = false;
+                    if dot(dp, dp) > 0.25 * reach * reach {
+                        let cr = wall_first_crossing(p, dp);
+                        if cr.f >= 0.0 {
+                            let wn = wall_tris[cr.slot].n.xyz;
+                            let ahead = dot(p - (p + dp * cr.f), wn);
+                            let gap = ahead - radius;
+                            n_escaped += select(0u, 1u, ahead < 0.0);
+                            max_pen = max(max_pen, -gap);
+                            swept += 1u;
+                            cl2[{e}] = -1.0;
+                            ct_on[{e}] = true;
+                            ct_n[{e}] = wn;
+                            ct_gap[{e}] = gap;
+                            crossed = true;
+                        }
+                    }
+                    let moved = p - cl_at[{e}];
+                    if !crossed && !(dot(moved, moved) < cl2[{e}]) {
+                        queries += 1u;
+                        let hq = wall_query(p, reach, select(WALL_LOOK * reach, reach, cl2[{e}] < -1.5));
+                        overflows += select(0u, 1u, hq.overflow);
+                        if hq.count == 0u {
+                            // Rounding of the distances must not open a gap.
+                            let clear = sqrt(hq.near2) - reach * 1.001;
+                            cl2[{e}] = select(-1.0, clear * clear, clear > 0.0);
+                            cl_at[{e}] = p;
+                        } else {
+                            cl2[{e}] = -2.0;
+                            n_escaped += select(0u, 1u, hq.escaped);
+                            if dot(hq.dir, hq.dir) > 0.0 {
+                                // Depths are measured against the inflated sphere.
+                                let pen = hq.depth - margin;
+                                max_pen = max(max_pen, pen);
+                                ct_on[{e}] = true;
+                                ct_n[{e}] = hq.dir;
+                                ct_gap[{e}] = -pen;
+                            }
+                        }
+                    }
+                }
+            }
+//#endfor
+            if n_escaped > 0u {
+                atomicAdd(&wg_count[cpar * 2u + 1u], n_escaped);
+            }
+        }
+        // Elements nearer a ridge of the wall between their points than at them: each point's
+        // own gap (its contact's, else the margin) and clearance beyond its reach, shared with
+        // the neighbours (mesh_contact.rs `segment_contacts`).
+        var ogx: array<f32, XP>;
+        var cex: array<f32, XP>;
+//#for e 0 EPT
+        {
+            ogx[{e+1}] = select(margin, ct_gap[{e}], ct_on[{e}]);
+            cex[{e+1}] = 0.0;
+            if cl2[{e}] > 0.0 {
+                cex[{e+1}] = max(sqrt(cl2[{e}]) - length(rx[{e+1}] - cl_at[{e}]), 0.0);
+            }
+        }
+//#endfor
+        sh_g[2u * lid] = vec2<f32>(ogx[1], cex[1]);
+        sh_g[2u * lid + 1u] = vec2<f32>(ogx[EPT], cex[EPT]);
+        workgroupBarrier();
+        ogx[0] = margin;
+        cex[0] = 0.0;
+        ogx[EPT + 1u] = margin;
+        cex[EPT + 1u] = 0.0;
+        if has_left {
+            let g = sh_g[2u * lid - 1u];
+            ogx[0] = g.x;
+            cex[0] = g.y;
+        }
+        if has_right {
+            let g = sh_g[2u * lid + 2u];
+            ogx[EPT + 1u] = g.x;
+            cex[EPT + 1u] = g.y;
+        }
+        if wall_on {
+            // Element x joins extended points x and x + 1 (local element b0 - 1 + x); each
+            // thread tests the elements of its points, the boundary ones as its neighbours do.
+            var seg_on: array<bool, XP>;
+            var seg_n: array<vec3<f32>, XP>;
+            var seg_w: array<vec3<f32>, XP>;
+            var n_ridges = 0u;
+//#for x 0 EPT+1
+            {
+                seg_on[{x}] = false;
+                let ge = it.w0 + b0 + {x} - 1u;
+                if b0 + {x} >= 1u && ge < end_elem {
+                    let a = rx[{x}];
+                    let d = rx[{x+1}] - a;
+                    let clear = cex[{x}] + cex[{x+1}];
+                    // Only a wall nearer than both points' own, by 2 % of the radius, makes a
+                    // ridge contact.
+                    let limit = min(ogx[{x}], ogx[{x+1}]) + radius * 0.98;
+                    if clear * clear < dot(d, d) && limit > 0.0 {
+                        let sh = wall_segment_nearest(a, d, limit);
+                        if sh.found && sh.fraction >= 1e-6 && sh.fraction <= 1.0 - 1e-6 {
+                            seg_on[{x}] = true;
+                            seg_n[{x}] = sh.normal;
+                            seg_w[{x}] = sh.on_wall;
+                            if {x} >= 1u {
+                                n_ridges += 1u;
+                                max_pen = max(max_pen, radius - sh.signed_distance);
+                            }
+                        }
+                    }
+                }
+            }
+//#endfor
+            // A point between ridge elements takes their planes' contacts as one: the mean of
+            // their normals and the lesser gap, where nearer than its own.
+            var n_contacts = 0u;
+//#for e 0 EPT
+            {
+                var sum = vec3<f32>(0.0);
+                var gap = 3.0e38;
+                var any = false;
+                if seg_on[{e}] {
+                    let eg = dot(seg_n[{e}], rx[{e+1}] - seg_w[{e}]) - radius;
+                    if eg < ogx[{e+1}] {
+                        sum += seg_n[{e}];
+                        gap = min(gap, eg);
+                        any = true;
+                    }
+                }
+                if seg_on[{e+1}] {
+                    let eg = dot(seg_n[{e+1}], rx[{e+1}] - seg_w[{e+1}]) - radius;
+                    if eg < ogx[{e+1}] {
+                        sum += seg_n[{e+1}];
+                        gap = min(gap, eg);
+                        any = true;
+                    }
+                }
+                if any && it.w0 + b0 + {e} < it.w1 {
+                    ct_on[{e}] = true;
+                    ct_n[{e}] = normalize(sum);
+                    ct_gap[{e}] = gap;
+                }
+                n_contacts += select(0u, 1u, ct_on[{e}]);
+            }
+//#endfor
+            ridges += n_ridges;
+            if n_contacts > 0u {
+                atomicAdd(&wg_count[cpar * 2u], n_contacts);
+            }
+        }
+//#endif
+
 //#if !EXTENSIBLE
         // Distance constraints, red–black, as the CPU's solver: d = e + h (v_b - v_a) with e the
         // element vector at the start of the step, s = (l0 - |d|) / (w_a + w_b) / h / |d|.
@@ -881,7 +1225,44 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endif
             }
 //#endfor
+//#if MESH
+            // Each contact once; kinematic points are left alone.
+//#for e 0 EPT
+            if ct_on[{e}] && pw[{e}] > 0.0 {
+                let rc = resolve_contact(vx[{e+1}], ct_n[{e}], ct_gap[{e}] * inv_h, ct_ln[{e}], ct_lt[{e}], mu_s, mu_k);
+                vx[{e+1}] = rc.v;
+                ct_ln[{e}] = rc.ln;
+                ct_lt[{e}] = rc.lt;
+            }
+//#endfor
+//#endif
         }
+//#else
+//#if MESH
+        // Without distance sweeps the contacts are still solved, as on the CPU.
+        for (var iter = 0u; iter < tc.on.z; iter++) {
+            // Each contact once; kinematic points are left alone.
+//#for e 0 EPT
+            if ct_on[{e}] && pw[{e}] > 0.0 {
+                let rc = resolve_contact(vx[{e+1}], ct_n[{e}], ct_gap[{e}] * inv_h, ct_ln[{e}], ct_lt[{e}], mu_s, mu_k);
+                vx[{e+1}] = rc.v;
+                ct_ln[{e}] = rc.ln;
+                ct_lt[{e}] = rc.lt;
+            }
+//#endfor
+        }
+//#endif
+//#endif
+//#if GUIDE
+        // Guided points keep only their velocity along the axis.
+//#for e 0 EPT
+        {
+            let gp = it.w0 + b0 + {e};
+            if gp >= 1u && gp < guide_end && gp < it.w1 {
+                vx[{e+1}] = tg.guide_a.xyz * dot(vx[{e+1}], tg.guide_a.xyz);
+            }
+        }
+//#endfor
 //#endif
 
         // Integrate positions and frames: r += h v, q <- normalise(q + q ⊗ (0, h ω / 2)).
@@ -1006,6 +1387,45 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#else
     workgroupBarrier();
     let first = atomicLoad(&wg_key);
+//#endif
+//#if MESH
+    // The counts of the last step, this thread's totals, and each point's last contact.
+    if wall_on {
+        if lid == 0u && steps_done > 0u {
+            let lp = ((steps_done - 1u) & 1u) * 2u;
+            let c = atomicLoad(&wg_count[lp]);
+            atomicStore(&wall_stats[it.rod * WALL_STATS + 2u], c);
+            atomicMax(&wall_stats[it.rod * WALL_STATS + 3u], c);
+            atomicMax(&wall_stats[it.rod * WALL_STATS + 1u], atomicLoad(&wg_count[lp + 1u]));
+        }
+        if max_pen > 0.0 {
+            atomicMax(&wall_stats[it.rod * WALL_STATS], bitcast<u32>(max_pen));
+        }
+        if swept > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 5u], swept);
+        }
+        if queries > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 6u], queries);
+        }
+        if overflows > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 7u], overflows);
+        }
+        if ridges > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 8u], ridges);
+        }
+        if steps_done > 0u {
+//#for e 0 EPT
+            {
+                let gp = it.w0 + b0 + {e};
+                if gp < it.w1 {
+                    let sl = it.base + gp;
+                    contact_out[2u * sl] = vec4<f32>(ct_n[{e}], select(0.0, 1.0, ct_on[{e}]));
+                    contact_out[2u * sl + 1u] = vec4<f32>(select(vec3<f32>(0.0), ct_n[{e}] * ct_ln[{e}] + ct_lt[{e}], ct_on[{e}]), 0.0);
+                }
+            }
+//#endfor
+        }
+    }
 //#endif
     if my_key != NONE && my_key == first {
         atomicStore(&status[item_index * 4u + 1u], it.w0 + ((first >> 2u) & 0x3fffu));
