@@ -217,6 +217,7 @@ impl<T: Real> RodMeshContact<T> {
                 self.has_near[i] = true;
                 from_anchor = 0.0;
             }
+            self.stats.queries += 1;
             let (r, nearest) =
                 collider.query_sphere_among(&p, reach, i as u32, &self.near[i], &mut self.found);
             if r.count == 0 {

@@ -339,6 +339,15 @@ impl GpuSimulation {
         Ok(bytes)
     }
 
+    /// Makes every point query the wall at its next step: a clearance measured before the state
+    /// was replaced says nothing about the new state.
+    fn forget_clearances(&self) {
+        if let Some(w) = &self.wall {
+            let zeros = vec![0u8; w.clearance.size() as usize];
+            self.gpu.queue.write_buffer(&w.clearance, 0, &zeros);
+        }
+    }
+
     /// Bytes of the status words.
     fn status_bytes(&self) -> usize {
         16 * self.plan.items.len()
@@ -452,6 +461,7 @@ impl GpuSimulation {
     /// followed it.
     pub fn restore(&mut self, snapshot: &GpuSnapshot) -> Result<(), GpuError> {
         self.ensure_idle()?;
+        self.forget_clearances();
         let bytes = (16 * self.slots) as usize;
         let clamps_at = 4 * bytes + self.status_bytes();
         if snapshot.state.len() != clamps_at + self.clamp_bytes()
@@ -493,6 +503,7 @@ impl GpuSimulation {
         values: &[[f32; 4]],
     ) -> Result<(), GpuError> {
         self.ensure_idle()?;
+        self.forget_clearances();
         let Some(&(base, n)) = self.rods.get(rod) else {
             return Err(GpuError::InvalidInput(format!("no rod {rod}")));
         };

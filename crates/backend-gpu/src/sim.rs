@@ -102,6 +102,9 @@ pub(crate) struct WallBuffers {
     /// Per slot, two `vec4`: the last step's contact normal (and whether there is one) and the
     /// wall's impulse as a velocity change.
     pub(crate) contacts: wgpu::Buffer,
+    /// Per slot, where the point's clearance from the wall was measured and its square
+    /// (zeros: unknown), kept from one dispatch to the next.
+    pub(crate) clearance: wgpu::Buffer,
     /// Which rods touch the wall.
     pub(crate) touching: Vec<bool>,
 }
@@ -468,6 +471,7 @@ impl GpuSimulation {
                             storage,
                         ),
                         contacts: init("contacts", &vec![0u8; 32 * slots_n], storage),
+                        clearance: init("clearance", &vec![0u8; 16 * slots_n], storage),
                         touching: rods.iter().map(|r| r.wall.is_some()).collect(),
                     },
                 ))
@@ -545,7 +549,7 @@ impl GpuSimulation {
             entries.push(rw(17));
         }
         if has_mesh {
-            entries.extend([ro(18), ro(19), rw(21), rw(22)]);
+            entries.extend([ro(18), ro(19), rw(21), rw(22), rw(23)]);
         }
         if has_touch {
             entries.push(ro(20));
@@ -668,7 +672,13 @@ impl GpuSimulation {
                 });
             }
             if let Some((nodes, tris, w)) = &wall_bufs {
-                for (binding, b) in [(18, nodes), (19, tris), (21, &w.stats), (22, &w.contacts)] {
+                for (binding, b) in [
+                    (18, nodes),
+                    (19, tris),
+                    (21, &w.stats),
+                    (22, &w.contacts),
+                    (23, &w.clearance),
+                ] {
                     e.push(wgpu::BindGroupEntry {
                         binding,
                         resource: whole(b),
@@ -787,8 +797,7 @@ impl GpuSimulation {
 
     /// Rod `rod`'s contact statistics as of the last [`Self::read_state`] (`None` for a rod
     /// that touches no mesh, or before the first read): the CPU's `CollisionStats`, with
-    /// `detection_seconds` 0 (detection is not timed on its own on the GPU) and `queries` the
-    /// sphere queries run (the points the clearance did not excuse).
+    /// `detection_seconds` 0 (detection is not timed on its own on the GPU).
     pub fn collision_stats(&self, rod: usize) -> Option<cosserat_problem::CollisionStats> {
         let touching = self.wall.as_ref()?.touching.get(rod).copied()?;
         let read = self.wall_read.as_ref().filter(|_| touching)?;
@@ -801,6 +810,7 @@ impl GpuSimulation {
             steps: u64::from(w[4]),
             swept_catches: u64::from(w[5]),
             segment_contacts: u64::from(w[8]),
+            queries: u64::from(w[6]),
             ..Default::default()
         })
     }

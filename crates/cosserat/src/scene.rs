@@ -82,6 +82,8 @@ pub struct SceneFile {
     pub rod_contact: Option<RodContactSection>,
     /// Filtering of the reaction force reported at held ends.
     pub haptics: Option<HapticsSection>,
+    /// Independent copies of the scene's rods stepped together.
+    pub batch: Option<BatchSection>,
     /// How `cosserat render` (and `cosserat run --render`) draws the run; the simulation
     /// ignores it.
     pub render: Option<RenderSection>,
@@ -135,6 +137,16 @@ pub struct RodContactSection {
     pub margin: Option<f64>,
     /// Segments per broad-phase bounding sphere (default 4).
     pub segments_per_sphere: Option<usize>,
+}
+
+/// `[batch]`: independent copies of the scene's rods (with their ends, loads, guides and
+/// bindings), sharing the environment, stepped together (one GPU dispatch; in parallel on the
+/// CPU with rayon). Copy `c` holds rods `c · k .. (c + 1) · k`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BatchSection {
+    /// Number of copies (at least 1).
+    pub copies: usize,
 }
 
 /// `[haptics]`.
@@ -1001,6 +1013,19 @@ impl Checker<'_> {
         }
         if let Some(h) = &scene.haptics {
             b = b.reaction_cutoff_hz(self.positive("haptics.cutoff_hz", h.cutoff_hz)?);
+        }
+        if let Some(batch) = &scene.batch {
+            if batch.copies == 0 {
+                return Err(self.invalid("batch.copies", 0, "expected at least 1"));
+            }
+            if batch.copies > 1 && scene.rod_contact.is_some() {
+                return Err(self.invalid(
+                    "batch.copies",
+                    batch.copies,
+                    "copies share one space, so with [rod_contact] their rods would touch each other",
+                ));
+            }
+            b = b.copies(batch.copies);
         }
         Ok(b)
     }

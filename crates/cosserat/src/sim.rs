@@ -364,6 +364,9 @@ pub struct SimulationBuilder {
     reaction_limit: f64,
     /// Whether a run whose energy grows beyond the work done on it stops as diverged.
     energy_check: bool,
+    /// Independent copies of the rods (and their bindings) stepped together; 1: the scene as
+    /// given.
+    copies: usize,
 }
 
 impl Default for SimulationBuilder {
@@ -391,6 +394,7 @@ impl SimulationBuilder {
             direct_constraints: false,
             reaction_limit: 1000.0,
             energy_check: true,
+            copies: 1,
         }
     }
 
@@ -553,6 +557,55 @@ impl SimulationBuilder {
 
     /// Checks everything and builds the simulation.
     pub fn build(self) -> Result<Simulation, BuildError> {
+        let this = self.expand_copies()?;
+        this.build_expanded()
+    }
+
+    /// Steps `n` independent copies of the scene's rods (with their bindings, ends, loads and
+    /// guides) together, sharing the environment: copy `c` holds rods `c · k .. (c + 1) · k` of
+    /// the `k` the scene describes, and every report is per rod, so per copy. On the GPU the
+    /// copies are one dispatch (one workgroup each); on the CPU with rayon they are stepped in
+    /// parallel. Copies never touch each other, so rod–rod contact is refused with more than
+    /// one copy. `n` = 0 is refused when the simulation is built.
+    pub fn copies(mut self, n: usize) -> Self {
+        self.copies = n;
+        self
+    }
+
+    /// This builder with its copies laid out as rods and bindings.
+    fn expand_copies(mut self) -> Result<Self, BuildError> {
+        let n = self.copies;
+        if n == 0 {
+            return Err(BuildError::Setting(
+                "batch.copies = 0: a batch needs at least one copy".into(),
+            ));
+        }
+        if n == 1 {
+            return Ok(self);
+        }
+        if self.rod_contact.is_some() {
+            return Err(BuildError::Setting(format!(
+                "batch.copies = {n} with rod contact: copies are independent and share one space, so their rods would touch each other; use one copy per simulation"
+            )));
+        }
+        let k = self.rods.len();
+        let rods = std::mem::take(&mut self.rods);
+        self.rods = (0..n).flat_map(|_| rods.iter().cloned()).collect();
+        let bindings = std::mem::take(&mut self.bindings);
+        self.bindings = (0..n)
+            .flat_map(|c| {
+                bindings.iter().map(move |b| BindingSpec {
+                    inner: b.inner + c * k,
+                    outer: b.outer + c * k,
+                    ..*b
+                })
+            })
+            .collect();
+        self.copies = 1;
+        Ok(self)
+    }
+
+    fn build_expanded(self) -> Result<Simulation, BuildError> {
         let s = &self.settings;
         if !(s.dt.is_finite() && s.dt > 0.0) {
             return Err(BuildError::Setting(format!(

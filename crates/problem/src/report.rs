@@ -47,6 +47,9 @@ pub struct CollisionStats {
     /// sphere (a ridge or a vertex of the wall between them): each gives its two points a
     /// contact on the plane across the ridge's normal (counted per detection).
     pub segment_contacts: u64,
+    /// Sphere queries run against the mesh (points whose clearance from the wall had run out),
+    /// counted per detection: what the detection cost, next to `steps` times the points.
+    pub queries: u64,
 }
 
 /// Measurements of the coupling since the start.

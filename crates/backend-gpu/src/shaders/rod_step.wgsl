@@ -181,6 +181,9 @@ struct Touch {
 // Per slot, two vec4: the contact's normal (w 1 in contact, 0 not) and the impulse the wall gave
 // the point in the last step as a velocity change (normal and friction).
 @group(0) @binding(22) var<storage, read_write> contact_out: array<vec4<f32>>;
+// Per slot, where the point's clearance was measured and its square (zeros: unknown), from one
+// dispatch to the next.
+@group(0) @binding(23) var<storage, read_write> clearance: array<vec4<f32>>;
 // Contacts and escaped points of the step, double-buffered by the step's parity.
 var<workgroup> wg_count: array<atomic<u32>, 4>;
 // Each thread's first and last point's own gap and clearance, for the elements between threads.
@@ -485,6 +488,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         pw[{e}] = 0.0;
         if gp < it.w1 {
             pw[{e}] = slots[it.base + gp].a.y;
+            let c = clearance[it.base + gp];
+            cl_at[{e}] = c.xyz;
+            cl2[{e}] = c.w;
         }
     }
 //#endfor
@@ -1421,6 +1427,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     let sl = it.base + gp;
                     contact_out[2u * sl] = vec4<f32>(ct_n[{e}], select(0.0, 1.0, ct_on[{e}]));
                     contact_out[2u * sl + 1u] = vec4<f32>(select(vec3<f32>(0.0), ct_n[{e}] * ct_ln[{e}] + ct_lt[{e}], ct_on[{e}]), 0.0);
+                    clearance[sl] = vec4<f32>(cl_at[{e}], cl2[{e}]);
                 }
             }
 //#endfor

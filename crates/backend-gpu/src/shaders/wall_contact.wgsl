@@ -58,7 +58,8 @@ struct WallHit {
     count: u32,
     // The centre is behind the nearest triangle's feature, not at an opening.
     escaped: bool,
-    // Squared distance of the nearest triangle tested (a lower bound where its plane was far).
+    // A lower bound of the squared distance to every triangle: the nearest tested (its plane's
+    // distance where that was beyond `look`), or the nearest box the walk did not enter.
     near2: f32,
     // The stack overflowed (a tree deeper than WALL_STACK): the answer is incomplete.
     overflow: bool,
@@ -131,11 +132,13 @@ fn feature_on_boundary(t: WallTri, feature: u32) -> bool {
 }
 
 // The sphere of radius `reach` at `p` against the wall, the tree walked out to `look` (at least
-// `reach`) so that `near2` bounds the distance to every triangle from below up to `look`: a point
-// with no contact is clear of the wall by at least sqrt(min(near2, look^2)) - reach.
+// `reach`) so that `near2` bounds the distance to every triangle from below: a point with no
+// contact is clear of the wall by at least sqrt(near2) - reach. Boxes the walk leaves out bound
+// the triangles in them, so a point far from the wall (outside the mesh's box, say) gets a
+// clearance of that distance, not just of `look`.
 fn wall_query(p: vec3<f32>, reach: f32, look: f32) -> WallHit {
     var hit: WallHit;
-    hit.near2 = look * look;
+    hit.near2 = 3.0e38;
     let r2 = reach * reach;
     let look2 = look * look;
     // Sums over the contacts in front of their feature, and over all of them (used when the
@@ -154,7 +157,10 @@ fn wall_query(p: vec3<f32>, reach: f32, look: f32) -> WallHit {
     var node = 0u;
     loop {
         let nd = wall_nodes[node];
-        if box_distance2(p, nd.lo, nd.hi) <= look2 {
+        let bd2 = box_distance2(p, nd.lo, nd.hi);
+        if bd2 > look2 {
+            hit.near2 = min(hit.near2, bd2);
+        } else {
             if nd.count > 0u {
                 for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
                     let t = wall_tris[slot];
@@ -205,6 +211,10 @@ fn wall_query(p: vec3<f32>, reach: f32, look: f32) -> WallHit {
         }
         sp -= 1u;
         node = stack[sp];
+    }
+    if hit.overflow {
+        // Nodes were left out: no bound.
+        hit.near2 = 0.0;
     }
     if hit.count == 0u {
         return hit;

@@ -1,0 +1,182 @@
+//! The benchmark behind `docs/benchmarks/gpu-contact.md`: the guidewire insertion into the
+//! procedural vessel (`scenes/guidewire-insertion.toml`) on the GPU backend, as a user runs it
+//! through the facade (wall clock, everything included).
+//!
+//! - one copy: the scene with neither vessel nor introducer, with the introducer only, and
+//!   with both, over the same steps (what the contact code costs, and that a scene without it
+//!   keeps the free-space speed);
+//! - one copy to full depth (the whole scene, 2.45 s simulated), with the contact report;
+//! - one tick: one step and the tip read back, as a haptic loop would;
+//! - batches of copies (`[batch] copies`) sharing the vessel, throughput per copy and whether
+//!   every copy stayed in the lumen.
+//!
+//! `cargo run --release --example gpu_contact_bench -- [--quick] [--copies 1024,4096] [--json FILE]`
+
+use cosserat::scene::parse_scene;
+use cosserat::sim::{Backend, RodHandle, Simulation};
+use std::path::Path;
+use std::time::Instant;
+
+const SCENE: &str = include_str!("../scenes/guidewire-insertion.toml");
+
+/// The scene with `overrides`, with or without contact with its vessel and its introducer.
+fn build(overrides: &[(&str, String)], vessel: bool, guide: bool) -> Simulation {
+    let mut doc: toml::Table = toml::from_str(SCENE).expect("the scene parses");
+    if !guide
+        && let Some(toml::Value::Array(rods)) = doc.get_mut("rod")
+        && let Some(toml::Value::Table(start)) =
+            rods[0].as_table_mut().and_then(|r| r.get_mut("start"))
+    {
+        start.remove("guide");
+    }
+    let text = toml::to_string(&doc).expect("the scene prints");
+    let mut overrides: Vec<(String, String)> = overrides
+        .iter()
+        .map(|(k, v)| ((*k).to_string(), v.clone()))
+        .collect();
+    if !vessel {
+        // The vessel still places the wire; the wire does not touch it.
+        overrides.push(("rod.0.collides".into(), "false".into()));
+    }
+    let (b, _, _) = parse_scene(Path::new("guidewire-insertion.toml"), &text, &overrides)
+        .unwrap_or_else(|e| panic!("{e}"));
+    b.backend(Backend::Gpu)
+        .build()
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Wall time per step [µs] of `steps` steps taken in calls of `chunk`, after a warm-up call.
+fn time_steps(sim: &mut Simulation, steps: u64, chunk: u64) -> f64 {
+    sim.run(chunk.min(steps)).expect("warm-up");
+    let t = Instant::now();
+    let mut left = steps;
+    while left > 0 {
+        let k = left.min(chunk);
+        sim.run(k).unwrap_or_else(|e| panic!("{e}"));
+        left -= k;
+    }
+    t.elapsed().as_secs_f64() * 1e6 / steps as f64
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let arg = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    let copies: Vec<usize> = arg("--copies")
+        .map(|s| s.split(',').map(|c| c.parse().expect("copies")).collect())
+        .unwrap_or_else(|| vec![1024, 4096]);
+    let steps: u64 = if quick { 200 } else { 20_000 };
+    let mut json = serde_json::Map::new();
+
+    // One copy: without and with the contact code.
+    let mut single = serde_json::Map::new();
+    for (name, vessel, guide) in [
+        ("free", false, false),
+        ("guide", false, true),
+        ("guide_and_vessel", true, true),
+    ] {
+        let mut sim = build(&[], vessel, guide);
+        let per = median(
+            (0..3)
+                .map(|_| time_steps(&mut sim, steps, 10_000.min(steps)))
+                .collect(),
+        );
+        println!("one copy, {name}: {per:.2} µs/step");
+        single.insert(name.into(), per.into());
+        if let Some(st) = sim.stepper().collision_stats(0) {
+            let q = st.queries as f64 / st.steps.max(1) as f64;
+            println!(
+                "  sphere queries per step {q:.1}, ridge element contacts {}",
+                st.segment_contacts
+            );
+            single.insert(format!("{name}_queries_per_step"), q.into());
+        }
+    }
+    json.insert("single_us_per_step".into(), single.into());
+
+    // One copy to full depth.
+    let mut sim = build(&[], true, true);
+    let full: u64 = if quick {
+        2_000
+    } else {
+        (2.45f64 / 3.5e-6).ceil() as u64
+    };
+    let t = Instant::now();
+    let mut left = full;
+    while left > 0 {
+        let k = left.min(10_000);
+        sim.run(k).unwrap_or_else(|e| panic!("{e}"));
+        left -= k;
+    }
+    let per = t.elapsed().as_secs_f64() * 1e6 / full as f64;
+    let report = sim.contact_report().expect("a vessel");
+    let tip = *sim.positions(RodHandle(0)).last().expect("points");
+    let st = sim.stepper().collision_stats(0).expect("stats");
+    let queries = st.queries as f64 / st.steps.max(1) as f64;
+    println!(
+        "  sphere queries per step {queries:.1}, most contacts {}, ridge element contacts {}, swept catches {}",
+        st.max_contacts, st.segment_contacts, st.swept_catches
+    );
+    println!(
+        "full depth: {full} steps, {per:.2} µs/step, escaped {}, max penetration {:.3e} m, contacts {}, tip {tip:?}",
+        report.escaped_points, report.max_penetration, report.contacts
+    );
+    json.insert(
+        "full_depth".into(),
+        serde_json::json!({
+            "steps": full, "us_per_step": per, "escaped_points": report.escaped_points,
+            "max_penetration_m": report.max_penetration, "contacts": report.contacts, "tip": tip,
+            "queries_per_step": queries, "max_contacts": st.max_contacts,
+            "ridge_contacts": st.segment_contacts, "swept_catches": st.swept_catches,
+        }),
+    );
+
+    // One tick: a step and the tip read back.
+    let mut ticks = Vec::new();
+    for _ in 0..if quick { 20 } else { 2000 } {
+        let t = Instant::now();
+        sim.run(1).unwrap_or_else(|e| panic!("{e}"));
+        let tip = *sim.positions(RodHandle(0)).last().expect("points");
+        ticks.push(t.elapsed().as_secs_f64() * 1e6);
+        std::hint::black_box(tip);
+    }
+    let tick = median(ticks);
+    println!("one tick (a step and the tip): {tick:.1} µs median");
+    json.insert("tick_us".into(), tick.into());
+
+    // Batches.
+    let mut batches = Vec::new();
+    for &n in &copies {
+        let mut sim = build(&[("batch.copies", n.to_string())], true, true);
+        let batch_steps: u64 = if quick { 100 } else { 2_000 };
+        let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
+        let report = sim.contact_report().expect("a vessel");
+        let per_copy = 1e6 / per;
+        println!(
+            "{n} copies: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
+            per_copy * 512.0 * n as f64,
+            report.escaped_points,
+            report.max_penetration
+        );
+        batches.push(serde_json::json!({
+            "copies": n, "us_per_step": per, "steps_per_s_per_copy": per_copy,
+            "element_steps_per_s": per_copy * 512.0 * n as f64,
+            "escaped_points": report.escaped_points, "max_penetration_m": report.max_penetration,
+            "steps": batch_steps,
+        }));
+    }
+    json.insert("batches".into(), batches.into());
+    if let Some(path) = arg("--json") {
+        std::fs::write(&path, serde_json::to_string_pretty(&json).expect("json"))
+            .unwrap_or_else(|e| panic!("{path}: {e}"));
+    }
+}
