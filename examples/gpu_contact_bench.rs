@@ -95,7 +95,7 @@ fn main() {
         if let Some(st) = sim.stepper().collision_stats(0) {
             let q = st.queries as f64 / st.steps.max(1) as f64;
             println!(
-                "  sphere queries per step {q:.1}, ridge element contacts {}",
+                "  tree walks per step {q:.2}, ridge element contacts {}",
                 st.segment_contacts
             );
             single.insert(format!("{name}_queries_per_step"), q.into());
@@ -123,7 +123,7 @@ fn main() {
     let st = sim.stepper().collision_stats(0).expect("stats");
     let queries = st.queries as f64 / st.steps.max(1) as f64;
     println!(
-        "  sphere queries per step {queries:.1}, most contacts {}, ridge element contacts {}, swept catches {}",
+        "  tree walks per step {queries:.2}, most contacts {}, ridge element contacts {}, swept catches {}",
         st.max_contacts, st.segment_contacts, st.swept_catches
     );
     println!(

@@ -383,6 +383,14 @@ mod tests {
                     tri.1,
                     "GpuWallTriangle's size"
                 );
+                // The near lists' lengths, which size the host's buffers.
+                for (name, n) in [
+                    ("NEAR_POINT", crate::sim::NEAR_POINT),
+                    ("NEAR_ELEMENT", crate::sim::NEAR_ELEMENT),
+                ] {
+                    let decl = format!("const {name}: u32 = {n}u;");
+                    assert!(src.contains(&decl), "the kernel lacks `{decl}`");
+                }
             }
         }
     }

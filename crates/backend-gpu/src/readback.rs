@@ -339,12 +339,14 @@ impl GpuSimulation {
         Ok(bytes)
     }
 
-    /// Makes every point query the wall at its next step: a clearance measured before the state
-    /// was replaced says nothing about the new state.
+    /// Makes every point and element walk the tree at its next step: clearances and near lists
+    /// made before the state was replaced say nothing about the new state.
     fn forget_clearances(&self) {
         if let Some(w) = &self.wall {
-            let zeros = vec![0u8; w.clearance.size() as usize];
-            self.gpu.queue.write_buffer(&w.clearance, 0, &zeros);
+            for b in &w.near {
+                let zeros = vec![0u8; b.size() as usize];
+                self.gpu.queue.write_buffer(b, 0, &zeros);
+            }
         }
     }
 

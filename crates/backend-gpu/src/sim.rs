@@ -102,15 +102,19 @@ pub(crate) struct WallBuffers {
     /// Per slot, two `vec4`: the last step's contact normal (and whether there is one) and the
     /// wall's impulse as a velocity change.
     pub(crate) contacts: wgpu::Buffer,
-    /// Per slot, where the point's clearance from the wall was measured and its square
-    /// (zeros: unknown), kept from one dispatch to the next.
-    pub(crate) clearance: wgpu::Buffer,
+    /// The points' and elements' anchors, clearances and near lists (`wall_contact.wgsl`),
+    /// kept from one dispatch to the next; zeros: none yet.
+    pub(crate) near: [wgpu::Buffer; 4],
     /// Which rods touch the wall.
     pub(crate) touching: Vec<bool>,
 }
 
 /// Statistics words per rod of a kernel with wall contact.
-pub(crate) const WALL_STATS: usize = 9;
+pub(crate) const WALL_STATS: usize = 11;
+/// Triangles in a point's near list, and ridge triangles in an element's
+/// (`shaders/wall_contact.wgsl`, checked by a test).
+pub(crate) const NEAR_POINT: usize = 16;
+pub(crate) const NEAR_ELEMENT: usize = 8;
 
 /// First step index `s` with `s * dt >= t`, matching the CPU's `time = steps as f64 * dt`.
 fn first_step_at(t: f64, dt: f64) -> u32 {
@@ -471,7 +475,20 @@ impl GpuSimulation {
                             storage,
                         ),
                         contacts: init("contacts", &vec![0u8; 32 * slots_n], storage),
-                        clearance: init("clearance", &vec![0u8; 16 * slots_n], storage),
+                        near: [
+                            init("point anchors", &vec![0u8; 16 * slots_n], storage),
+                            init(
+                                "point near lists",
+                                &vec![0u8; 4 * (NEAR_POINT + 1) * slots_n],
+                                storage,
+                            ),
+                            init("element anchors", &vec![0u8; 32 * slots_n], storage),
+                            init(
+                                "element near lists",
+                                &vec![0u8; 4 * (NEAR_ELEMENT + 1) * slots_n],
+                                storage,
+                            ),
+                        ],
                         touching: rods.iter().map(|r| r.wall.is_some()).collect(),
                     },
                 ))
@@ -549,7 +566,16 @@ impl GpuSimulation {
             entries.push(rw(17));
         }
         if has_mesh {
-            entries.extend([ro(18), ro(19), rw(21), rw(22), rw(23)]);
+            entries.extend([
+                ro(18),
+                ro(19),
+                rw(21),
+                rw(22),
+                rw(23),
+                rw(24),
+                rw(25),
+                rw(26),
+            ]);
         }
         if has_touch {
             entries.push(ro(20));
@@ -677,7 +703,10 @@ impl GpuSimulation {
                     (19, tris),
                     (21, &w.stats),
                     (22, &w.contacts),
-                    (23, &w.clearance),
+                    (23, &w.near[0]),
+                    (24, &w.near[1]),
+                    (25, &w.near[2]),
+                    (26, &w.near[3]),
                 ] {
                     e.push(wgpu::BindGroupEntry {
                         binding,
@@ -815,12 +844,14 @@ impl GpuSimulation {
         })
     }
 
-    /// Sphere queries run for rod `rod` and queries whose tree walk overflowed its stack, as of
-    /// the last [`Self::read_state`].
-    pub fn wall_queries(&self, rod: usize) -> Option<(u64, u64)> {
+    /// What rod `rod`'s wall contact cost since the start, as of the last
+    /// [`Self::read_state`]: the points' tree walks, their queries answered from near lists,
+    /// the elements' tree walks, and walks whose stack overflowed (0 for any mesh with
+    /// `u32` indices).
+    pub fn wall_work(&self, rod: usize) -> Option<[u64; 4]> {
         let read = self.wall_read.as_ref()?;
         let w = read.stats.get(WALL_STATS * rod..WALL_STATS * (rod + 1))?;
-        Some((u64::from(w[6]), u64::from(w[7])))
+        Some([w[6], w[9], w[10], w[7]].map(u64::from))
     }
 
     /// Rod `rod`'s points in contact with the wall at the last step before the last

@@ -175,15 +175,12 @@ struct Touch {
 @group(0) @binding(20) var<storage, read> touch: array<Touch>;
 // Per rod, WALL_STATS words: 0 largest penetration (f32 bits), 1 most escaped points in a step,
 // 2 contacts at the last step, 3 most contacts in a step, 4 steps with detection, 5 swept
-// catches, 6 sphere queries, 7 queries whose tree walk overflowed its stack, 8 ridge (segment)
-// contacts.
+// catches, 6 tree walks of points, 7 walks that overflowed their stack, 8 ridge (segment)
+// contacts, 9 point queries answered from near lists, 10 tree walks of elements.
 @group(0) @binding(21) var<storage, read_write> wall_stats: array<atomic<u32>>;
 // Per slot, two vec4: the contact's normal (w 1 in contact, 0 not) and the impulse the wall gave
 // the point in the last step as a velocity change (normal and friction).
 @group(0) @binding(22) var<storage, read_write> contact_out: array<vec4<f32>>;
-// Per slot, where the point's clearance was measured and its square (zeros: unknown), from one
-// dispatch to the next.
-@group(0) @binding(23) var<storage, read_write> clearance: array<vec4<f32>>;
 // Contacts and escaped points of the step, double-buffered by the step's parity.
 var<workgroup> wg_count: array<atomic<u32>, 4>;
 // Each thread's first and last point's own gap and clearance, for the elements between threads.
@@ -246,10 +243,10 @@ var<workgroup> wg_stop: u32;
 
 const NONE: u32 = 0xffffffffu;
 const XP: u32 = EPT + 2u;
-const WALL_STATS: u32 = 9u;
-// A point with no contact queries the tree out to this multiple of its reach, so that its
-// clearance lets it skip the next queries until it has moved that far.
-const WALL_LOOK: f32 = 2.0;
+const WALL_STATS: u32 = 11u;
+// The skin of the near lists as a fraction of the reach: a point's list holds the triangles
+// within reach + skin of its anchor, and serves while the point stays within the skin of it.
+const WALL_SKIN: f32 = 0.5;
 
 //#if MESH
 struct Resolved {
@@ -463,8 +460,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 
 //#if MESH
     // Wall contact: per point, the contact of this step (normal, gap, accumulated normal and
-    // friction impulses), the point's inverse mass, and where its clearance was measured with
-    // its square (-1: query next step with the look-ahead, -2: it touched, query with the reach).
+    // friction impulses), the point's inverse mass, and its anchor (where it last walked the
+    // tree), clearance from there, and near list's head (wall_contact.wgsl), kept in registers
+    // for the dispatch and in `pt_meta` / `pt_list` between dispatches.
     let tc = touch[it.rod];
     let wall_on = tc.on.x != 0u;
     let mu_s = tc.wall.x;
@@ -478,22 +476,27 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     var ct_ln: array<f32, EPT>;
     var ct_lt: array<vec3<f32>, EPT>;
     var pw: array<f32, EPT>;
-    var cl_at: array<vec3<f32>, EPT>;
-    var cl2: array<f32, EPT>;
+    var anchor: array<vec3<f32>, EPT>;
+    var clear: array<f32, EPT>;
+    var head: array<u32, EPT>;
+    let skin = reach * WALL_SKIN;
 //#for e 0 EPT
     {
         let gp = it.w0 + b0 + {e};
         ct_on[{e}] = false;
-        cl2[{e}] = -1.0;
         pw[{e}] = 0.0;
+        head[{e}] = 0u;
         if gp < it.w1 {
             pw[{e}] = slots[it.base + gp].a.y;
-            let c = clearance[it.base + gp];
-            cl_at[{e}] = c.xyz;
-            cl2[{e}] = c.w;
+            let m = pt_meta[it.base + gp];
+            anchor[{e}] = m.xyz;
+            clear[{e}] = m.w;
+            head[{e}] = pt_list[(it.base + gp) * (NEAR_POINT + 1u)];
         }
     }
 //#endfor
+    var listed = 0u;
+    var element_walks = 0u;
     var queries = 0u;
     var swept = 0u;
     var ridges = 0u;
@@ -969,57 +972,102 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 }
                 atomicAdd(&wall_stats[it.rod * WALL_STATS + 4u], 1u);
             }
-            var n_escaped = 0u;
+            // Which points need more than one comparison: those that move far enough to be
+            // swept, and those whose clearance does not excuse them. Their queries run in one
+            // loop that is not unrolled, on copies indexed by the loop (one copy of the query
+            // code, whatever EPT; the unrolled state stays in registers).
+            var need = 0u;
+            var dq_p: array<vec3<f32>, EPT>;
+            var dq_v: array<vec3<f32>, EPT>;
+            var dq_anchor: array<vec3<f32>, EPT>;
+            var dq_clear: array<f32, EPT>;
+            var dq_head: array<u32, EPT>;
+            var dq_on: array<bool, EPT>;
+            var dq_n: array<vec3<f32>, EPT>;
+            var dq_gap: array<f32, EPT>;
 //#for e 0 EPT
             {
-                let gp = it.w0 + b0 + {e};
                 ct_on[{e}] = false;
                 ct_ln[{e}] = 0.0;
                 ct_lt[{e}] = vec3<f32>(0.0);
-                if gp < it.w1 {
-                    let p = rx[{e+1}];
-                    let dp = vx[{e+1}] * h;
-                    var crossed = false;
-                    if dot(dp, dp) > 0.25 * reach * reach {
-                        let cr = wall_first_crossing(p, dp);
-                        if cr.f >= 0.0 {
-                            let wn = wall_tris[cr.slot].n.xyz;
-                            let ahead = dot(p - (p + dp * cr.f), wn);
-                            let gap = ahead - radius;
-                            n_escaped += select(0u, 1u, ahead < 0.0);
-                            max_pen = max(max_pen, -gap);
-                            swept += 1u;
-                            cl2[{e}] = -1.0;
-                            ct_on[{e}] = true;
-                            ct_n[{e}] = wn;
-                            ct_gap[{e}] = gap;
-                            crossed = true;
-                        }
+                let dp = vx[{e+1}] * h;
+                let moved = length(rx[{e+1}] - anchor[{e}]);
+                let excused = (head[{e}] & LIST_VALID) != 0u && moved < clear[{e}];
+                if it.w0 + b0 + {e} < it.w1 && (!excused || dot(dp, dp) > 0.25 * reach * reach) {
+                    need |= 1u << u32({e});
+                    dq_p[{e}] = rx[{e+1}];
+                    dq_v[{e}] = dp;
+                    dq_anchor[{e}] = anchor[{e}];
+                    dq_clear[{e}] = clear[{e}];
+                    dq_head[{e}] = head[{e}];
+                }
+            }
+//#endfor
+            var n_escaped = 0u;
+            for (var k = 0u; k < EPT; k++) {
+                if (need & (1u << k)) == 0u {
+                    continue;
+                }
+                let p = dq_p[k];
+                let dp = dq_v[k];
+                dq_on[k] = false;
+                var crossed = false;
+                if dot(dp, dp) > 0.25 * reach * reach {
+                    // Swept: a wall crossed beyond the sphere's reach puts the point back on it.
+                    let cr = wall_first_crossing(p, dp);
+                    if cr.f >= 0.0 {
+                        let wn = wall_tris[cr.slot].n.xyz;
+                        let ahead = -cr.f * dot(dp, wn);
+                        let gap = ahead - radius;
+                        n_escaped += select(0u, 1u, ahead < 0.0);
+                        max_pen = max(max_pen, -gap);
+                        swept += 1u;
+                        dq_on[k] = true;
+                        dq_n[k] = wn;
+                        dq_gap[k] = gap;
+                        crossed = true;
                     }
-                    let moved = p - cl_at[{e}];
-                    if !crossed && !(dot(moved, moved) < cl2[{e}]) {
+                }
+                let moved = length(p - dq_anchor[k]);
+                let valid = (dq_head[k] & LIST_VALID) != 0u;
+                // Within its clearance a point cannot touch the wall; within the skin its near
+                // list holds every triangle it can touch; else it walks the tree.
+                if !crossed && !(valid && moved < dq_clear[k]) {
+                    var hq: WallHit;
+                    let lb = (it.base + it.w0 + b0 + k) * (NEAR_POINT + 1u);
+                    if valid && (dq_head[k] & LIST_OVER) == 0u && moved <= skin {
+                        listed += 1u;
+                        hq = wall_query_listed(p, reach, lb, dq_head[k]);
+                    } else {
                         queries += 1u;
-                        let hq = wall_query(p, reach, select(WALL_LOOK * reach, reach, cl2[{e}] < -1.5));
+                        hq = wall_walk(p, reach, reach + skin, lb);
                         overflows += select(0u, 1u, hq.overflow);
-                        if hq.count == 0u {
-                            // Rounding of the distances must not open a gap.
-                            let clear = sqrt(hq.near2) - reach * 1.001;
-                            cl2[{e}] = select(-1.0, clear * clear, clear > 0.0);
-                            cl_at[{e}] = p;
-                        } else {
-                            cl2[{e}] = -2.0;
-                            n_escaped += select(0u, 1u, hq.escaped);
-                            if dot(hq.dir, hq.dir) > 0.0 {
-                                // Depths are measured against the inflated sphere.
-                                let pen = hq.depth - margin;
-                                max_pen = max(max_pen, pen);
-                                ct_on[{e}] = true;
-                                ct_n[{e}] = hq.dir;
-                                ct_gap[{e}] = -pen;
-                            }
+                        dq_anchor[k] = p;
+                        // Rounding of the distances must not open a gap.
+                        dq_clear[k] = max(sqrt(hq.near2) - reach * 1.001, 0.0);
+                        dq_head[k] = pt_list[lb];
+                    }
+                    if hq.count > 0u {
+                        n_escaped += select(0u, 1u, hq.escaped);
+                        if dot(hq.dir, hq.dir) > 0.0 {
+                            // Depths are measured against the inflated sphere.
+                            let pen = hq.depth - margin;
+                            max_pen = max(max_pen, pen);
+                            dq_on[k] = true;
+                            dq_n[k] = hq.dir;
+                            dq_gap[k] = -pen;
                         }
                     }
                 }
+            }
+//#for e 0 EPT
+            if (need & (1u << u32({e}))) != 0u {
+                ct_on[{e}] = dq_on[{e}];
+                ct_n[{e}] = dq_n[{e}];
+                ct_gap[{e}] = dq_gap[{e}];
+                anchor[{e}] = dq_anchor[{e}];
+                clear[{e}] = dq_clear[{e}];
+                head[{e}] = dq_head[{e}];
             }
 //#endfor
             if n_escaped > 0u {
@@ -1035,8 +1083,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         {
             ogx[{e+1}] = select(margin, ct_gap[{e}], ct_on[{e}]);
             cex[{e+1}] = 0.0;
-            if cl2[{e}] > 0.0 {
-                cex[{e+1}] = max(sqrt(cl2[{e}]) - length(rx[{e+1}] - cl_at[{e}]), 0.0);
+            if (head[{e}] & LIST_VALID) != 0u {
+                cex[{e+1}] = max(clear[{e}] - length(rx[{e+1}] - anchor[{e}]), 0.0);
             }
         }
 //#endfor
@@ -1057,39 +1105,84 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             ogx[EPT + 1u] = g.x;
             cex[EPT + 1u] = g.y;
         }
-        if wall_on {
-            // Element x joins extended points x and x + 1 (local element b0 - 1 + x); each
-            // thread tests the elements of its points, the boundary ones as its neighbours do.
-            var seg_on: array<bool, XP>;
-            var seg_n: array<vec3<f32>, XP>;
-            var seg_w: array<vec3<f32>, XP>;
-            var n_ridges = 0u;
-//#for x 0 EPT+1
-            {
-                seg_on[{x}] = false;
-                let ge = it.w0 + b0 + {x} - 1u;
-                if b0 + {x} >= 1u && ge < end_elem {
-                    let a = rx[{x}];
-                    let d = rx[{x+1}] - a;
-                    let clear = cex[{x}] + cex[{x+1}];
-                    // Only a wall nearer than both points' own, by 2 % of the radius, makes a
-                    // ridge contact.
-                    let limit = min(ogx[{x}], ogx[{x+1}]) + radius * 0.98;
-                    if clear * clear < dot(d, d) && limit > 0.0 {
-                        let sh = wall_segment_nearest(a, d, limit);
-                        if sh.found && sh.fraction >= 1e-6 && sh.fraction <= 1.0 - 1e-6 {
-                            seg_on[{x}] = true;
-                            seg_n[{x}] = sh.normal;
-                            seg_w[{x}] = sh.on_wall;
-                            if {x} >= 1u {
-                                n_ridges += 1u;
-                                max_pen = max(max_pen, radius - sh.signed_distance);
-                            }
-                        }
-                    }
-                }
+        // Element x joins extended points x and x + 1 (local element b0 - 1 + x). A thread tests
+        // the elements that end at its points (x = 1 ..= EPT) and takes the one before its first
+        // point (x = 0) from its left neighbour, which tested it as its last. The elements near
+        // the wall are tested in one loop that is not unrolled, as the points above.
+        var seg_on: array<bool, XP>;
+        var seg_n: array<vec3<f32>, XP>;
+        var seg_w: array<vec3<f32>, XP>;
+        var eneed = 0u;
+        var de_a: array<vec3<f32>, XP>;
+        var de_d: array<vec3<f32>, XP>;
+        var de_limit: array<f32, XP>;
+        var de_on: array<bool, XP>;
+        var de_n: array<vec3<f32>, XP>;
+        var de_w: array<vec3<f32>, XP>;
+//#for x 1 EPT+1
+        {
+            seg_on[{x}] = false;
+            let d = rx[{x+1}] - rx[{x}];
+            let clear_sum = cex[{x}] + cex[{x+1}];
+            // Only a wall nearer than both points' own, by 2 % of the radius, makes a ridge
+            // contact.
+            let limit = min(ogx[{x}], ogx[{x+1}]) + radius * 0.98;
+            if wall_on && it.w0 + b0 + {x} - 1u < end_elem && clear_sum * clear_sum < dot(d, d) && limit > 0.0 {
+                eneed |= 1u << u32({x});
+                de_a[{x}] = rx[{x}];
+                de_d[{x}] = d;
+                de_limit[{x}] = limit;
             }
+        }
 //#endfor
+        for (var x = 1u; x <= EPT; x++) {
+            if (eneed & (1u << x)) == 0u {
+                continue;
+            }
+            let ge = it.w0 + b0 + x - 1u;
+            let a = de_a[x];
+            let d = de_d[x];
+            let eb = (it.base + ge) * (NEAR_ELEMENT + 1u);
+            let eh = el_list[eb];
+            let e0 = el_meta[2u * (it.base + ge)].xyz;
+            let e1 = el_meta[2u * (it.base + ge) + 1u].xyz;
+            var sh: SegmentHit;
+            if (eh & LIST_VALID) != 0u && (eh & LIST_OVER) == 0u
+                && length(a - e0) <= skin && length(a + d - e1) <= skin {
+                sh = wall_segment_listed(a, d, de_limit[x], eb, eh);
+            } else {
+                element_walks += 1u;
+                sh = wall_segment_walk(a, d, de_limit[x], reach + skin, eb);
+                el_meta[2u * (it.base + ge)] = vec4<f32>(a, 0.0);
+                el_meta[2u * (it.base + ge) + 1u] = vec4<f32>(a + d, 0.0);
+            }
+            de_on[x] = sh.found && sh.fraction >= 1e-6 && sh.fraction <= 1.0 - 1e-6;
+            if de_on[x] {
+                de_n[x] = sh.normal;
+                de_w[x] = sh.on_wall;
+                ridges += 1u;
+                max_pen = max(max_pen, radius - sh.signed_distance);
+            }
+        }
+//#for x 1 EPT+1
+        if (eneed & (1u << u32({x}))) != 0u {
+            seg_on[{x}] = de_on[{x}];
+            seg_n[{x}] = de_n[{x}];
+            seg_w[{x}] = de_w[{x}];
+        }
+//#endfor
+        // The last element to the right neighbour (through the exchange arrays, free here).
+        sh_r[2u * lid] = vec4<f32>(seg_n[EPT], select(0.0, 1.0, seg_on[EPT]));
+        sh_q[2u * lid] = vec4<f32>(seg_w[EPT], 0.0);
+        workgroupBarrier();
+        seg_on[0] = false;
+        if has_left {
+            let l = sh_r[2u * lid - 2u];
+            seg_on[0] = l.w > 0.5;
+            seg_n[0] = l.xyz;
+            seg_w[0] = sh_q[2u * lid - 2u].xyz;
+        }
+        if wall_on {
             // A point between ridge elements takes their planes' contacts as one: the mean of
             // their normals and the lesser gap, where nearer than its own.
             var n_contacts = 0u;
@@ -1122,7 +1215,6 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 n_contacts += select(0u, 1u, ct_on[{e}]);
             }
 //#endfor
-            ridges += n_ridges;
             if n_contacts > 0u {
                 atomicAdd(&wg_count[cpar * 2u], n_contacts);
             }
@@ -1419,6 +1511,12 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if ridges > 0u {
             atomicAdd(&wall_stats[it.rod * WALL_STATS + 8u], ridges);
         }
+        if listed > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 9u], listed);
+        }
+        if element_walks > 0u {
+            atomicAdd(&wall_stats[it.rod * WALL_STATS + 10u], element_walks);
+        }
         if steps_done > 0u {
 //#for e 0 EPT
             {
@@ -1427,7 +1525,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     let sl = it.base + gp;
                     contact_out[2u * sl] = vec4<f32>(ct_n[{e}], select(0.0, 1.0, ct_on[{e}]));
                     contact_out[2u * sl + 1u] = vec4<f32>(select(vec3<f32>(0.0), ct_n[{e}] * ct_ln[{e}] + ct_lt[{e}], ct_on[{e}]), 0.0);
-                    clearance[sl] = vec4<f32>(cl_at[{e}], cl2[{e}]);
+                    pt_meta[sl] = vec4<f32>(anchor[{e}], clear[{e}]);
                 }
             }
 //#endfor

@@ -114,97 +114,209 @@ fn closest_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -
     return Closest(a + ab * (vb * denom) + ac * (vc * denom), 0u);
 }
 
-fn feature_normal(t: WallTri, feature: u32) -> vec3<f32> {
+// The pseudo-normal of a feature of the triangle in `slot`, loaded alone: the kernels load only
+// the members they use, so that a walk holds few registers.
+fn feature_normal(slot: u32, feature: u32) -> vec3<f32> {
     switch feature {
-        case 1u: { return t.e0.xyz; }
-        case 2u: { return t.e1.xyz; }
-        case 3u: { return t.e2.xyz; }
-        case 4u: { return t.v0.xyz; }
-        case 5u: { return t.v1.xyz; }
-        case 6u: { return t.v2.xyz; }
-        default: { return t.n.xyz; }
+        case 1u: { return wall_tris[slot].e0.xyz; }
+        case 2u: { return wall_tris[slot].e1.xyz; }
+        case 3u: { return wall_tris[slot].e2.xyz; }
+        case 4u: { return wall_tris[slot].v0.xyz; }
+        case 5u: { return wall_tris[slot].v1.xyz; }
+        case 6u: { return wall_tris[slot].v2.xyz; }
+        default: { return wall_tris[slot].n.xyz; }
     }
 }
 
 // Edge k is boundary bit k and corner k bit 3 + k: bit `feature - 1` either way.
-fn feature_on_boundary(t: WallTri, feature: u32) -> bool {
-    return feature != 0u && (t.boundary & (1u << (feature - 1u))) != 0u;
+fn feature_on_boundary(slot: u32, feature: u32) -> bool {
+    return feature != 0u && (wall_tris[slot].boundary & (1u << (feature - 1u))) != 0u;
 }
 
-// The sphere of radius `reach` at `p` against the wall, the tree walked out to `look` (at least
-// `reach`) so that `near2` bounds the distance to every triangle from below: a point with no
-// contact is clear of the wall by at least sqrt(near2) - reach. Boxes the walk leaves out bound
-// the triangles in them, so a point far from the wall (outside the mesh's box, say) gets a
-// clearance of that distance, not just of `look`.
-fn wall_query(p: vec3<f32>, reach: f32, look: f32) -> WallHit {
+// What a point's sphere touches, summed triangle by triangle: over the contacts in front of
+// their feature, and over all of them (used when the nearest says the centre has crossed the
+// wall).
+struct Touching {
+    sum_front: vec3<f32>,
+    w_front: f32,
+    max_front: f32,
+    sum_all: vec3<f32>,
+    w_all: f32,
+    max_all: f32,
+    best2: f32,
+    best_behind: bool,
+    best_boundary: bool,
+    count: u32,
+}
+
+fn touching_none() -> Touching {
+    var acc: Touching;
+    acc.best2 = 3.0e38;
+    return acc;
+}
+
+// Adds the triangle in `slot` to what the sphere of radius `reach` at `p` touches; returns the
+// squared distance to it, or its plane's where that already exceeds `beyond2` (a lower bound).
+fn touch_triangle(acc: ptr<function, Touching>, p: vec3<f32>, reach: f32, slot: u32, beyond2: f32) -> f32 {
+    let a = wall_tris[slot].a;
+    let plane = dot(wall_tris[slot].n.xyz, p - a);
+    if plane * plane > beyond2 {
+        return plane * plane;
+    }
+    return touch_near_plane(acc, p, reach, slot, a);
+}
+
+// `touch_triangle` for a triangle (corner `a`) whose plane is within reach.
+fn touch_near_plane(acc: ptr<function, Touching>, p: vec3<f32>, reach: f32, slot: u32, a: vec3<f32>) -> f32 {
+    let cl = closest_on_triangle(p, a, wall_tris[slot].b, wall_tris[slot].c);
+    let diff = p - cl.c;
+    let d2 = dot(diff, diff);
+    if d2 < reach * reach {
+        let d = sqrt(d2);
+        let n = feature_normal(slot, cl.feature);
+        let behind = dot(diff, n) < 0.0;
+        let depth = reach - select(d, -d, behind);
+        (*acc).count += 1u;
+        if d2 < (*acc).best2 {
+            (*acc).best2 = d2;
+            (*acc).best_behind = behind;
+            (*acc).best_boundary = feature_on_boundary(slot, cl.feature);
+        }
+        (*acc).sum_all += n * depth;
+        (*acc).w_all += depth;
+        (*acc).max_all = max((*acc).max_all, depth);
+        if !behind {
+            (*acc).sum_front += n * depth;
+            (*acc).w_front += depth;
+            (*acc).max_front = max((*acc).max_front, depth);
+        }
+    }
+    return d2;
+}
+
+// The point's response: the depth-weighted mean normal of the contacts that act.
+fn touching_hit(acc: Touching) -> WallHit {
     var hit: WallHit;
-    hit.near2 = 3.0e38;
+    hit.count = acc.count;
+    if acc.count == 0u {
+        return hit;
+    }
+    hit.escaped = acc.best_behind && !acc.best_boundary;
+    let s = select(acc.sum_front, acc.sum_all, hit.escaped);
+    let w = select(acc.w_front, acc.w_all, hit.escaped);
+    let len2 = dot(s, s);
+    if w > 0.0 && len2 > 0.0 {
+        hit.dir = s * inverseSqrt(len2);
+        hit.depth = select(acc.max_front, acc.max_all, hit.escaped);
+    }
+    return hit;
+}
+
+// Near lists (the CPU's `near_slots`): a point keeps the triangles within `radius` of where it
+// last walked the tree (its anchor, in `pt_meta`), in `pt_list` from word `list`: word 0 is
+// LIST_VALID | count (or | LIST_OVER when more than NEAR_POINT were near: the point walks the tree
+// at every step then), the slots follow. While the point is within `radius - reach` of its
+// anchor, every triangle within its reach is in the list.
+const NEAR_POINT: u32 = 16u;
+const NEAR_ELEMENT: u32 = 8u;
+const LIST_VALID: u32 = 0x80000000u;
+const LIST_OVER: u32 = 0x40000000u;
+const LIST_COUNT: u32 = 0x0000ffffu;
+
+// Per slot: the point's anchor and its clearance (the distance it may move from the anchor
+// before any triangle can come within its reach).
+@group(0) @binding(23) var<storage, read_write> pt_meta: array<vec4<f32>>;
+// Per slot, 1 + NEAR_POINT words: the point's near list.
+@group(0) @binding(24) var<storage, read_write> pt_list: array<u32>;
+// Per slot, two vec4: the element's anchors (its two ends when its list was made).
+@group(0) @binding(25) var<storage, read_write> el_meta: array<vec4<f32>>;
+// Per slot, 1 + NEAR_ELEMENT words: the ridge triangles near the element, as `pt_list`.
+@group(0) @binding(26) var<storage, read_write> el_list: array<u32>;
+
+// The sphere of radius `reach` at `p` against the triangles of its near list, four at a time:
+// their slots, corners and normals are loaded together before any is tested, so that a list
+// costs a few memory latencies, not two per triangle.
+fn wall_query_listed(p: vec3<f32>, reach: f32, list: u32, head: u32) -> WallHit {
+    var acc = touching_none();
+    let n = head & LIST_COUNT;
     let r2 = reach * reach;
-    let look2 = look * look;
-    // Sums over the contacts in front of their feature, and over all of them (used when the
-    // nearest says the centre has crossed the wall).
-    var sum_front = vec3<f32>(0.0);
-    var w_front = 0.0;
-    var max_front = 0.0;
-    var sum_all = vec3<f32>(0.0);
-    var w_all = 0.0;
-    var max_all = 0.0;
-    var best2 = 3.0e38;
-    var best_behind = false;
-    var best_boundary = false;
+    for (var k = 0u; k < n; k += 4u) {
+        let last = n - 1u;
+        let s0 = pt_list[list + 1u + k];
+        let s1 = pt_list[list + 1u + min(k + 1u, last)];
+        let s2 = pt_list[list + 1u + min(k + 2u, last)];
+        let s3 = pt_list[list + 1u + min(k + 3u, last)];
+        let a0 = wall_tris[s0].a;
+        let a1 = wall_tris[s1].a;
+        let a2 = wall_tris[s2].a;
+        let a3 = wall_tris[s3].a;
+        let h0 = dot(wall_tris[s0].n.xyz, p - a0);
+        let h1 = dot(wall_tris[s1].n.xyz, p - a1);
+        let h2 = dot(wall_tris[s2].n.xyz, p - a2);
+        let h3 = dot(wall_tris[s3].n.xyz, p - a3);
+        if h0 * h0 <= r2 {
+            touch_near_plane(&acc, p, reach, s0, a0);
+        }
+        if k + 1u < n && h1 * h1 <= r2 {
+            touch_near_plane(&acc, p, reach, s1, a1);
+        }
+        if k + 2u < n && h2 * h2 <= r2 {
+            touch_near_plane(&acc, p, reach, s2, a2);
+        }
+        if k + 3u < n && h3 * h3 <= r2 {
+            touch_near_plane(&acc, p, reach, s3, a3);
+        }
+    }
+    return touching_hit(acc);
+}
+
+// The sphere of radius `reach` at `p` against the wall through the tree, walked out to `radius`
+// (at least `reach`): writes the triangles within `radius` as the point's near list at `list`,
+// and returns in `near2` a lower bound of the squared distance to every triangle (the nearest
+// tested, its plane's distance where that was beyond `radius`, or the nearest box the walk did
+// not enter), so that a point far from the wall (outside the mesh's box, say) gets that as its
+// clearance.
+fn wall_walk(p: vec3<f32>, reach: f32, radius: f32, list: u32) -> WallHit {
+    var acc = touching_none();
+    let r2 = radius * radius;
+    var near2 = 3.0e38;
+    var listed = 0u;
+    var over = false;
+    var deep = false;
     var stack: array<u32, WALL_STACK>;
     var sp = 0u;
     var node = 0u;
     loop {
         let nd = wall_nodes[node];
         let bd2 = box_distance2(p, nd.lo, nd.hi);
-        if bd2 > look2 {
-            hit.near2 = min(hit.near2, bd2);
-        } else {
-            if nd.count > 0u {
-                for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-                    let t = wall_tris[slot];
-                    let plane = dot(t.n.xyz, p - t.a);
-                    if plane * plane > look2 {
-                        hit.near2 = min(hit.near2, plane * plane);
-                        continue;
-                    }
-                    let cl = closest_on_triangle(p, t.a, t.b, t.c);
-                    let diff = p - cl.c;
-                    let d2 = dot(diff, diff);
-                    hit.near2 = min(hit.near2, d2);
-                    if d2 < r2 {
-                        let d = sqrt(d2);
-                        let n = feature_normal(t, cl.feature);
-                        let behind = dot(diff, n) < 0.0;
-                        let depth = reach - select(d, -d, behind);
-                        hit.count += 1u;
-                        if d2 < best2 {
-                            best2 = d2;
-                            best_behind = behind;
-                            best_boundary = feature_on_boundary(t, cl.feature);
-                        }
-                        sum_all += n * depth;
-                        w_all += depth;
-                        max_all = max(max_all, depth);
-                        if !behind {
-                            sum_front += n * depth;
-                            w_front += depth;
-                            max_front = max(max_front, depth);
-                        }
+        if bd2 > r2 {
+            near2 = min(near2, bd2);
+        } else if nd.count > 0u {
+            for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
+                let d2 = touch_triangle(&acc, p, reach, slot, r2);
+                near2 = min(near2, d2);
+                if d2 < r2 {
+                    if listed < NEAR_POINT {
+                        pt_list[list + 1u + listed] = slot;
+                        listed += 1u;
+                    } else {
+                        over = true;
                     }
                 }
-            } else {
-                // Descend into the left child now, keep the right one for later.
-                if sp < WALL_STACK {
-                    stack[sp] = nd.first + 1u;
-                    sp += 1u;
-                } else {
-                    hit.overflow = true;
-                }
-                node = nd.first;
-                continue;
             }
+        } else {
+            // Descend into the left child now, keep the right one for later.
+            if sp < WALL_STACK {
+                stack[sp] = nd.first + 1u;
+                sp += 1u;
+            } else {
+                // Nodes are left out: no bound, and the list is incomplete.
+                deep = true;
+                over = true;
+                near2 = 0.0;
+            }
+            node = nd.first;
+            continue;
         }
         if sp == 0u {
             break;
@@ -212,21 +324,10 @@ fn wall_query(p: vec3<f32>, reach: f32, look: f32) -> WallHit {
         sp -= 1u;
         node = stack[sp];
     }
-    if hit.overflow {
-        // Nodes were left out: no bound.
-        hit.near2 = 0.0;
-    }
-    if hit.count == 0u {
-        return hit;
-    }
-    hit.escaped = best_behind && !best_boundary;
-    let s = select(sum_front, sum_all, hit.escaped);
-    let w = select(w_front, w_all, hit.escaped);
-    let len2 = dot(s, s);
-    if w > 0.0 && len2 > 0.0 {
-        hit.dir = s * inverseSqrt(len2);
-        hit.depth = select(max_front, max_all, hit.escaped);
-    }
+    pt_list[list] = LIST_VALID | select(listed, LIST_OVER, over);
+    var hit = touching_hit(acc);
+    hit.near2 = near2;
+    hit.overflow = deep;
     return hit;
 }
 
@@ -300,11 +401,10 @@ fn wall_first_crossing(o: vec3<f32>, d: vec3<f32>) -> Crossing {
         }
         if nd.count > 0u {
             for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-                let t = wall_tris[slot];
-                if dot(t.n.xyz, d) >= 0.0 {
+                if dot(wall_tris[slot].n.xyz, d) >= 0.0 {
                     continue;
                 }
-                let f = segment_triangle(o, d, t.a, t.b, t.c);
+                let f = segment_triangle(o, d, wall_tris[slot].a, wall_tris[slot].b, wall_tris[slot].c);
                 if f >= 0.0 && f < best {
                     best = f;
                     best_slot = slot;
@@ -352,24 +452,24 @@ fn segment_segment(p1: vec3<f32>, d1: vec3<f32>, p2: vec3<f32>, d2: vec3<f32>) -
 
 // Squared distance between the segment p + s d and triangle t, and the fraction s where it is
 // reached (collide `segment_triangle_distance2`).
-fn segment_triangle_distance2(p: vec3<f32>, d: vec3<f32>, t: WallTri) -> vec2<f32> {
-    let through = segment_triangle(p, d, t.a, t.b, t.c);
+fn segment_triangle_distance2(p: vec3<f32>, d: vec3<f32>, ta: vec3<f32>, tb: vec3<f32>, tc: vec3<f32>) -> vec2<f32> {
+    let through = segment_triangle(p, d, ta, tb, tc);
     if through >= 0.0 {
         return vec2<f32>(0.0, through);
     }
     let q = p + d;
     var best = vec2<f32>(3.0e38, 0.0);
-    let c0 = closest_on_triangle(p, t.a, t.b, t.c).c;
+    let c0 = closest_on_triangle(p, ta, tb, tc).c;
     let d0 = dot(p - c0, p - c0);
     if d0 < best.x {
         best = vec2<f32>(d0, 0.0);
     }
-    let c1 = closest_on_triangle(q, t.a, t.b, t.c).c;
+    let c1 = closest_on_triangle(q, ta, tb, tc).c;
     let d1 = dot(q - c1, q - c1);
     if d1 < best.x {
         best = vec2<f32>(d1, 1.0);
     }
-    let corners = array<vec3<f32>, 3>(t.a, t.b, t.c);
+    let corners = array<vec3<f32>, 3>(ta, tb, tc);
     for (var k = 0u; k < 3u; k++) {
         let u = corners[k];
         let v = corners[(k + 1u) % 3u];
@@ -396,43 +496,108 @@ struct SegmentHit {
     normal: vec3<f32>,
 }
 
-fn wall_segment_nearest(p: vec3<f32>, d: vec3<f32>, limit: f32) -> SegmentHit {
+// The nearest ridge triangle to an element so far: squared distance, fraction along the element,
+// and slot + 1 (0: none).
+struct SegBest {
+    d2: f32,
+    s: f32,
+    slot1: u32,
+}
+
+// Considers ridge triangle `slot` for the element's nearest (collide `consider`).
+fn segment_consider(p: vec3<f32>, d: vec3<f32>, limit: f32, slot: u32, best: ptr<function, SegBest>) {
+    let a = wall_tris[slot].a;
+    let n = wall_tris[slot].n.xyz;
+    let h0 = dot(n, p - a);
+    let h1 = dot(n, p + d - a);
+    if (h0 > limit && h1 > limit) || (h0 < -limit && h1 < -limit) {
+        return;
+    }
+    let ds = segment_triangle_distance2(p, d, a, wall_tris[slot].b, wall_tris[slot].c);
+    if ds.x < (*best).d2 {
+        *best = SegBest(ds.x, ds.y, slot + 1u);
+    }
+}
+
+// The element's nearest wall point and direction from `best` (collide `answer`).
+fn segment_answer(p: vec3<f32>, d: vec3<f32>, best: SegBest) -> SegmentHit {
     var hit: SegmentHit;
+    if best.slot1 == 0u {
+        return hit;
+    }
+    hit.found = true;
+    let slot = best.slot1 - 1u;
+    let at = p + d * best.s;
+    let cl = closest_on_triangle(at, wall_tris[slot].a, wall_tris[slot].b, wall_tris[slot].c);
+    let diff = at - cl.c;
+    let distance = sqrt(best.d2);
+    hit.fraction = best.s;
+    hit.on_wall = cl.c;
+    if distance > 0.0 {
+        let side = select(-1.0, 1.0, dot(diff, feature_normal(slot, cl.feature)) >= 0.0);
+        hit.signed_distance = side * distance;
+        hit.normal = diff * (side / distance);
+    } else {
+        hit.normal = wall_tris[slot].n.xyz;
+    }
+    return hit;
+}
+
+// The nearest ridge triangle within `limit` of the element from p to p + d, among its near list
+// at `list`.
+fn wall_segment_listed(p: vec3<f32>, d: vec3<f32>, limit: f32, list: u32, head: u32) -> SegmentHit {
+    var best = SegBest(limit * limit, 0.0, 0u);
+    let n = head & LIST_COUNT;
+    for (var k = 0u; k < n; k++) {
+        segment_consider(p, d, limit, el_list[list + 1u + k], &best);
+    }
+    return segment_answer(p, d, best);
+}
+
+// The same through the tree: writes the ridge triangles within `radius` of the element as its
+// near list at `list` (collide `segment_near_slots` with ridges only), and answers among them.
+fn wall_segment_walk(p: vec3<f32>, d: vec3<f32>, limit: f32, radius: f32, list: u32) -> SegmentHit {
+    var best = SegBest(limit * limit, 0.0, 0u);
     let centre = p + d * 0.5;
-    let r = 0.5 * length(d) + limit;
-    let r2 = r * r;
-    var best2 = limit * limit;
-    var best_s = 0.0;
-    var best_slot = 0u;
+    let r = 0.5 * length(d) + radius;
+    var listed = 0u;
+    var over = false;
     var stack: array<u32, WALL_STACK>;
     var sp = 0u;
     var node = 0u;
     loop {
         let nd = wall_nodes[node];
-        if box_distance2(centre, nd.lo, nd.hi) <= r2 {
+        if box_distance2(centre, nd.lo, nd.hi) <= r * r {
             if nd.count > 0u {
                 for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-                    let t = wall_tris[slot];
-                    if (t.boundary & 64u) == 0u {
+                    if (wall_tris[slot].boundary & 64u) == 0u {
                         continue;
                     }
-                    let h0 = dot(t.n.xyz, p - t.a);
-                    let h1 = dot(t.n.xyz, p + d - t.a);
-                    if (h0 > limit && h1 > limit) || (h0 < -limit && h1 < -limit) {
+                    let a = wall_tris[slot].a;
+                    let n = wall_tris[slot].n.xyz;
+                    let h0 = dot(n, p - a);
+                    let h1 = dot(n, p + d - a);
+                    if (h0 > radius && h1 > radius) || (h0 < -radius && h1 < -radius) {
                         continue;
                     }
-                    let ds = segment_triangle_distance2(p, d, t);
-                    if ds.x < best2 {
-                        best2 = ds.x;
-                        best_s = ds.y;
-                        best_slot = slot;
-                        hit.found = true;
+                    let tb = wall_tris[slot].b;
+                    let tc = wall_tris[slot].c;
+                    if segment_triangle_distance2(p, d, a, tb, tc).x < radius * radius {
+                        if listed < NEAR_ELEMENT {
+                            el_list[list + 1u + listed] = slot;
+                            listed += 1u;
+                        } else {
+                            over = true;
+                        }
+                        segment_consider(p, d, limit, slot, &best);
                     }
                 }
             } else {
                 if sp < WALL_STACK {
                     stack[sp] = nd.first + 1u;
                     sp += 1u;
+                } else {
+                    over = true;
                 }
                 node = nd.first;
                 continue;
@@ -444,22 +609,6 @@ fn wall_segment_nearest(p: vec3<f32>, d: vec3<f32>, limit: f32) -> SegmentHit {
         sp -= 1u;
         node = stack[sp];
     }
-    if !hit.found {
-        return hit;
-    }
-    let t = wall_tris[best_slot];
-    let at = p + d * best_s;
-    let cl = closest_on_triangle(at, t.a, t.b, t.c);
-    let diff = at - cl.c;
-    let distance = sqrt(best2);
-    hit.fraction = best_s;
-    hit.on_wall = cl.c;
-    if distance > 0.0 {
-        let side = select(-1.0, 1.0, dot(diff, feature_normal(t, cl.feature)) >= 0.0);
-        hit.signed_distance = side * distance;
-        hit.normal = diff * (side / distance);
-    } else {
-        hit.normal = t.n.xyz;
-    }
-    return hit;
+    el_list[list] = LIST_VALID | select(listed, LIST_OVER, over);
+    return segment_answer(p, d, best);
 }
