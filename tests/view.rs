@@ -1,0 +1,167 @@
+//! `cosserat view` in a real window under Xvfb, driven by a script as a hand would drive it:
+//! push, twist, a screenshot, quit. Checks that it exits cleanly, that the pictures show
+//! something, and that the held end moved as far as it was pushed.
+//!
+//! It needs `xvfb-run` (Debian's `xvfb`) and a wgpu adapter (lavapipe). Without `xvfb-run` the
+//! test passes after saying why it did not run, unless `COSSERAT_REQUIRE_DISPLAY=1`, which
+//! makes it fail (CI installs xvfb and sets it); without an adapter likewise, unless
+//! `COSSERAT_REQUIRE_GPU=1`.
+#![cfg(feature = "view")]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Whether `xvfb-run` can be started; `false` means the test is skipped (or fails when a
+/// display is required).
+fn xvfb_available() -> bool {
+    let found = Command::new("xvfb-run")
+        .arg("--help")
+        .output()
+        .is_ok_and(|o| o.status.success() || !o.stdout.is_empty() || !o.stderr.is_empty());
+    if !found {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_DISPLAY").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_DISPLAY=1 but xvfb-run is not installed (apt-get install xvfb)"
+        );
+        eprintln!("skipped: xvfb-run is not installed (apt-get install xvfb), so no window can be opened");
+    }
+    found
+}
+
+fn scratch(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cosserat-view-{}-{test}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The PNG's pixels as RGBA rows, decoded with the render crate's reader.
+fn pixels(path: &Path) -> (u32, u32, Vec<u8>) {
+    let image = cosserat_render::read_png(path).unwrap_or_else(|e| panic!("{e}"));
+    (image.width, image.height, image.rgba)
+}
+
+/// How many pixels differ from the top-left one (the background) by more than a little.
+fn drawn_pixels(rgba: &[u8]) -> usize {
+    let background = &rgba[..3];
+    rgba.chunks_exact(4)
+        .filter(|p| (0..3).any(|k| p[k].abs_diff(background[k]) > 16))
+        .count()
+}
+
+/// The pendulum's rope (16 elements, pinned at its first end) pushed along its axis at
+/// 0.1 m/s for 0.2 s of simulated time, then twisted, photographed, and closed: the command
+/// exits 0, both pictures are the size asked and show the rope, and the summary says the
+/// held end moved 20 mm along the axis.
+#[test]
+fn a_scripted_hand_pushes_the_wire_in_a_window() {
+    if !xvfb_available() {
+        return;
+    }
+    let dir = scratch("push");
+    let script = dir.join("hand.txt");
+    let middle = dir.join("middle.png");
+    let last = dir.join("last.png");
+    std::fs::write(
+        &script,
+        format!(
+            "# the hand\n0.0 push 0.1\n0.2 push 0\n0.2 twist 4\n0.3 screenshot {}\n0.35 quit\n",
+            middle.display()
+        ),
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 800x600x24"])
+        .arg(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["view", "scenes/pendulum.toml", "--elements", "16"])
+        .args(["--width", "320", "--height", "200"])
+        .arg("--script")
+        .arg(&script)
+        .arg("--screenshot")
+        .arg(&last)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if stderr.contains("no GPU adapter") {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {stderr}"
+        );
+        eprintln!("skipped: {stderr}");
+        return;
+    }
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout: {stdout}\nstderr: {stderr}",
+        out.status
+    );
+    eprintln!("viewer ran {:.1} s", started.elapsed().as_secs_f64());
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no summary line in: {stdout}"));
+    let summary: serde_json::Value = serde_json::from_str(line).unwrap();
+    let moved = summary["hand_displacement_m"].as_f64().unwrap();
+    assert!(
+        (moved - 0.02).abs() < 1e-4,
+        "the held end moved {moved} m along its axis, 0.1 m/s for 0.2 s is 0.02 m: {line}"
+    );
+    assert!(summary["frames"].as_u64().unwrap() >= 1, "{line}");
+    assert!(summary["time_s"].as_f64().unwrap() > 0.349, "{line}");
+    assert!(summary["hand_force_norm_n"].as_f64().unwrap() > 0.0, "{line}");
+    for picture in [&middle, &last] {
+        let (w, h, rgba) = pixels(picture);
+        assert_eq!((w, h), (320, 200), "{}", picture.display());
+        let drawn = drawn_pixels(&rgba);
+        assert!(
+            drawn > 50,
+            "{}: only {drawn} pixels differ from the background",
+            picture.display()
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Without a display the command fails with an error that says what is missing, not a
+/// panic.
+#[test]
+fn without_a_display_it_says_so() {
+    let out = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["view", "scenes/pendulum.toml", "--elements", "4"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("needs a display"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// A bad script line is refused before any window opens, naming the file, line and value.
+#[test]
+fn a_bad_script_names_its_line() {
+    let dir = scratch("bad");
+    let script = dir.join("hand.txt");
+    std::fs::write(&script, "0 push 0.1\n0.1 push quickly\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["view", "scenes/pendulum.toml", "--script"])
+        .arg(&script)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("hand.txt:2") && stderr.contains("quickly"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
