@@ -268,6 +268,7 @@ pub(crate) fn run(
             }
             origin = (now, sim.time());
             rate = RateMeter::new(sim.time());
+            published_paused = None;
         }
         let paused = controls.paused.load(Relaxed)
             || pause_until.is_some_and(|t| now < t)
@@ -289,6 +290,7 @@ pub(crate) fn run(
             if stepped || published_paused != Some(stopped.clone()) {
                 gather.fill(&sim, &controls, &mut back);
                 back.paused = true;
+                back.real_time_factor = 0.0;
                 back.stopped = stopped.clone();
                 mailbox.publish(&mut back);
                 published_paused = Some(stopped.clone());

@@ -6,8 +6,9 @@
 //! because under Xvfb there is no display to wait for and a software rasteriser drawing flat out
 //! would take the cores the physics needs.
 //!
-//! Text is the window's title (scene, simulated time, push and twist, hand force, real-time
-//! factor, frames per second), refreshed four times a second: no font to ship or rasterise.
+//! The readout (scene, simulated time, push and twist, hand force and displacement, real-time
+//! factor, frames per second) is drawn over the picture in the renderer's built-in bitmap
+//! font every frame, and set as the window's title four times a second.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -253,6 +254,8 @@ impl Viewer {
         let Some(renderer) = self.renderer.as_mut() else {
             return;
         };
+        let lines = readout(&self.setup.name, &self.pose, self.fps, self.setup.steerable);
+        renderer.set_overlay(&lines.iter().map(String::as_str).collect::<Vec<_>>());
         let rods: Vec<RodPose<'_>> = self
             .pose
             .rods
@@ -322,38 +325,45 @@ impl Viewer {
         let Some(window) = &self.window else {
             return;
         };
-        window.set_title(&title(
-            &self.setup.name,
-            &self.pose,
-            self.fps,
-            self.setup.steerable,
-        ));
+        let lines = readout(&self.setup.name, &self.pose, self.fps, self.setup.steerable);
+        window.set_title(&lines.join(" | "));
     }
 }
 
-/// The window's title: what the hand does and feels, and how fast things run.
-fn title(name: &str, p: &Pose, fps: f64, steerable: bool) -> String {
-    let mut t = format!("{name} | t {:.3} s", p.time);
+/// The readout: what the hand does and feels, and how fast things run; drawn over the
+/// picture, one line each, and joined into the window's title.
+fn readout(name: &str, p: &Pose, fps: f64, steerable: bool) -> Vec<String> {
+    let mut lines = vec![format!("{name}  t {:.3} s", p.time)];
     if steerable {
-        t += &format!(" | push {:+.3} m/s twist {:+.1} rad/s", p.push, p.twist);
-        match p.hand_force {
+        lines.push(format!(
+            "push {:+.3} m/s  twist {:+.1} rad/s",
+            p.push, p.twist
+        ));
+        lines.push(match p.hand_force {
             Some(f) => {
                 let norm = f.iter().map(|x| x * x).sum::<f64>().sqrt();
-                t += &format!(" | hand {norm:.4} N");
+                format!(
+                    "hand {norm:.4} N  moved {:+.1} mm",
+                    1e3 * p.hand_displacement
+                )
             }
-            None => t += " | hand: no reaction",
-        }
+            None => format!(
+                "hand: no reaction  moved {:+.1} mm",
+                1e3 * p.hand_displacement
+            ),
+        });
     }
-    t += &format!(" | real time x{:.2} | {fps:.0} fps", p.real_time_factor);
+    let mut speed = format!("real time x{:.2}  {fps:.0} fps", p.real_time_factor);
     if p.real_time_factor < 0.95 && !p.paused {
-        t += " (physics behind)";
+        speed += "  (physics behind)";
     }
+    lines.push(speed);
     if let Some(why) = &p.stopped {
-        t += &format!(" | STOPPED: {why} (R resets)");
+        lines.push(format!("STOPPED: {why} (R resets)"));
     } else if p.paused {
-        t += " | paused";
+        lines.push("paused (space goes on, N steps)".into());
     }
-    t
+    lines
 }
 
 impl ApplicationHandler for Viewer {

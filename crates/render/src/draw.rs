@@ -18,6 +18,7 @@ use wgpu::util::DeviceExt;
 use crate::RenderError;
 use crate::camera::Camera;
 use crate::geometry::{ROD_COLOURS, RodPose, SurfaceMesh, Vertex, mesh_vertices, push_tube};
+use crate::overlay::OverlayDraw;
 use crate::renderer::RenderSettings;
 
 pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -31,15 +32,19 @@ struct CameraUniform {
     eye: [f32; 4],
 }
 
-/// A growable GPU buffer for the vertices or indices of the tubes.
-struct Growable {
-    buffer: wgpu::Buffer,
+/// A growable GPU buffer for vertices or indices built every frame.
+pub(crate) struct Growable {
+    pub(crate) buffer: wgpu::Buffer,
     usage: wgpu::BufferUsages,
     label: &'static str,
 }
 
 impl Growable {
-    fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        usage: wgpu::BufferUsages,
+    ) -> Self {
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: 1 << 16,
@@ -53,7 +58,7 @@ impl Growable {
         }
     }
 
-    fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: &[u8]) {
+    pub(crate) fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: &[u8]) {
         if bytes.len() as u64 > self.buffer.size() {
             self.buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(self.label),
@@ -196,6 +201,7 @@ pub(crate) struct Attachments<'a> {
 /// The pipelines and buffers that draw rods and a mesh into targets of one format and sample
 /// count.
 pub(crate) struct SceneDraw {
+    format: wgpu::TextureFormat,
     samples: u32,
     min_radius_px: f64,
     force_scale: f64,
@@ -207,6 +213,8 @@ pub(crate) struct SceneDraw {
     tube_vertices: Growable,
     tube_indices: Growable,
     mesh: Option<MeshBuffers>,
+    /// Text over the picture, made on first use (a window's readout; pictures have none).
+    overlay: Option<OverlayDraw>,
     scratch_vertices: Vec<Vertex>,
     scratch_indices: Vec<u32>,
 }
@@ -274,6 +282,7 @@ impl SceneDraw {
             return Err(RenderError::Device(format!("building the pipelines: {e}")));
         }
         Ok(Self {
+            format,
             samples,
             min_radius_px: settings.min_radius_px,
             force_scale: settings.force_scale,
@@ -285,9 +294,26 @@ impl SceneDraw {
             tube_vertices: Growable::new(device, "tube vertices", wgpu::BufferUsages::VERTEX),
             tube_indices: Growable::new(device, "tube indices", wgpu::BufferUsages::INDEX),
             mesh: None,
+            overlay: None,
             scratch_vertices: Vec::new(),
             scratch_indices: Vec::new(),
         })
+    }
+
+    /// Sets the text drawn over every later frame of a `width × height` target (no lines:
+    /// none).
+    pub(crate) fn set_overlay(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        lines: &[&str],
+        width: u32,
+        height: u32,
+    ) {
+        let (format, samples) = (self.format, self.samples);
+        self.overlay
+            .get_or_insert_with(|| OverlayDraw::new(device, format, samples))
+            .set_text(device, queue, lines, width, height);
     }
 
     /// Samples per pixel the pipelines draw with.
@@ -425,6 +451,9 @@ impl SceneDraw {
             pass.set_vertex_buffer(0, mesh.vertices.slice(..));
             pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..mesh.count, 0, 0..1);
+        }
+        if let Some(overlay) = &self.overlay {
+            overlay.draw(&mut pass);
         }
     }
 }

@@ -35,7 +35,9 @@
 pub mod camera;
 mod draw;
 mod encode;
+mod font;
 mod geometry;
+mod overlay;
 pub mod renderer;
 pub mod surface;
 

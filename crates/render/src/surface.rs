@@ -147,6 +147,14 @@ impl SurfaceRenderer {
         self.scene.set_mesh(&self.gpu.device, mesh);
     }
 
+    /// Sets the lines of text drawn over the top-left corner of every later frame (the
+    /// viewer's readout, in a built-in 5 × 7 pixel font); no lines draw none.
+    pub fn set_overlay(&mut self, lines: &[&str]) {
+        let (w, h) = self.size();
+        self.scene
+            .set_overlay(&self.gpu.device, &self.gpu.queue, lines, w, h);
+    }
+
     /// Draws `rods` (and the mesh) seen by `camera` into the window and presents it; with
     /// `capture`, the same frame is also read back into it (sRGB RGBA, as PNG expects).
     ///
