@@ -337,6 +337,8 @@ fn stats(physics: &PhysicsReport, window: &WindowReport, wall_s: f64) -> serde_j
         "tick_p50_ms": p50,
         "tick_p99_ms": p99,
         "tick_max_ms": max,
+        "publishes": physics.publish_times.len(),
+        "publish_p50_ms": quantile(&mut physics.publish_times.clone(), 0.5).map(|s| s * 1e3),
         "adapter": window.adapter,
         "samples": window.samples,
         "width": window.size.0,

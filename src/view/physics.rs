@@ -3,10 +3,12 @@
 //!
 //! Drawing must never hold the physics back: a haptic loop ticks at 1 kHz, a window draws at
 //! 60 Hz or less (much less on a software rasteriser), so the two run on their own threads and
-//! meet only in a [`Mailbox`]: after every tick the physics swaps its freshly filled [`Pose`]
-//! into the mailbox (a lock held for a swap of three pointers) and the window takes the latest
-//! one when it draws; a pose nobody took is overwritten, so the window always shows the newest
-//! state and the physics never waits for a frame.
+//! meet only in a [`Mailbox`]: after a tick the physics swaps its freshly filled [`Pose`] into
+//! the mailbox (a lock held for a swap of a few pointers) and the window takes the latest one
+//! when it draws; a pose nobody took is overwritten, so the window always shows a recent state
+//! and the physics never waits for a frame. A pose is published after every tick once the last
+//! one was taken, else every [`PUBLISH_EVERY`] ticks, so the window draws a state at most a few
+//! milliseconds old without the physics reading the rods out a thousand times a second.
 //!
 //! A tick is 1 ms of simulated time (or one step where the step is longer): the hand's push and
 //! twist are set through the same control call a haptic device makes
@@ -29,6 +31,10 @@ use super::script::{Action, Timed};
 const TICK: f64 = 1e-3;
 /// How far the simulation may fall behind the wall clock before the lag is written off [s].
 const MAX_LAG: f64 = 0.1;
+/// Ticks after which a pose is published even though the last one was not drawn yet: the
+/// window draws a pose at most this many ticks old, and the physics does not spend time on
+/// poses nobody draws (at 60 frames a second most ticks are not drawn).
+const PUBLISH_EVERY: u32 = 4;
 /// Wall time over which the real-time factor shown is measured [s].
 const RATE_WINDOW: f64 = 0.5;
 
@@ -180,6 +186,11 @@ impl Mailbox {
         *slot = Some(fresh);
     }
 
+    /// Whether a published pose has not been taken yet.
+    fn holds_unread(&self) -> bool {
+        lock(&self.latest).is_some()
+    }
+
     /// The latest pose, if one came since the last call.
     pub(crate) fn take(&self) -> Option<Pose> {
         lock(&self.latest).take()
@@ -202,6 +213,8 @@ pub(crate) struct PhysicsReport {
     pub(crate) dt: f64,
     /// Wall time of each tick's steps [s].
     pub(crate) tick_times: Vec<f64>,
+    /// Wall time of reading and publishing each pose published while running [s].
+    pub(crate) publish_times: Vec<f64>,
     /// Simulated and wall seconds while running (not paused).
     pub(crate) simulated_s: f64,
     pub(crate) running_wall_s: f64,
@@ -252,6 +265,7 @@ pub(crate) fn run(
     let mut was_running = false;
     let mut published_paused = None;
     let mut stopped: Option<String> = None;
+    let mut unpublished = 0;
     // The script quits after a divergence (nobody is there to reset), as at its `quit`.
     let scripted = !script.is_empty();
     while !controls.quit.load(Relaxed) {
@@ -348,10 +362,17 @@ pub(crate) fn run(
             report.behind_s += lag;
             origin = (Instant::now(), sim.time());
         }
-        gather.fill(&sim, &controls, &mut back);
-        back.real_time_factor = rate.update(sim.time());
-        back.stopped = stopped.clone();
-        mailbox.publish(&mut back);
+        let rate_now = rate.update(sim.time());
+        unpublished += 1;
+        if unpublished >= PUBLISH_EVERY || !mailbox.holds_unread() || stopped.is_some() {
+            let t0 = Instant::now();
+            gather.fill(&sim, &controls, &mut back);
+            back.real_time_factor = rate_now;
+            back.stopped = stopped.clone();
+            mailbox.publish(&mut back);
+            report.publish_times.push(t0.elapsed().as_secs_f64());
+            unpublished = 0;
+        }
     }
     gather.fill(&sim, &controls, &mut back);
     back.paused = controls.paused.load(Relaxed);
