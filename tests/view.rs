@@ -30,6 +30,52 @@ fn xvfb_available() -> bool {
     found
 }
 
+/// `xvfb-run -a` picks a free display number, but two started at once can pick the same one:
+/// the window tests take turns.
+static ONE_DISPLAY_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Runs `cosserat ARGS` in a window under Xvfb; `None` when it found no adapter (allowed
+/// unless `COSSERAT_REQUIRE_GPU=1`).
+fn view_under_xvfb(args: &[&std::ffi::OsStr]) -> Option<(String, String)> {
+    let _turn = ONE_DISPLAY_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 800x600x24"])
+        .arg(env!("CARGO_BIN_EXE_cosserat"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    if stderr.contains("no GPU adapter") {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {stderr}"
+        );
+        eprintln!("skipped: {stderr}");
+        return None;
+    }
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout: {stdout}\nstderr: {stderr}",
+        out.status
+    );
+    Some((stdout, stderr))
+}
+
+/// The JSON summary line the viewer prints on exit.
+fn summary(stdout: &str) -> serde_json::Value {
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no summary line in: {stdout}"));
+    serde_json::from_str(line).unwrap()
+}
+
 fn scratch(test: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("cosserat-view-{}-{test}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();
@@ -81,41 +127,25 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
     )
     .unwrap();
     let started = std::time::Instant::now();
-    let out = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 800x600x24"])
-        .arg(env!("CARGO_BIN_EXE_cosserat"))
-        .args(["view", "scenes/pendulum.toml", "--elements", "16"])
-        .args(["--width", "320", "--height", "200"])
-        .arg("--script")
-        .arg(&script)
-        .arg("--screenshot")
-        .arg(&last)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    if stderr.contains("no GPU adapter") {
-        assert!(
-            std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
-            "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {stderr}"
-        );
-        eprintln!("skipped: {stderr}");
+    let Some((stdout, _)) = view_under_xvfb(&[
+        "view".as_ref(),
+        "scenes/pendulum.toml".as_ref(),
+        "--elements".as_ref(),
+        "16".as_ref(),
+        "--width".as_ref(),
+        "320".as_ref(),
+        "--height".as_ref(),
+        "200".as_ref(),
+        "--script".as_ref(),
+        script.as_os_str(),
+        "--screenshot".as_ref(),
+        last.as_os_str(),
+    ]) else {
         return;
-    }
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstdout: {stdout}\nstderr: {stderr}",
-        out.status
-    );
+    };
     eprintln!("viewer ran {:.1} s", started.elapsed().as_secs_f64());
-    let line = stdout
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .unwrap_or_else(|| panic!("no summary line in: {stdout}"));
-    let summary: serde_json::Value = serde_json::from_str(line).unwrap();
+    let summary = summary(&stdout);
+    let line = summary.to_string();
     let moved = summary["hand_displacement_m"].as_f64().unwrap();
     assert!(
         (moved - 0.02).abs() < 1e-4,
@@ -137,6 +167,40 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
             picture.display()
         );
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--frames K` closes the window after K frames, saving the last with `--screenshot`; the
+/// scene runs as written meanwhile (nobody steers).
+#[test]
+fn frames_close_the_window() {
+    if !xvfb_available() {
+        return;
+    }
+    let dir = scratch("frames");
+    let last = dir.join("last.png");
+    let Some((stdout, _)) = view_under_xvfb(&[
+        "view".as_ref(),
+        "scenes/pendulum.toml".as_ref(),
+        "--elements".as_ref(),
+        "8".as_ref(),
+        "--width".as_ref(),
+        "160".as_ref(),
+        "--height".as_ref(),
+        "120".as_ref(),
+        "--frames".as_ref(),
+        "5".as_ref(),
+        "--screenshot".as_ref(),
+        last.as_os_str(),
+    ]) else {
+        return;
+    };
+    let summary = summary(&stdout);
+    assert_eq!(summary["frames"], 5, "{summary}");
+    assert_eq!(summary["hand_displacement_m"], 0.0, "{summary}");
+    let (w, h, rgba) = pixels(&last);
+    assert_eq!((w, h), (160, 120));
+    assert!(drawn_pixels(&rgba).0 > 0);
     std::fs::remove_dir_all(&dir).ok();
 }
 

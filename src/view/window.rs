@@ -342,10 +342,13 @@ fn readout(name: &str, p: &Pose, fps: f64, steerable: bool) -> Vec<String> {
         lines.push(match p.hand_force {
             Some(f) => {
                 let norm = f.iter().map(|x| x * x).sum::<f64>().sqrt();
-                format!(
-                    "hand {norm:.4} N  moved {:+.1} mm",
-                    1e3 * p.hand_displacement
-                )
+                // Newtons to three decimals where a hand feels it, else the small value itself.
+                let force = if norm >= 0.01 {
+                    format!("{norm:.3}")
+                } else {
+                    format!("{norm:.2e}")
+                };
+                format!("hand {force} N  moved {:+.1} mm", 1e3 * p.hand_displacement)
             }
             None => format!(
                 "hand: no reaction  moved {:+.1} mm",
