@@ -24,7 +24,7 @@ use std::sync::Arc;
 use cosserat::scene::{load_render_section, load_scene};
 use cosserat_render::{Bounds, Projection, RenderSettings, SurfaceMesh, View, include_rod};
 
-use physics::{Controls, Hand, Mailbox, PhysicsReport};
+use physics::{Controls, Ended, Hand, Mailbox, PhysicsReport};
 use window::{Setup, Viewer, WindowReport};
 
 /// `cosserat view`'s arguments.
@@ -171,7 +171,10 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
         let (controls, mailbox) = (controls.clone(), mailbox.clone());
         std::thread::Builder::new()
             .name("physics".into())
-            .spawn(move || physics::run(sim, hand, script, controls, mailbox))
+            .spawn(move || {
+                let _ended = Ended(controls.clone());
+                physics::run(sim, hand, script, controls, mailbox)
+            })
             .map_err(|e| format!("cannot start the physics thread: {e}"))?
     };
     let setup = Setup {

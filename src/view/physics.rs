@@ -67,6 +67,18 @@ pub(crate) struct Controls {
     pub(crate) reset: AtomicBool,
     /// The viewer is closing: publish the last state and stop.
     pub(crate) quit: AtomicBool,
+    /// The physics thread has ended, normally or not (set by [`Ended`]).
+    pub(crate) ended: AtomicBool,
+}
+
+/// Sets [`Controls::ended`] when dropped, so that the window stops waiting for poses even if
+/// the physics thread panics.
+pub(crate) struct Ended(pub(crate) Arc<Controls>);
+
+impl Drop for Ended {
+    fn drop(&mut self) {
+        self.0.ended.store(true, Relaxed);
+    }
 }
 
 /// The held end that the hand steers: the first end of the first rod that holds one.

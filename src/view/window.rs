@@ -230,6 +230,9 @@ impl Viewer {
     }
 
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        // Read before taking the pose: once the physics has ended, its last pose is in the
+        // mailbox.
+        let physics_ended = self.controls.ended.load(Relaxed);
         if let Some(pose) = self.mailbox.take() {
             let drawn = std::mem::replace(&mut self.pose, pose);
             self.mailbox.give_back(drawn);
@@ -241,6 +244,7 @@ impl Viewer {
         // The last frame: the physics has stopped (closing, or a scripted run that quit or
         // diverged), or `--frames` are drawn.
         let last = self.pose.finished
+            || physics_ended
             || self.closing.is_some_and(|t| t.elapsed() > CLOSING_WAIT)
             || self
                 .setup
