@@ -339,9 +339,10 @@ pub(crate) fn run(
             std::thread::sleep(Duration::from_secs_f64(ahead.min(2e-3)));
             continue;
         }
-        // The script's actions due by now.
+        // The script's actions due by now; those after a pause wait for its end.
         while let Some(timed) = script.get(next_action)
             && timed.at <= script_time + 0.5 * dt
+            && pause_until.is_none()
         {
             next_action += 1;
             match &timed.action {

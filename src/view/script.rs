@@ -12,7 +12,8 @@
 //! 0.4         reset                 # back to the initial state
 //! 0.5         quit
 //! ```
-//! Times are simulated seconds, not wall-clock ones: a machine that cannot keep up with real
+//! Actions at the same time are taken in the order written; those after a `pause` are taken
+//! when it ends. Times are simulated seconds, not wall-clock ones: a machine that cannot keep up with real
 //! time replays the same motion, only slower, so a script gives the same hand motion
 //! everywhere. A line that cannot be read is refused with the file, line number and value.
 
