@@ -77,6 +77,7 @@ pub(crate) struct ViewArgs {
 /// `cosserat view`: opens the window and runs until it is closed, the script quits or
 /// `--frames` are drawn.
 pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
+    leave_a_core_to_the_physics();
     let overrides = crate::scene_overrides(&args.scene, &args.overrides, args.elements)?;
     let (builder, _, name) = load_scene(&args.scene, &overrides).map_err(|e| e.to_string())?;
     let section = load_render_section(&args.scene, &overrides)
@@ -226,6 +227,21 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// On a machine of two cores, Mesa's software rasteriser (lavapipe) draws with one thread
+/// instead of one per core, unless `LP_NUM_THREADS` says otherwise: with two, its threads
+/// and the physics thread take turns on the same cores and the soft insertion's 1 ms ticks
+/// ran at 0.77 of real time at 60 frames a second, against 0.93 with one
+/// (`docs/rendering.md`, "Viewer"). GPU drivers ignore the variable.
+fn leave_a_core_to_the_physics() {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    if cores <= 2 && std::env::var_os("LP_NUM_THREADS").is_none() {
+        // SAFETY: called first thing in `view`, before this process starts any other thread
+        // (the physics, rayon's pool, the Vulkan driver's), so nothing reads the environment
+        // while it changes.
+        unsafe { std::env::set_var("LP_NUM_THREADS", "1") };
+    }
 }
 
 /// What the camera frames, so that it can stay still while the rods move: the mesh and the
