@@ -2,7 +2,7 @@
 //! push, twist, a screenshot, quit. Checks that it exits cleanly, that the pictures show
 //! something, and that the held end moved as far as it was pushed.
 //!
-//! It needs `xvfb-run` (Debian's `xvfb`) and a wgpu adapter (lavapipe). Without `xvfb-run` the
+//! It needs `xvfb-run` (Debian's `xvfb`; `xdotool` for the keys) and a wgpu adapter (lavapipe). Without `xvfb-run` the
 //! test passes after saying why it did not run, unless `COSSERAT_REQUIRE_DISPLAY=1`, which
 //! makes it fail (CI installs xvfb and sets it); without an adapter likewise, unless
 //! `COSSERAT_REQUIRE_GPU=1`.
@@ -40,9 +40,16 @@ fn view_under_xvfb(args: &[&std::ffi::OsStr]) -> Option<(String, String)> {
     let _turn = ONE_DISPLAY_AT_A_TIME
         .lock()
         .unwrap_or_else(|p| p.into_inner());
+    // `cosserat ARGS`, or any other program when the first argument is `bash`.
+    let program: &std::ffi::OsStr = if args.first().is_some_and(|a| *a == "bash") {
+        "bash".as_ref()
+    } else {
+        env!("CARGO_BIN_EXE_cosserat").as_ref()
+    };
+    let args = if program == "bash" { &args[1..] } else { args };
     let out = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 800x600x24"])
-        .arg(env!("CARGO_BIN_EXE_cosserat"))
+        .arg(program)
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
@@ -201,6 +208,69 @@ fn frames_close_the_window() {
     let (w, h, rgba) = pixels(&last);
     assert_eq!((w, h), (160, 120));
     assert!(drawn_pixels(&rgba).0 > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The keyboard steers: under Xvfb, `xdotool` holds the up arrow on the window for half a
+/// second and then presses Q; the viewer exits 0 and the held end moved forward along its
+/// axis. Skipped where `xdotool` is missing, unless `COSSERAT_REQUIRE_DISPLAY=1`.
+#[test]
+fn the_up_arrow_pushes_the_wire() {
+    if !xvfb_available() {
+        return;
+    }
+    if Command::new("xdotool").arg("version").output().is_err() {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_DISPLAY").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_DISPLAY=1 but xdotool is not installed (apt-get install xdotool)"
+        );
+        eprintln!(
+            "skipped: xdotool is not installed (apt-get install xdotool), so no key can be pressed"
+        );
+        return;
+    }
+    let dir = scratch("keys");
+    let summary_file = dir.join("summary.json");
+    // Started inside the X server: the viewer in the background, then the keys once its
+    // window is there.
+    let hand = r#"
+        timeout 60 "$1" view scenes/pendulum.toml --elements 8 --width 320 --height 200 > "$2" &
+        viewer=$!
+        for i in $(seq 150); do
+            window=$(xdotool search --name pendulum 2>/dev/null | head -1)
+            [ -n "$window" ] && break
+            sleep 0.2
+        done
+        [ -n "$window" ] || { echo "no window"; kill $viewer; exit 3; }
+        sleep 0.5
+        # No window manager gives the window the focus: take it, so that keys reach it.
+        xdotool windowfocus --sync "$window"
+        xdotool keydown --window "$window" Up
+        sleep 0.5
+        xdotool keyup --window "$window" Up
+        sleep 0.2
+        xdotool key --window "$window" q
+        wait $viewer
+    "#;
+    let Some(_) = view_under_xvfb(&[
+        "bash".as_ref(),
+        "-c".as_ref(),
+        hand.as_ref(),
+        "hand".as_ref(),
+        env!("CARGO_BIN_EXE_cosserat").as_ref(),
+        summary_file.as_os_str(),
+    ]) else {
+        return;
+    };
+    let stdout = std::fs::read_to_string(&summary_file).unwrap();
+    let summary = summary(&stdout);
+    let moved = summary["hand_displacement_m"].as_f64().unwrap();
+    // 0.05 m/s for half a second of wall time is 25 mm in real time; a debug build may run
+    // slower than real time.
+    assert!(
+        moved > 1e-3 && moved < 0.05,
+        "the held end moved {moved} m: {summary}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
