@@ -1,11 +1,11 @@
-//! `cosserat view` in a real window under Xvfb, driven by a script as a hand would drive it:
-//! push, twist, a screenshot, quit. Checks that it exits cleanly, that the pictures show
-//! something, and that the held end moved as far as it was pushed.
+//! `cosserat view` in a real window under Xvfb, driven by a script as a hand would drive it
+//! (push, twist, a screenshot, quit) and by the keyboard: it exits cleanly, the pictures show
+//! the rope, and the held end moved as far as it was pushed.
 //!
-//! It needs `xvfb-run` (Debian's `xvfb`; `xdotool` for the keys) and a wgpu adapter (lavapipe). Without `xvfb-run` the
-//! test passes after saying why it did not run, unless `COSSERAT_REQUIRE_DISPLAY=1`, which
-//! makes it fail (CI installs xvfb and sets it); without an adapter likewise, unless
-//! `COSSERAT_REQUIRE_GPU=1`.
+//! It needs `xvfb-run` (Debian's `xvfb`; `xdotool` for the keys) and a wgpu adapter
+//! (lavapipe). Without them the window tests pass after saying why they did not run, unless
+//! `COSSERAT_REQUIRE_DISPLAY=1` (CI installs both and sets it) or, for the adapter,
+//! `COSSERAT_REQUIRE_GPU=1`, which make them fail.
 #![cfg(feature = "view")]
 
 use std::path::{Path, PathBuf};
