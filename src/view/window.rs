@@ -481,3 +481,36 @@ impl ApplicationHandler for Viewer {
         event_loop.set_control_flow(ControlFlow::WaitUntil(self.next_frame));
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The readout says what the hand feels and when the physics is behind or paused.
+    #[test]
+    fn the_readout_says_force_speed_and_state() {
+        let mut pose = Pose {
+            time: 1.5,
+            push: 0.05,
+            hand_force: Some([0.3, 0.0, 0.4]),
+            hand_displacement: 0.012,
+            real_time_factor: 0.8,
+            ..Default::default()
+        };
+        let lines = readout("wire", &pose, 59.6, true);
+        assert_eq!(lines[0], "wire  t 1.500 s");
+        assert_eq!(lines[1], "push +0.050 m/s  twist +0.0 rad/s");
+        assert_eq!(lines[2], "hand 0.500 N  moved +12.0 mm");
+        assert_eq!(lines[3], "real time x0.80  60 fps  (physics behind)");
+        pose.hand_force = Some([0.0, 2e-4, 0.0]);
+        pose.paused = true;
+        let lines = readout("wire", &pose, 60.0, true);
+        assert!(lines[2].starts_with("hand 2.00e-4 N"), "{}", lines[2]);
+        assert!(!lines[3].contains("behind"), "{}", lines[3]);
+        assert!(lines[4].starts_with("paused"), "{lines:?}");
+        pose.stopped = Some("diverged".into());
+        let lines = readout("free", &pose, 60.0, false);
+        assert_eq!(lines.len(), 3, "no hand lines without a hand: {lines:?}");
+        assert!(lines[2].contains("STOPPED: diverged"), "{lines:?}");
+    }
+}
