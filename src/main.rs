@@ -4,7 +4,8 @@
 //! for scripts and benchmarks); `--out DIR` also writes the trajectory for NumPy and ParaView.
 //! `cosserat converge SCENE` estimates how accurate such a run is (`docs/convergence.md`).
 //! `cosserat render RUN_DIR` draws a run's frames into pictures and a video
-//! (`docs/rendering.md`). With no arguments it runs the built-in demo, the paper's free-space
+//! (`docs/rendering.md`); `cosserat view SCENE` opens a window that simulates a scene in real
+//! time while it draws it, with a wire to steer. With no arguments it runs the built-in demo, the paper's free-space
 //! pendulum.
 
 use clap::{Parser, Subcommand};
@@ -18,6 +19,8 @@ use std::time::Instant;
 
 #[cfg(feature = "render")]
 mod render;
+#[cfg(feature = "view")]
+mod view;
 
 /// The demo run by `cosserat` with no arguments.
 const DEMO_SCENE: &str = include_str!("../scenes/pendulum.toml");
@@ -47,6 +50,11 @@ enum Command {
     /// ffmpeg when installed, else GIF), offscreen on any GPU or on Mesa's lavapipe.
     #[cfg(feature = "render")]
     Render(render::RenderArgs),
+    /// Open a window that simulates a scene in real time while it draws it; steer the held
+    /// end of its wire with the keyboard and mouse (arrows push, pull and twist; space pauses;
+    /// R resets), or with a script.
+    #[cfg(feature = "view")]
+    View(view::ViewArgs),
 }
 
 #[derive(Subcommand)]
@@ -152,6 +160,8 @@ fn main() -> ExitCode {
         Some(Command::Mesh(MeshCommand::Inspect(args))) => inspect(&args),
         #[cfg(feature = "render")]
         Some(Command::Render(args)) => render::render(&args),
+        #[cfg(feature = "view")]
+        Some(Command::View(args)) => view::view(&args),
         None => demo(),
     };
     match result {
@@ -517,15 +527,25 @@ struct LoadedScene {
 
 /// The command line's `--set` and `--elements` as overrides.
 fn overrides(args: &SceneArgs) -> Result<Vec<(String, String)>, String> {
+    scene_overrides(&args.scene, &args.overrides, args.elements)
+}
+
+/// `--set KEY=VALUE` pairs and `--elements N` (for every rod of the scene at `scene`) as
+/// overrides.
+fn scene_overrides(
+    scene: &Path,
+    sets: &[String],
+    elements: Option<usize>,
+) -> Result<Vec<(String, String)>, String> {
     let mut overrides = Vec::new();
-    for kv in &args.overrides {
+    for kv in sets {
         let (k, v) = kv
             .split_once('=')
             .ok_or_else(|| format!("--set `{kv}`: expected KEY=VALUE"))?;
         overrides.push((k.trim().to_string(), v.trim().to_string()));
     }
-    if let Some(n) = args.elements {
-        let count = count_rods(&args.scene)?;
+    if let Some(n) = elements {
+        let count = count_rods(scene)?;
         for i in 0..count {
             overrides.push((format!("rod.{i}.elements"), n.to_string()));
         }

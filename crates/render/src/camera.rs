@@ -294,6 +294,35 @@ impl Camera {
     }
 }
 
+impl Camera {
+    /// The same camera with the picture magnified `factor` times about its centre (a wheel's
+    /// zoom): clip-space `x` and `y` are scaled, depth is not, so nothing framed is clipped
+    /// away in depth.
+    #[must_use]
+    pub fn zoomed(mut self, factor: f64) -> Self {
+        let f = factor as f32;
+        for column in &mut self.view_projection {
+            column[0] *= f;
+            column[1] *= f;
+        }
+        self.pixel_size /= factor;
+        self
+    }
+}
+
+impl View {
+    /// The angles of a view whose unit vector from the scene towards the camera is `back`
+    /// (the inverse of the direction [`View::Angles`] looks from), for orbiting from a
+    /// camera's [`Camera::towards_camera`].
+    pub fn looking_from(back: [f32; 3]) -> Self {
+        let [x, y, z] = back.map(f64::from);
+        Self::Angles {
+            azimuth: (-x).atan2(-y).to_degrees(),
+            elevation: z.clamp(-1.0, 1.0).asin().to_degrees(),
+        }
+    }
+}
+
 type Mat4 = [[f64; 4]; 4];
 
 /// World → camera space for an eye with axes `right`, `up` and `back` (column-major).
@@ -383,6 +412,51 @@ mod tests {
                 assert!(
                     reach > 0.8,
                     "{view} {projection:?}: the box fills only {reach}"
+                );
+            }
+        }
+    }
+
+    /// Zooming keeps the centre and depth, and scales the rest of the picture.
+    #[test]
+    fn zoom_magnifies_about_the_centre() {
+        let b = unit_box();
+        let cam = Camera::framing(&b, View::Auto, Projection::Orthographic, 160, 90).unwrap();
+        let zoomed = cam.zoomed(2.0);
+        let corner = clip(&cam.view_projection, b.min);
+        let near = clip(&zoomed.view_projection, b.min);
+        assert!(
+            (near[0] - 2.0 * corner[0]).abs() < 1e-5 && (near[1] - 2.0 * corner[1]).abs() < 1e-5
+        );
+        assert!((near[2] - corner[2]).abs() < 1e-6);
+        assert!((zoomed.pixel_size - cam.pixel_size / 2.0).abs() < 1e-12);
+    }
+
+    /// The angles read back from a camera give the camera's direction again.
+    #[test]
+    fn orbiting_starts_from_where_the_camera_is() {
+        let b = unit_box();
+        for view in ["iso", "20,-40", "front"] {
+            let cam = Camera::framing(
+                &b,
+                View::parse(view).unwrap(),
+                Projection::Orthographic,
+                16,
+                9,
+            )
+            .unwrap();
+            let again = Camera::framing(
+                &b,
+                View::looking_from(cam.towards_camera),
+                Projection::Orthographic,
+                16,
+                9,
+            )
+            .unwrap();
+            for k in 0..3 {
+                assert!(
+                    (cam.towards_camera[k] - again.towards_camera[k]).abs() < 1e-5,
+                    "{view}"
                 );
             }
         }

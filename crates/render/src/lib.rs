@@ -5,7 +5,8 @@
 //! their material frames; the vessel translucent; points pressed against the wall coloured by
 //! their normal force — into PNG frames and one animated file (MP4 through ffmpeg, else GIF).
 //! It runs on any wgpu adapter, Mesa's lavapipe included, so it works on a machine without a
-//! GPU and in CI.
+//! GPU and in CI. The same drawing goes into a window's surface ([`SurfaceRenderer`], for
+//! `cosserat view`).
 //!
 //! It takes plain data only ([`RodPose`]: centreline, directors, radius, contact forces;
 //! [`SurfaceMesh`]: vertices and triangles) and knows nothing of simulations or file layouts;
@@ -32,14 +33,19 @@
 //! since rasterisers of different adapters differ in the last bit of an edge.
 
 pub mod camera;
+mod draw;
 mod encode;
+mod font;
 mod geometry;
+mod overlay;
 pub mod renderer;
+pub mod surface;
 
 pub use camera::{Bounds, Camera, Projection, View};
 pub use encode::{AnimationFormat, AnimationWriter, ffmpeg_available, read_png, write_png};
 pub use geometry::{MESH_COLOUR, ROD_COLOURS, RodPose, SIDES, SurfaceMesh, include_rod};
 pub use renderer::{Image, RenderSettings, Renderer};
+pub use surface::{Presented, SurfaceRenderer};
 
 use std::path::{Path, PathBuf};
 
