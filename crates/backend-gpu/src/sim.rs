@@ -114,7 +114,7 @@ pub(crate) const WALL_STATS: usize = 11;
 /// Triangles in a point's near list, and ridge triangles in an element's
 /// (`shaders/wall_contact.wgsl`, checked by a test).
 pub(crate) const NEAR_POINT: usize = 16;
-pub(crate) const NEAR_ELEMENT: usize = 8;
+pub(crate) const NEAR_ELEMENT: usize = 16;
 
 /// First step index `s` with `s * dt >= t`, matching the CPU's `time = steps as f64 * dt`.
 fn first_step_at(t: f64, dt: f64) -> u32 {

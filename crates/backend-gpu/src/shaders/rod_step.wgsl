@@ -245,8 +245,13 @@ const NONE: u32 = 0xffffffffu;
 const XP: u32 = EPT + 2u;
 const WALL_STATS: u32 = 11u;
 // The skin of the near lists as a fraction of the reach: a point's list holds the triangles
-// within reach + skin of its anchor, and serves while the point stays within the skin of it.
+// within reach + skin of its anchor, and serves while the point stays within the skin of it;
+// an element's, the ridge triangles within reach + RIDGE_SKIN of it. Measured on the H100
+// (docs/benchmarks/gpu-contact.md): ridge skins of 0.25 / 0.5 / 2 reaches gave 62 / 57 / 323
+// µs per step to full depth (a wide one overflows the lists at bifurcations, and those
+// elements then walk the tree at every step).
 const WALL_SKIN: f32 = 0.5;
+const RIDGE_SKIN: f32 = 0.5;
 
 //#if MESH
 struct Resolved {
@@ -480,6 +485,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     var clear: array<f32, EPT>;
     var head: array<u32, EPT>;
     let skin = reach * WALL_SKIN;
+    let ridge_skin = reach * RIDGE_SKIN;
 //#for e 0 EPT
     {
         let gp = it.w0 + b0 + {e};
@@ -1148,11 +1154,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             let e1 = el_meta[2u * (it.base + ge) + 1u].xyz;
             var sh: SegmentHit;
             if (eh & LIST_VALID) != 0u && (eh & LIST_OVER) == 0u
-                && length(a - e0) <= skin && length(a + d - e1) <= skin {
+                && length(a - e0) <= ridge_skin && length(a + d - e1) <= ridge_skin {
                 sh = wall_segment_listed(a, d, de_limit[x], eb, eh);
             } else {
                 element_walks += 1u;
-                sh = wall_segment_walk(a, d, de_limit[x], reach + skin, eb);
+                sh = wall_segment_walk(a, d, de_limit[x], reach + ridge_skin, eb);
                 el_meta[2u * (it.base + ge)] = vec4<f32>(a, 0.0);
                 el_meta[2u * (it.base + ge) + 1u] = vec4<f32>(a + d, 0.0);
             }
