@@ -10,7 +10,9 @@
 //! - batches of copies (`[batch] copies`) sharing the vessel, throughput per copy and whether
 //!   every copy stayed in the lumen.
 //!
-//! `cargo run --release --example gpu_contact_bench -- [--quick] [--copies 1024,4096] [--json FILE]`
+//! `cargo run --release --example gpu_contact_bench -- [--quick] [--copies 1024,4096]
+//! [--batch-parts] [--json FILE]`; `--batch-parts` also times the batches without the vessel
+//! and without either (what each part costs when the GPU is full).
 
 use cosserat::scene::parse_scene;
 use cosserat::sim::{Backend, RodHandle, Simulation};
@@ -154,25 +156,36 @@ fn main() {
     json.insert("tick_us".into(), tick.into());
 
     // Batches.
+    let parts: &[(&str, bool, bool)] = if args.iter().any(|a| a == "--batch-parts") {
+        &[
+            ("guide_and_vessel", true, true),
+            ("guide", false, true),
+            ("free", false, false),
+        ]
+    } else {
+        &[("guide_and_vessel", true, true)]
+    };
     let mut batches = Vec::new();
     for &n in &copies {
-        let mut sim = build(&[("batch.copies", n.to_string())], true, true);
-        let batch_steps: u64 = if quick { 100 } else { 2_000 };
-        let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
-        let report = sim.contact_report().expect("a vessel");
-        let per_copy = 1e6 / per;
-        println!(
-            "{n} copies: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
-            per_copy * 512.0 * n as f64,
-            report.escaped_points,
-            report.max_penetration
-        );
-        batches.push(serde_json::json!({
-            "copies": n, "us_per_step": per, "steps_per_s_per_copy": per_copy,
+        for &(part, vessel, guide) in parts {
+            let mut sim = build(&[("batch.copies", n.to_string())], vessel, guide);
+            let batch_steps: u64 = if quick { 100 } else { 2_000 };
+            let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
+            let report = sim.contact_report().expect("a vessel");
+            let per_copy = 1e6 / per;
+            println!(
+                "{n} copies, {part}: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
+                per_copy * 512.0 * n as f64,
+                report.escaped_points,
+                report.max_penetration
+            );
+            batches.push(serde_json::json!({
+            "copies": n, "part": part, "us_per_step": per, "steps_per_s_per_copy": per_copy,
             "element_steps_per_s": per_copy * 512.0 * n as f64,
             "escaped_points": report.escaped_points, "max_penetration_m": report.max_penetration,
             "steps": batch_steps,
         }));
+        }
     }
     json.insert("batches".into(), batches.into());
     if let Some(path) = arg("--json") {
