@@ -363,15 +363,21 @@ impl GpuSimulation {
     /// Positions, velocities, frames, angular velocities (each `16 · slots` bytes), the status
     /// words and the clamps, one after another, in one round trip.
     fn read_whole_state(&mut self) -> Result<Vec<u8>, GpuError> {
+        let parts = self.whole_state_parts();
+        self.read_buffers(&parts)
+    }
+
+    /// The parts of [`Self::read_whole_state`] and their sizes.
+    fn whole_state_parts(&self) -> Vec<(Part, u64)> {
         let bytes = 16 * self.slots;
-        self.read_buffers(&[
+        vec![
             (Part::Positions, bytes),
             (Part::Velocities, bytes),
             (Part::Frames, bytes),
             (Part::AngularVelocities, bytes),
             (Part::Status, self.status_bytes() as u64),
             (Part::Clamps, self.clamp_bytes() as u64),
-        ])
+        ]
     }
 
     /// The full state of every rod (blocking, one round trip). Fails like
@@ -380,19 +386,16 @@ impl GpuSimulation {
         use cosserat_model::RodState;
         let all = if self.wall.is_some() {
             // The wall's statistics and contacts come in the same round trip.
-            let bytes = 16 * self.slots;
-            let rods = self.rods.len() as u64;
-            let mut all = self.read_buffers(&[
-                (Part::Positions, bytes),
-                (Part::Velocities, bytes),
-                (Part::Frames, bytes),
-                (Part::AngularVelocities, bytes),
-                (Part::Status, self.status_bytes() as u64),
-                (Part::Clamps, self.clamp_bytes() as u64),
-                (Part::WallStats, 4 * WALL_STATS as u64 * rods),
+            let mut parts = self.whole_state_parts();
+            let wall_at = parts.iter().map(|p| p.1 as usize).sum();
+            parts.extend([
+                (
+                    Part::WallStats,
+                    4 * WALL_STATS as u64 * self.rods.len() as u64,
+                ),
                 (Part::Contacts, 32 * self.slots),
-            ])?;
-            let wall_at = 4 * bytes as usize + self.status_bytes() + self.clamp_bytes();
+            ]);
+            let mut all = self.read_buffers(&parts)?;
             let wall = all.split_off(wall_at);
             let (stats, contacts) = wall.split_at(4 * WALL_STATS * self.rods.len());
             self.wall_read = Some(WallRead {

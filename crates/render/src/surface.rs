@@ -192,20 +192,7 @@ impl SurfaceRenderer {
             format: Some(self.format),
             ..Default::default()
         });
-        let mut encoder = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("window frame"),
-            });
-        self.scene.encode(
-            &mut encoder,
-            &Attachments {
-                colour: &view,
-                multisampled: self.multisampled.as_ref(),
-                depth: &self.depth,
-            },
-        );
+        let encoder = self.encode_scene("window frame", &view);
         self.gpu.queue.submit([encoder.finish()]);
         self.gpu.queue.present(frame);
         if let Some(out) = capture {
@@ -213,6 +200,23 @@ impl SurfaceRenderer {
         }
         self.gpu.take_error()?;
         Ok(Presented::Shown)
+    }
+
+    /// A command encoder that draws the frame prepared last into `colour`.
+    fn encode_scene(&self, label: &str, colour: &wgpu::TextureView) -> wgpu::CommandEncoder {
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        self.scene.encode(
+            &mut encoder,
+            &Attachments {
+                colour,
+                multisampled: self.multisampled.as_ref(),
+                depth: &self.depth,
+            },
+        );
+        encoder
     }
 
     /// Draws the frame prepared last into an offscreen texture of the surface's format and
@@ -231,20 +235,7 @@ impl SurfaceRenderer {
         );
         let view = texture.create_view(&Default::default());
         let readback = Readback::new(&self.gpu.device, width, height);
-        let mut encoder = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("screenshot"),
-            });
-        self.scene.encode(
-            &mut encoder,
-            &Attachments {
-                colour: &view,
-                multisampled: self.multisampled.as_ref(),
-                depth: &self.depth,
-            },
-        );
+        let mut encoder = self.encode_scene("screenshot", &view);
         readback.copy(&mut encoder, &texture);
         readback.finish(&self.gpu, encoder, out)?;
         if matches!(

@@ -1505,23 +1505,12 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if max_pen > 0.0 {
             atomicMax(&wall_stats[it.rod * WALL_STATS], bitcast<u32>(max_pen));
         }
-        if swept > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 5u], swept);
-        }
-        if queries > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 6u], queries);
-        }
-        if overflows > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 7u], overflows);
-        }
-        if ridges > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 8u], ridges);
-        }
-        if listed > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 9u], listed);
-        }
-        if element_walks > 0u {
-            atomicAdd(&wall_stats[it.rod * WALL_STATS + 10u], element_walks);
+        // Words 5 ..= 10, in their order.
+        let totals = array<u32, 6>(swept, queries, overflows, ridges, listed, element_walks);
+        for (var k = 0u; k < 6u; k++) {
+            if totals[k] > 0u {
+                atomicAdd(&wall_stats[it.rod * WALL_STATS + 5u + k], totals[k]);
+            }
         }
         if steps_done > 0u {
 //#for e 0 EPT
