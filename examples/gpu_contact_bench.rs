@@ -11,8 +11,10 @@
 //!   every copy stayed in the lumen.
 //!
 //! `cargo run --release --example gpu_contact_bench -- [--quick] [--copies 1024,4096]
-//! [--batch-parts] [--json FILE]`; `--batch-parts` also times the batches without the vessel
-//! and without either (what each part costs when the GPU is full).
+//! [--batch-parts] [--gpus 1,2,4] [--batches-only] [--json FILE]`; `--batch-parts` also times
+//! the batches without the vessel and without either (what each part costs when the GPU is
+//! full); `--gpus` times every batch spread over each number of GPUs (`[batch] gpus`), for the
+//! scaling table; `--batches-only` leaves out the single copy.
 
 use cosserat::scene::parse_scene;
 use cosserat::sim::{Backend, RodHandle, Simulation};
@@ -76,63 +78,68 @@ fn main() {
     let copies: Vec<usize> = arg("--copies")
         .map(|s| s.split(',').map(|c| c.parse().expect("copies")).collect())
         .unwrap_or_else(|| vec![1024, 4096]);
+    let gpus: Vec<usize> = arg("--gpus")
+        .map(|s| s.split(',').map(|c| c.parse().expect("gpus")).collect())
+        .unwrap_or_else(|| vec![1]);
+    let batches_only = args.iter().any(|a| a == "--batches-only");
     let steps: u64 = if quick { 200 } else { 20_000 };
     let mut json = serde_json::Map::new();
 
-    // One copy: without and with the contact code.
-    let mut single = serde_json::Map::new();
-    for (name, vessel, guide) in [
-        ("free", false, false),
-        ("guide", false, true),
-        ("guide_and_vessel", true, true),
-    ] {
-        let mut sim = build(&[], vessel, guide);
-        let per = median(
-            (0..3)
-                .map(|_| time_steps(&mut sim, steps, 10_000.min(steps)))
-                .collect(),
-        );
-        println!("one copy, {name}: {per:.2} µs/step");
-        single.insert(name.into(), per.into());
-        if let Some(st) = sim.stepper().collision_stats(0) {
-            let q = st.queries as f64 / st.steps.max(1) as f64;
-            println!(
-                "  tree walks per step {q:.2}, ridge element contacts {}",
-                st.segment_contacts
+    if !batches_only {
+        // One copy: without and with the contact code.
+        let mut single = serde_json::Map::new();
+        for (name, vessel, guide) in [
+            ("free", false, false),
+            ("guide", false, true),
+            ("guide_and_vessel", true, true),
+        ] {
+            let mut sim = build(&[], vessel, guide);
+            let per = median(
+                (0..3)
+                    .map(|_| time_steps(&mut sim, steps, 10_000.min(steps)))
+                    .collect(),
             );
-            single.insert(format!("{name}_queries_per_step"), q.into());
+            println!("one copy, {name}: {per:.2} µs/step");
+            single.insert(name.into(), per.into());
+            if let Some(st) = sim.stepper().collision_stats(0) {
+                let q = st.queries as f64 / st.steps.max(1) as f64;
+                println!(
+                    "  tree walks per step {q:.2}, ridge element contacts {}",
+                    st.segment_contacts
+                );
+                single.insert(format!("{name}_queries_per_step"), q.into());
+            }
         }
-    }
-    json.insert("single_us_per_step".into(), single.into());
+        json.insert("single_us_per_step".into(), single.into());
 
-    // One copy to full depth.
-    let mut sim = build(&[], true, true);
-    let full: u64 = if quick {
-        2_000
-    } else {
-        (2.45f64 / 3.5e-6).ceil() as u64
-    };
-    let t = Instant::now();
-    let mut left = full;
-    while left > 0 {
-        let k = left.min(10_000);
-        sim.run(k).unwrap_or_else(|e| panic!("{e}"));
-        left -= k;
-    }
-    let per = t.elapsed().as_secs_f64() * 1e6 / full as f64;
-    let report = sim.contact_report().expect("a vessel");
-    let tip = *sim.positions(RodHandle(0)).last().expect("points");
-    let st = sim.stepper().collision_stats(0).expect("stats");
-    let queries = st.queries as f64 / st.steps.max(1) as f64;
-    println!(
-        "  tree walks per step {queries:.2}, most contacts {}, ridge element contacts {}, swept catches {}",
-        st.max_contacts, st.segment_contacts, st.swept_catches
-    );
-    println!(
-        "full depth: {full} steps, {per:.2} µs/step, escaped {}, max penetration {:.3e} m, contacts {}, tip {tip:?}",
-        report.escaped_points, report.max_penetration, report.contacts
-    );
-    json.insert(
+        // One copy to full depth.
+        let mut sim = build(&[], true, true);
+        let full: u64 = if quick {
+            2_000
+        } else {
+            (2.45f64 / 3.5e-6).ceil() as u64
+        };
+        let t = Instant::now();
+        let mut left = full;
+        while left > 0 {
+            let k = left.min(10_000);
+            sim.run(k).unwrap_or_else(|e| panic!("{e}"));
+            left -= k;
+        }
+        let per = t.elapsed().as_secs_f64() * 1e6 / full as f64;
+        let report = sim.contact_report().expect("a vessel");
+        let tip = *sim.positions(RodHandle(0)).last().expect("points");
+        let st = sim.stepper().collision_stats(0).expect("stats");
+        let queries = st.queries as f64 / st.steps.max(1) as f64;
+        println!(
+            "  tree walks per step {queries:.2}, most contacts {}, ridge element contacts {}, swept catches {}",
+            st.max_contacts, st.segment_contacts, st.swept_catches
+        );
+        println!(
+            "full depth: {full} steps, {per:.2} µs/step, escaped {}, max penetration {:.3e} m, contacts {}, tip {tip:?}",
+            report.escaped_points, report.max_penetration, report.contacts
+        );
+        json.insert(
         "full_depth".into(),
         serde_json::json!({
             "steps": full, "us_per_step": per, "escaped_points": report.escaped_points,
@@ -142,18 +149,19 @@ fn main() {
         }),
     );
 
-    // One tick: a step and the tip read back.
-    let mut ticks = Vec::new();
-    for _ in 0..if quick { 20 } else { 2000 } {
-        let t = Instant::now();
-        sim.run(1).unwrap_or_else(|e| panic!("{e}"));
-        let tip = *sim.positions(RodHandle(0)).last().expect("points");
-        ticks.push(t.elapsed().as_secs_f64() * 1e6);
-        std::hint::black_box(tip);
+        // One tick: a step and the tip read back.
+        let mut ticks = Vec::new();
+        for _ in 0..if quick { 20 } else { 2000 } {
+            let t = Instant::now();
+            sim.run(1).unwrap_or_else(|e| panic!("{e}"));
+            let tip = *sim.positions(RodHandle(0)).last().expect("points");
+            ticks.push(t.elapsed().as_secs_f64() * 1e6);
+            std::hint::black_box(tip);
+        }
+        let tick = median(ticks);
+        println!("one tick (a step and the tip): {tick:.1} µs median");
+        json.insert("tick_us".into(), tick.into());
     }
-    let tick = median(ticks);
-    println!("one tick (a step and the tip): {tick:.1} µs median");
-    json.insert("tick_us".into(), tick.into());
 
     // Batches.
     let parts: &[(&str, bool, bool)] = if args.iter().any(|a| a == "--batch-parts") {
@@ -167,24 +175,31 @@ fn main() {
     };
     let mut batches = Vec::new();
     for &n in &copies {
-        for &(part, vessel, guide) in parts {
-            let mut sim = build(&[("batch.copies", n.to_string())], vessel, guide);
-            let batch_steps: u64 = if quick { 100 } else { 2_000 };
-            let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
-            let report = sim.contact_report().expect("a vessel");
-            let per_copy = 1e6 / per;
-            println!(
-                "{n} copies, {part}: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
-                per_copy * 512.0 * n as f64,
-                report.escaped_points,
-                report.max_penetration
-            );
-            batches.push(serde_json::json!({
-            "copies": n, "part": part, "us_per_step": per, "steps_per_s_per_copy": per_copy,
-            "element_steps_per_s": per_copy * 512.0 * n as f64,
-            "escaped_points": report.escaped_points, "max_penetration_m": report.max_penetration,
-            "steps": batch_steps,
-        }));
+        for &g in &gpus {
+            for &(part, vessel, guide) in parts {
+                let overrides = [
+                    ("batch.copies", n.to_string()),
+                    ("batch.gpus", g.to_string()),
+                ];
+                let mut sim = build(&overrides, vessel, guide);
+                let batch_steps: u64 = if quick { 100 } else { 2_000 };
+                let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
+                let report = sim.contact_report().expect("a vessel");
+                let per_copy = 1e6 / per;
+                println!(
+                    "{n} copies on {g} GPU(s), {part}: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
+                    per_copy * 512.0 * n as f64,
+                    report.escaped_points,
+                    report.max_penetration
+                );
+                batches.push(serde_json::json!({
+                    "copies": n, "gpus": g, "part": part, "us_per_step": per,
+                    "steps_per_s_per_copy": per_copy,
+                    "element_steps_per_s": per_copy * 512.0 * n as f64,
+                    "escaped_points": report.escaped_points,
+                    "max_penetration_m": report.max_penetration, "steps": batch_steps,
+                }));
+            }
         }
     }
     json.insert("batches".into(), batches.into());

@@ -1,6 +1,7 @@
 //! Scene files: every shipped scene loads and runs a few steps; bad scenes are refused with the
 //! file, the field and the value named, never a panic.
 
+use cosserat::RodHandle;
 use cosserat::scene::{SceneError, load_scene, parse_scene};
 use std::path::Path;
 
@@ -179,12 +180,54 @@ fn bad_values_name_file_field_and_value() {
             "rod[0].distributed_load[0]",
             "point = Some(3)",
         ),
+        (
+            GOOD.to_string() + "[batch]\ncopies = 2\ngpus = 0\n",
+            "batch.gpus",
+            "0",
+        ),
+        (
+            GOOD.to_string() + "[batch]\ncopies = 2\ngpus = \"every\"\n",
+            "batch.gpus",
+            "\"every\"",
+        ),
     ];
     for (text, field, value) in cases {
         let msg = error_for(&text);
         assert!(msg.starts_with("bad.toml:"), "{msg}");
         assert!(msg.contains(field), "expected field `{field}` in: {msg}");
         assert!(msg.contains(value), "expected value `{value}` in: {msg}");
+    }
+}
+
+/// `[batch] copies = N` steps N copies of the rods, each exactly as the scene alone, steered
+/// one by one; `gpus` only says where they run (the CPU backends ignore it).
+#[test]
+fn copies_of_a_scene_step_as_the_scene_alone() {
+    let text = GOOD.replace(
+        "start = { kind = \"clamped\" }",
+        "start = { kind = \"clamped\" }\nend = { kind = \"pinned\" }",
+    );
+    let (alone, _, _) = parse_scene(Path::new("good.toml"), &text, &[]).unwrap();
+    let batch = text + "[batch]\ncopies = 3\ngpus = \"all\"\n";
+    let (b, _, _) = parse_scene(Path::new("batch.toml"), &batch, &[]).unwrap();
+    let mut alone = alone.build().unwrap();
+    let mut copies = b.build().unwrap();
+    assert_eq!(copies.rods().count(), 3);
+    let push = [0.0, 0.05, 0.0];
+    alone
+        .set_end_velocity(RodHandle(0), 1, push, [0.0; 3])
+        .unwrap();
+    copies
+        .set_end_velocity(RodHandle(1), 1, push, [0.0; 3])
+        .unwrap();
+    alone.run(200).unwrap();
+    copies.run(200).unwrap();
+    let pushed = alone.positions(RodHandle(0));
+    assert_eq!(copies.positions(RodHandle(1)), pushed);
+    for still in [0, 2] {
+        let p = copies.positions(RodHandle(still));
+        assert_eq!(p, copies.positions(RodHandle(2 - still)));
+        assert_ne!(p, pushed, "copy {still} was not pushed");
     }
 }
 
@@ -337,7 +380,7 @@ fn a_load_at_a_fraction_follows_the_elements() {
         let (b, _, _) = parse_scene(Path::new("load.toml"), &text, &over).unwrap();
         let mut sim = b.build().unwrap();
         sim.run(50).unwrap();
-        sim.positions(cosserat::RodHandle(0))
+        sim.positions(RodHandle(0))
     };
     assert_eq!(with_load("at = 1.0", 8), with_load("point = -1", 8));
     assert_eq!(with_load("at = 0.5", 8), with_load("point = 4", 8));
@@ -386,7 +429,7 @@ end = {{ kind = "pinned" }}
         let (b, _, _) = parse_scene(Path::new("taut.toml"), &scene(strain), &[]).unwrap();
         let mut sim = b.reaction_cutoff_hz(f64::INFINITY).build().unwrap();
         sim.run(200).unwrap();
-        let h = cosserat::RodHandle(0);
+        let h = RodHandle(0);
         (
             sim.end_reaction(h, 0).unwrap().force,
             sim.end_reaction(h, 1).unwrap().force,
@@ -453,7 +496,7 @@ end = {{ kind = "pinned" }}
     .unwrap();
     let mut sim = builder.build().unwrap();
     sim.run(20_000).unwrap();
-    let p = sim.positions(cosserat::RodHandle(0));
+    let p = sim.positions(RodHandle(0));
     // Equal tension: equal strain in every element; total length 0.1 over the rest 0.1 − 0.05·(0.02/1.02).
     let rest_total = 2.0 * a + 2.0 * b;
     let strain = 0.1 / rest_total - 1.0;

@@ -88,6 +88,62 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        Self::open(&adapter, options)
+    }
+
+    /// A device on each of `count` distinct adapters (`None`: every one), hardware adapters
+    /// before software ones and in bus order, so that a batch split across them lands on the
+    /// same cards from run to run. An adapter that several graphics APIs expose is taken once.
+    pub(crate) fn acquire_each(
+        options: &GpuOptions,
+        count: Option<usize>,
+    ) -> Result<Vec<Self>, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let adapters = distinct_adapters(all.iter().map(wgpu::Adapter::get_info).collect())
+            .into_iter()
+            .map(|i| &all[i])
+            .collect::<Vec<_>>();
+        let names = || {
+            adapters
+                .iter()
+                .map(|a| a.get_info().name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let take = match count {
+            Some(0) => {
+                return Err(GpuError::InvalidInput(
+                    "gpus = 0: a simulation needs at least one adapter".into(),
+                ));
+            }
+            Some(n) if n > adapters.len() => {
+                return Err(GpuError::NoAdapter(format!(
+                    "gpus = {n}, but {} adapter{} found ({})",
+                    adapters.len(),
+                    if adapters.len() == 1 {
+                        " was"
+                    } else {
+                        "s were"
+                    },
+                    names()
+                )));
+            }
+            Some(n) => n,
+            None if adapters.is_empty() => {
+                return Err(GpuError::NoAdapter("no adapter was found".into()));
+            }
+            None => adapters.len(),
+        };
+        adapters[..take]
+            .iter()
+            .map(|a| Self::open(a, options))
+            .collect()
+    }
+
+    /// A device on `adapter` with its full limits and the optional features the kernels use.
+    fn open(adapter: &wgpu::Adapter, options: &GpuOptions) -> Result<Self, GpuError> {
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("cosserat-backend-gpu"),
@@ -127,6 +183,39 @@ impl Gpu {
             errors,
         }
     }
+}
+
+/// Indices of the adapters to use, one per physical device: hardware adapters (or, when there
+/// are none, software ones), each device once (Vulkan, GL and the others can list the same
+/// card; the first listing wins, wgpu lists Vulkan first), in PCI bus order where known.
+fn distinct_adapters(infos: Vec<wgpu::AdapterInfo>) -> Vec<usize> {
+    let software = |i: &wgpu::AdapterInfo| {
+        i.device_type == wgpu::DeviceType::Cpu || i.name.to_ascii_lowercase().contains("llvmpipe")
+    };
+    let any_hardware = infos.iter().any(|i| !software(i));
+    let mut seen = Vec::new();
+    let mut chosen: Vec<usize> = Vec::new();
+    for (k, info) in infos.iter().enumerate() {
+        if software(info) == any_hardware {
+            continue;
+        }
+        let identity = (
+            info.vendor,
+            info.device,
+            if info.device_pci_bus_id.is_empty() {
+                info.name.clone()
+            } else {
+                info.device_pci_bus_id.clone()
+            },
+        );
+        if seen.contains(&identity) {
+            continue;
+        }
+        seen.push(identity);
+        chosen.push(k);
+    }
+    chosen.sort_by(|&a, &b| infos[a].device_pci_bus_id.cmp(&infos[b].device_pci_bus_id));
+    chosen
 }
 
 /// The optional features of `available` the kernels use: subgroups and `@coherent` buffers

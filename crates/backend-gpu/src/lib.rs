@@ -48,8 +48,8 @@ mod stepper;
 mod variants;
 
 pub use cosserat_problem::{
-    DivergedQuantity, Divergence, EndCondition, EndKind, Ordering, PointLoad, PrescribedMotion,
-    SolverSettings,
+    DivergedQuantity, Divergence, EndCondition, EndKind, Gpus, Ordering, PointLoad,
+    PrescribedMotion, SolverSettings,
 };
 pub use device::AdapterSummary;
 pub use readback::{GpuField, GpuSnapshot};

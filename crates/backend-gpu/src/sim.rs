@@ -211,6 +211,17 @@ impl GpuSimulation {
         )
     }
 
+    /// Uploads `rods` to a device [`crate::GpuStepper::on_gpus`] opened.
+    pub(crate) fn on_gpu(
+        gpu: Gpu,
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: GpuOptions,
+    ) -> Result<Self, GpuError> {
+        validate(&rods, settings)?;
+        Self::planned(gpu, rods, settings, options)
+    }
+
     /// Plans with the production tuning and builds.
     fn planned(
         gpu: Gpu,

@@ -1,5 +1,11 @@
 //! The GPU as a [`Stepper`]: the explicit scheme in `f32`, with a host-side copy of the state
 //! refreshed after every batch so that reads cost no round trip of their own.
+//!
+//! The rods can be split across several devices ([`GpuStepper::on_gpus`]): each device steps a
+//! contiguous share of them as a [`GpuSimulation`] of its own. The kernels couple no two rods
+//! (rod contact and bindings run on the CPU), so a share needs nothing from another during a
+//! batch: every device is given its steps before any is waited for, and the one round trip per
+//! batch reads them one after the other while the others are still running.
 
 use cosserat_model::energy::{Energies, ForceModel, energies};
 use cosserat_model::{RodParams, RodState, Vec3};
@@ -14,13 +20,16 @@ use cosserat_problem::{
     StepError, Stepper, StepperInfo, StiffSummary,
 };
 
-use crate::{GpuError, GpuField, GpuOptions, GpuRodInput, GpuSimulation, GpuSnapshot};
+use crate::device::Gpu;
+use crate::{GpuError, GpuField, GpuOptions, GpuRodInput, GpuSimulation, GpuSnapshot, Gpus};
 
 const NAME: &str = "gpu explicit";
 
 /// Rods stepped on the GPU through the [`Stepper`] interface.
 pub struct GpuStepper {
-    sim: GpuSimulation,
+    /// One simulation per device, each stepping the rods `starts[k]..starts[k + 1]`.
+    parts: Vec<GpuSimulation>,
+    starts: Vec<usize>,
     /// The state after the last batch, as read back.
     states: Vec<RodState<f32>>,
     params: Vec<RodParams<f32>>,
@@ -31,7 +40,7 @@ pub struct GpuStepper {
 
 /// A [`GpuStepper`]'s snapshot.
 struct Saved {
-    device: GpuSnapshot,
+    devices: Vec<GpuSnapshot>,
     states: Vec<RodState<f32>>,
     ends: Vec<[EndCondition<f32>; 2]>,
     clock: Clock,
@@ -58,8 +67,9 @@ impl GpuStepper {
         settings: &SolverSettings<f32>,
         options: GpuOptions,
     ) -> Result<Self, GpuError> {
-        Self::around(rods, settings, |rods| {
-            GpuSimulation::new(rods, settings, options)
+        let starts = vec![0, rods.len()];
+        Self::around(rods, settings, starts, |rods| {
+            GpuSimulation::new(rods, settings, options.clone())
         })
     }
 
@@ -71,24 +81,78 @@ impl GpuStepper {
         settings: &SolverSettings<f32>,
         options: GpuOptions,
     ) -> Result<Self, GpuError> {
-        Self::around(rods, settings, |rods| {
-            GpuSimulation::on_device(device, queue, rods, settings, options)
+        let starts = vec![0, rods.len()];
+        let mut device = Some((device, queue));
+        Self::around(rods, settings, starts, |rods| {
+            let (device, queue) = device.take().expect("one share");
+            GpuSimulation::on_device(device, queue, rods, settings, options.clone())
         })
     }
 
-    /// The stepper around the simulation `make` builds from `rods`, with the host-side copy of
-    /// their state.
+    /// Splits `rods` across devices (see [`Gpus`]): each device that is used steps a
+    /// contiguous share of the rods, balanced by their points, on the kernel its share plans.
+    /// With [`Gpus::All`] a scene with fewer rods than devices uses one device per rod.
+    pub fn on_gpus(
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        options: GpuOptions,
+        gpus: Gpus,
+    ) -> Result<Self, GpuError> {
+        if let Gpus::Count(n) = gpus
+            && n > rods.len()
+        {
+            return Err(GpuError::InvalidInput(format!(
+                "gpus = {n}: the scene has {} rod{} to share among them; ask for at most that many",
+                rods.len(),
+                if rods.len() == 1 { "" } else { "s" }
+            )));
+        }
+        let count = match gpus {
+            Gpus::Count(1) => return Self::new(rods, settings, options),
+            Gpus::Count(n) => Some(n),
+            Gpus::All => None,
+        };
+        let mut devices = Gpu::acquire_each(&options, count)?.into_iter();
+        let parts = devices.len().min(rods.len());
+        Self::split(rods, settings, parts, |share| {
+            let gpu = devices.next().expect("one device per share");
+            GpuSimulation::on_gpu(gpu, share, settings, options.clone())
+        })
+    }
+
+    /// Splits `rods` into `parts` contiguous shares balanced by their points and builds each
+    /// share's simulation with `make` (in order). [`Self::on_gpus`] gives each share a device of
+    /// its own; a test can give two shares two devices on one adapter.
+    pub fn split(
+        rods: Vec<GpuRodInput>,
+        settings: &SolverSettings<f32>,
+        parts: usize,
+        make: impl FnMut(Vec<GpuRodInput>) -> Result<GpuSimulation, GpuError>,
+    ) -> Result<Self, GpuError> {
+        let points: Vec<usize> = rods.iter().map(|r| r.state.positions.len()).collect();
+        let starts = shares(&points, parts);
+        Self::around(rods, settings, starts, make)
+    }
+
+    /// The stepper around the simulations `make` builds from the shares of `rods` that begin at
+    /// `starts`, with the host-side copy of their state.
     fn around(
         rods: Vec<GpuRodInput>,
         settings: &SolverSettings<f32>,
-        make: impl FnOnce(Vec<GpuRodInput>) -> Result<GpuSimulation, GpuError>,
+        starts: Vec<usize>,
+        mut make: impl FnMut(Vec<GpuRodInput>) -> Result<GpuSimulation, GpuError>,
     ) -> Result<Self, GpuError> {
         let states = rods.iter().map(|r| r.state.clone()).collect();
         let params = rods.iter().map(|r| r.params.clone()).collect();
         let ends = rods.iter().map(|r| r.ends.clone()).collect();
-        let sim = make(rods)?;
+        let mut rods = rods.into_iter();
+        let parts = starts
+            .windows(2)
+            .map(|w| make(rods.by_ref().take(w[1] - w[0]).collect()))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
-            sim,
+            parts,
+            starts,
             states,
             params,
             ends,
@@ -103,9 +167,27 @@ impl GpuStepper {
         Capabilities::of(&[Capability::MeshContact, Capability::Guide])
     }
 
-    /// The simulation underneath, for what the trait does not cover (adapter, kernel path).
+    /// The (first device's) simulation underneath, for what the trait does not cover (adapter,
+    /// kernel path).
     pub fn simulation(&self) -> &GpuSimulation {
-        &self.sim
+        &self.parts[0]
+    }
+
+    /// The simulation of each device, in the order of the rods they step.
+    pub fn simulations(&self) -> &[GpuSimulation] {
+        &self.parts
+    }
+
+    /// The device simulation that steps `rod`, and the rod's index in it.
+    fn part_of(&self, rod: usize) -> (usize, usize) {
+        let k = self.starts.partition_point(|&s| s <= rod) - 1;
+        (k, rod - self.starts[k])
+    }
+
+    /// The device simulation that steps `rod` (mutably), and the rod's index in it.
+    fn part_mut(&mut self, rod: usize) -> (&mut GpuSimulation, usize) {
+        let (k, local) = self.part_of(rod);
+        (&mut self.parts[k], local)
     }
 
     fn elements_of(&self, rod: usize) -> Result<usize, ControlError> {
@@ -134,15 +216,37 @@ impl Stepper for GpuStepper {
         if steps == 0 {
             return Ok(0.0);
         }
-        let mut left = steps;
+        let starts = &self.starts;
         let run = (|| {
-            while left > 0 {
-                let k = left.min(u64::from(u32::MAX)) as u32;
-                self.sim.step(k)?;
-                left -= u64::from(k);
+            // Every device gets its steps before any is waited for.
+            for sim in &mut self.parts {
+                let mut left = steps;
+                while left > 0 {
+                    let k = left.min(u64::from(u32::MAX)) as u32;
+                    sim.step(k)?;
+                    left -= u64::from(k);
+                }
             }
-            // One round trip: the state and the divergence status come back together.
-            self.sim.read_state()
+            // One round trip per device: the state and the divergence status come back
+            // together. Every device is read before an error is returned, so the earliest
+            // divergence of all is the one reported.
+            let mut states = Vec::with_capacity(self.states.len());
+            let mut first: Option<GpuError> = None;
+            for (sim, &start) in self.parts.iter_mut().zip(starts) {
+                match sim.read_state() {
+                    Ok(s) => states.extend(s),
+                    Err(mut e) => {
+                        if let GpuError::Diverged(d) = &mut e {
+                            d.rod += start;
+                        }
+                        first = Some(match first.take() {
+                            None => e,
+                            Some(f) => graver(f, e),
+                        });
+                    }
+                }
+            }
+            first.map_or(Ok(states), Err)
         })();
         match run {
             Ok(states) => {
@@ -205,8 +309,8 @@ impl Stepper for GpuStepper {
             .iter()
             .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
             .collect();
-        self.sim
-            .write_rod_field(rod, gpu, &words)
+        let (sim, local) = self.part_mut(rod);
+        sim.write_rod_field(local, gpu, &words)
             .map_err(to_control)?;
         let s = &mut self.states[rod];
         let target = match field {
@@ -225,8 +329,8 @@ impl Stepper for GpuStepper {
         let words: Vec<[f32; 4]> = unit_frames(n, values)?
             .map(|q| [q[1] as f32, q[2] as f32, q[3] as f32, q[0] as f32])
             .collect();
-        self.sim
-            .write_rod_field(rod, GpuField::Frames, &words)
+        let (sim, local) = self.part_mut(rod);
+        sim.write_rod_field(local, GpuField::Frames, &words)
             .map_err(to_control)?;
         for (t, w) in self.states[rod].frames.iter_mut().zip(&words) {
             *t = cosserat_model::Quat::new(w[3], w[0], w[1], w[2]);
@@ -237,8 +341,8 @@ impl Stepper for GpuStepper {
             if self.ends[rod][end].holds_frame() {
                 self.states[rod].seat_clamp(&self.params[rod], end);
                 let q = self.states[rod].clamp_frames[end];
-                self.sim
-                    .write_clamp_frame(rod, end, [q.i, q.j, q.k, q.w])
+                let (sim, local) = self.part_mut(rod);
+                sim.write_clamp_frame(local, end, [q.i, q.j, q.k, q.w])
                     .map_err(to_control)?;
             }
         }
@@ -277,8 +381,8 @@ impl Stepper for GpuStepper {
             });
         }
         let condition: EndCondition<f32> = condition.cast();
-        self.sim
-            .set_end_motion(rod, end, condition.motion)
+        let (sim, local) = self.part_mut(rod);
+        sim.set_end_motion(local, end, condition.motion)
             .map_err(to_control)?;
         self.ends[rod][end] = condition;
         Ok(())
@@ -294,8 +398,8 @@ impl Stepper for GpuStepper {
         }
         check_capabilities(NAME, self.capabilities(), PointLoad::needs(loads), "set")?;
         let loads: Vec<PointLoad<f32>> = loads.iter().map(PointLoad::cast).collect();
-        self.sim
-            .set_loads(rod, &loads)
+        let (sim, local) = self.part_mut(rod);
+        sim.set_loads(local, &loads)
             .map_err(|e| ControlError::Unsupported {
                 stepper: NAME,
                 what: format!("change these loads: {e}"),
@@ -315,9 +419,10 @@ impl Stepper for GpuStepper {
         out.clear();
         let dt = f64::from(self.settings.dt);
         let masses = &self.params[rod].masses;
+        let (k, local) = self.part_of(rod);
         out.extend(
-            self.sim
-                .wall_contacts(rod)
+            self.parts[k]
+                .wall_contacts(local)
                 .into_iter()
                 .map(|(point, n, impulse)| {
                     let m = f64::from(masses[point]);
@@ -332,7 +437,11 @@ impl Stepper for GpuStepper {
     }
 
     fn collision_stats(&self, rod: usize) -> Option<CollisionStats> {
-        self.sim.collision_stats(rod)
+        if rod >= self.states.len() {
+            return None;
+        }
+        let (k, local) = self.part_of(rod);
+        self.parts[k].collision_stats(local)
     }
 
     fn coupling_stats(&self) -> Option<CouplingStats> {
@@ -371,12 +480,17 @@ impl Stepper for GpuStepper {
     }
 
     fn snapshot(&mut self) -> Result<Snapshot, StepError> {
-        let device = self.sim.snapshot().map_err(to_step)?;
+        let devices = self
+            .parts
+            .iter_mut()
+            .map(GpuSimulation::snapshot)
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(to_step)?;
         Ok(Snapshot::new(
             NAME,
             self.clock,
             Box::new(Saved {
-                device,
+                devices,
                 states: self.states.clone(),
                 ends: self.ends.clone(),
                 clock: self.clock,
@@ -391,12 +505,70 @@ impl Stepper for GpuStepper {
                 snapshot.stepper()
             )));
         };
-        self.sim
-            .restore(&saved.device)
-            .map_err(|e| ControlError::Snapshot(e.to_string()))?;
+        for (sim, device) in self.parts.iter_mut().zip(&saved.devices) {
+            sim.restore(device)
+                .map_err(|e| ControlError::Snapshot(e.to_string()))?;
+        }
         self.states.clone_from(&saved.states);
         self.ends.clone_from(&saved.ends);
         self.clock = saved.clock;
         Ok(())
+    }
+}
+
+/// Of two devices' errors, the one to report: a device's failure before a divergence, and of
+/// two divergences the earlier.
+fn graver(a: GpuError, b: GpuError) -> GpuError {
+    match (&a, &b) {
+        (GpuError::Diverged(x), GpuError::Diverged(y)) if y.step < x.step => b,
+        (GpuError::Diverged(_), GpuError::Diverged(_)) => a,
+        (GpuError::Diverged(_), _) => b,
+        _ => a,
+    }
+}
+
+/// The first rod of each of `parts` contiguous shares of rods with `points` points each, and
+/// the end: shares as equal in points as whole rods allow, none empty (`parts` is at most the
+/// number of rods).
+fn shares(points: &[usize], parts: usize) -> Vec<usize> {
+    let parts = parts.clamp(1, points.len().max(1));
+    let total: usize = points.iter().sum();
+    let mut starts = vec![0];
+    let mut sum = 0;
+    for (i, &p) in points.iter().enumerate() {
+        let k = starts.len();
+        // Cut before rod i once the shares so far hold their part of the points, leaving a rod
+        // for each share still to come.
+        let rods_left = points.len() - i;
+        let shares_left = parts - (k - 1);
+        if k < parts && i > starts[k - 1] && (sum * parts >= total * k || rods_left < shares_left) {
+            starts.push(i);
+        }
+        sum += p;
+    }
+    starts.push(points.len());
+    starts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shares;
+
+    #[test]
+    fn shares_are_contiguous_balanced_and_never_empty() {
+        assert_eq!(shares(&[10; 8], 2), vec![0, 4, 8]);
+        assert_eq!(shares(&[10; 8], 4), vec![0, 2, 4, 6, 8]);
+        assert_eq!(shares(&[10; 7], 2), vec![0, 4, 7]);
+        assert_eq!(shares(&[10; 3], 3), vec![0, 1, 2, 3]);
+        // A long rod first: the short ones share the second device.
+        assert_eq!(shares(&[100, 10, 10, 10], 2), vec![0, 1, 4]);
+        // More shares than rods cannot leave one empty.
+        assert_eq!(shares(&[5, 5], 4), vec![0, 1, 2]);
+        assert_eq!(shares(&[5], 1), vec![0, 1]);
+        for parts in 1..6 {
+            let s = shares(&[3, 1, 4, 1, 5, 9, 2, 6], parts);
+            assert_eq!(s.len(), parts + 1);
+            assert!(s.windows(2).all(|w| w[0] < w[1]), "{s:?}");
+        }
     }
 }

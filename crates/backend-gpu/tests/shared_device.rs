@@ -8,12 +8,12 @@
 //! `COSSERAT_REQUIRE_GPU=1`.
 
 use cosserat_backend_gpu::{
-    EndCondition, GpuError, GpuOptions, GpuRodInput, GpuSimulation, GpuStepper, KernelPath,
+    EndCondition, GpuError, GpuOptions, GpuRodInput, GpuSimulation, GpuStepper, Gpus, KernelPath,
     Ordering, PointLoad, PrescribedMotion, SolverSettings,
 };
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, RodState, Vec3};
-use cosserat_problem::{StateField, Stepper};
+use cosserat_problem::{DivergedQuantity, StateField, StepError, Stepper};
 
 fn settings(extensible: bool) -> SolverSettings<f32> {
     SolverSettings {
@@ -219,4 +219,101 @@ fn a_stepper_on_the_callers_device_matches_its_own_device() {
             .expect("read");
         assert_eq!(a, b, "rod {rod}");
     }
+}
+
+/// Positions of every rod of `stepper`, rod after rod.
+fn positions(stepper: &GpuStepper) -> Vec<[f64; 3]> {
+    let mut all = Vec::new();
+    for rod in 0..stepper.rod_count() {
+        let mut p = vec![[0.0; 3]; stepper.elements(rod).expect("rod") + 1];
+        stepper
+            .read(rod, StateField::Positions, &mut p)
+            .expect("read");
+        all.extend(p);
+    }
+    all
+}
+
+/// A stepper whose rods are split across two devices (here two devices on one adapter, as
+/// [`GpuStepper::on_gpus`] puts them on two cards) steps, steers, restores and reports
+/// divergence as one device does: each share plans the same kernel as the whole, so bit for bit.
+#[test]
+fn a_stepper_split_across_devices_matches_one_device() {
+    let s = settings(false);
+    let both = || [rods(), rods()].concat();
+    let Some(mut one) = or_skip(GpuStepper::new(both(), &s, GpuOptions::default())) else {
+        return;
+    };
+    let mut split = GpuStepper::split(both(), &s, 2, |share| {
+        GpuSimulation::new(share, &s, GpuOptions::default())
+    })
+    .expect("two devices");
+    assert_eq!(split.simulations().len(), 2);
+    assert_eq!(split.simulations()[1].rods(), 2);
+    // Steering a rod of the second share reaches its device.
+    for st in [&mut one, &mut split] {
+        st.advance(40).expect("advance");
+        let mut c = st.end_condition(3, 0).expect("end");
+        c.motion.as_mut().expect("driven").velocity = Vec3::new(0.0, -0.2, 0.0);
+        st.set_end_condition(3, 0, c).expect("steer");
+        st.advance(40).expect("advance");
+    }
+    assert_eq!(one.clock(), split.clock());
+    let after = positions(&one);
+    assert_eq!(positions(&split), after);
+    // Snapshots hold every device's state.
+    let snap = split.snapshot().expect("snapshot");
+    split.advance(30).expect("advance");
+    assert_ne!(positions(&split), after);
+    split.restore(&snap).expect("restore");
+    assert_eq!(positions(&split), after);
+    // A rod of the second device that blows up is reported by its index in the whole.
+    let n = split.elements(2).expect("rod");
+    let mut p = vec![[0.0; 3]; n + 1];
+    split.read(2, StateField::Positions, &mut p).expect("read");
+    let wild: Vec<[f64; 3]> = p
+        .iter()
+        .map(|x| std::array::from_fn(|k| p[0][k] + 4.0 * (x[k] - p[0][k])))
+        .collect();
+    split.write(2, StateField::Positions, &wild).expect("write");
+    match split.advance(20) {
+        Err(StepError::Diverged(d)) => {
+            assert_eq!(d.rod, 2, "{d}");
+            assert!(matches!(d.quantity, DivergedQuantity::Strain(_)), "{d}");
+        }
+        other => panic!("expected rod 2 to diverge, got {other:?}"),
+    }
+}
+
+/// Asking for more GPUs than the machine has, or than there are rods, fails with a message that
+/// says what there is.
+#[test]
+fn asking_for_more_gpus_than_there_are_says_how_many_there_are() {
+    let s = settings(false);
+    if or_skip(GpuStepper::new(rods(), &s, GpuOptions::default())).is_none() {
+        return;
+    }
+    let Err(e) = GpuStepper::on_gpus(rods(), &s, GpuOptions::default(), Gpus::Count(3)) else {
+        panic!("three GPUs for two rods");
+    };
+    assert!(
+        e.to_string().contains("gpus = 3: the scene has 2 rods"),
+        "{e}"
+    );
+    // Every adapter there is, at most one per rod: lavapipe alone is one device.
+    let all = GpuStepper::on_gpus(
+        [rods(), rods()].concat(),
+        &s,
+        GpuOptions::default(),
+        Gpus::All,
+    )
+    .expect("every adapter");
+    assert!(!all.simulations().is_empty());
+    assert_eq!(
+        all.simulations()
+            .iter()
+            .map(GpuSimulation::rods)
+            .sum::<usize>(),
+        4
+    );
 }

@@ -37,6 +37,6 @@ pub use cosserat_model::{self, Material};
 pub use environment::{Entry, Environment};
 pub use sim::{
     Backend, BuildError, Capabilities, Capability, ContactReport, ContactSample, ControlError,
-    RodBuilder, RodContactSpec, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot,
+    Gpus, RodBuilder, RodContactSpec, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot,
     StateField, StepError, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };

@@ -9,7 +9,9 @@
 //! which is how one scene file serves several resolutions.
 
 use crate::environment::{Entry, Environment};
-use crate::sim::{BindingSpec, BindingVariant, RodBuilder, RodContactSpec, SimulationBuilder};
+use crate::sim::{
+    BindingSpec, BindingVariant, Gpus, RodBuilder, RodContactSpec, SimulationBuilder,
+};
 use cosserat_backend_cpu::{
     EndCondition, EndKind, EndPath, LoadProfile, Ordering, PointLoad, PrescribedMotion,
 };
@@ -147,6 +149,18 @@ pub struct RodContactSection {
 pub struct BatchSection {
     /// Number of copies (at least 1).
     pub copies: usize,
+    /// GPUs to spread the copies over with the GPU backend: a number, or `"all"` (default 1).
+    pub gpus: Option<GpuCount>,
+}
+
+/// `batch.gpus`: a number of GPUs, or `"all"`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum GpuCount {
+    /// This many.
+    Count(i64),
+    /// Every one there is (the string `"all"`).
+    Named(String),
 }
 
 /// `[haptics]`.
@@ -1026,6 +1040,21 @@ impl Checker<'_> {
                 ));
             }
             b = b.copies(batch.copies);
+            match &batch.gpus {
+                None => {}
+                Some(GpuCount::Count(n)) if *n >= 1 => b = b.gpus(Gpus::Count(*n as usize)),
+                Some(GpuCount::Count(n)) => {
+                    return Err(self.invalid("batch.gpus", n, "expected at least 1, or \"all\""));
+                }
+                Some(GpuCount::Named(name)) if name == "all" => b = b.gpus(Gpus::All),
+                Some(GpuCount::Named(name)) => {
+                    return Err(self.invalid(
+                        "batch.gpus",
+                        name,
+                        "expected a number of GPUs, or \"all\"",
+                    ));
+                }
+            }
         }
         Ok(b)
     }

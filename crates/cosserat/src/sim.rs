@@ -16,7 +16,7 @@ use cosserat_model::{Material, Quat, Real, RodBuildError, Vec3};
 use cosserat_problem::Snapshot;
 pub use cosserat_problem::{
     Capabilities, Capability, ContactSample, ControlError, CouplingStats, EndCondition, EndKind,
-    EndReaction, Integrator, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
+    EndReaction, Gpus, Integrator, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
     StateField, StepError, Stepper, StepperInfo, StiffScheme, StiffSettings, StiffSummary,
 };
 
@@ -367,6 +367,8 @@ pub struct SimulationBuilder {
     /// Independent copies of the rods (and their bindings) stepped together; 1: the scene as
     /// given.
     copies: usize,
+    /// The GPUs the GPU backend spreads the rods over.
+    gpus: Gpus,
 }
 
 impl Default for SimulationBuilder {
@@ -395,6 +397,7 @@ impl SimulationBuilder {
             reaction_limit: 1000.0,
             energy_check: true,
             copies: 1,
+            gpus: Gpus::default(),
         }
     }
 
@@ -569,6 +572,15 @@ impl SimulationBuilder {
     /// one copy. `n` = 0 is refused when the simulation is built.
     pub fn copies(mut self, n: usize) -> Self {
         self.copies = n;
+        self
+    }
+
+    /// Spreads the rods over several GPUs (GPU backend; the other backends ignore it): each
+    /// device steps a contiguous share of the rods, balanced by their points, with no round trip
+    /// between devices during a batch of steps. Meant for batches ([`Self::copies`]): the GPU
+    /// couples no rods, so any split steps each rod as one device would.
+    pub fn gpus(mut self, gpus: Gpus) -> Self {
+        self.gpus = gpus;
         self
     }
 
@@ -974,10 +986,11 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
             }
         })
         .collect();
-    let stepper = cosserat_backend_gpu::GpuStepper::new(
+    let stepper = cosserat_backend_gpu::GpuStepper::on_gpus(
         inputs,
         &b.settings.cast(),
         cosserat_backend_gpu::GpuOptions::default(),
+        b.gpus,
     )
     .map_err(|e| BuildError::Setting(e.to_string()))?;
     Ok(Box::new(stepper))

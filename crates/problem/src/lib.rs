@@ -28,7 +28,7 @@ pub use divergence::{DivergedQuantity, Divergence, StepStats};
 pub use ends::{EndCondition, EndKind, EndPath, PrescribedMotion};
 pub use report::{CollisionStats, CouplingStats, EndReaction, StiffReport, StiffSummary};
 pub use settings::{
-    Integrator, LoadProfile, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme,
+    Gpus, Integrator, LoadProfile, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme,
     StiffSettings,
 };
 pub use stepper::{

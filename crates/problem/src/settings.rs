@@ -448,3 +448,29 @@ mod tests {
         }
     }
 }
+
+/// How many GPUs a GPU backend spreads a simulation's rods over (each device steps a contiguous
+/// share of the rods; no rod couples to a rod of another share).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gpus {
+    /// This many distinct adapters; building fails if there are fewer, or fewer rods.
+    Count(usize),
+    /// Every distinct hardware adapter (or the software one where there is none), at most one
+    /// per rod.
+    All,
+}
+
+impl Default for Gpus {
+    fn default() -> Self {
+        Self::Count(1)
+    }
+}
+
+impl std::fmt::Display for Gpus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Count(n) => write!(f, "{n}"),
+            Self::All => f.write_str("all"),
+        }
+    }
+}
