@@ -35,10 +35,8 @@
 use cosserat_constraints::KinematicImpulses;
 use cosserat_model::{Real, Vec3};
 pub use cosserat_problem::EndReaction;
-
-/// Default cut-off of the reaction low-pass filter [Hz]: well below a haptic loop's 1 kHz and
-/// above the few hertz of deliberate hand motion.
-pub const DEFAULT_CUTOFF_HZ: f64 = 50.0;
+pub use cosserat_problem::report::DEFAULT_CUTOFF_HZ;
+use cosserat_problem::report::reaction_filter_weights;
 
 fn to_f64<T: Real>(v: Vec3<T>) -> [f64; 3] {
     [v.x.to_f64(), v.y.to_f64(), v.z.to_f64()]
@@ -118,21 +116,8 @@ impl<T: Real> Reactions<T> {
     /// its other point, `kinematic[e]` what coupling constraints gave the held point itself.
     /// Completes the step's reaction and filters it.
     pub(crate) fn finish(&mut self, distance: [Vec3<T>; 2], kinematic: KinematicImpulses<T>, h: T) {
-        // Weights of the last output, the last raw value and this one (module docs); without a
-        // cut-off the output is the raw value.
-        let (keep, from_old, from_new) = if self.cutoff_hz.is_finite() && self.cutoff_hz > 0.0 {
-            let ah = 2.0 * std::f64::consts::PI * self.cutoff_hz * h.to_f64();
-            let e = (-ah).exp();
-            // (1 − E)/(a h) by its series where a h is tiny (no cancellation).
-            let mean = if ah < 1e-4 {
-                1.0 - ah * (0.5 - ah / 6.0)
-            } else {
-                (1.0 - e) / ah
-            };
-            (e, mean - e, 1.0 - mean)
-        } else {
-            (0.0, 0.0, 1.0)
-        };
+        // Weights of the last output, the last raw value and this one (module docs).
+        let (keep, from_old, from_new) = reaction_filter_weights(self.cutoff_hz, h.to_f64());
         for e in 0..2 {
             if !self.held[e] {
                 continue;

@@ -110,9 +110,11 @@ gpu_struct! {
         num_items: u32,
         /// Multi-workgroup path: halo exchanges since the synchronisation words were cleared.
         epoch0: u32,
-        pad0: u32,
-        pad1: u32,
-        pad2: u32,
+        /// Weights of the reaction filter's last output, last raw value and new raw value
+        /// (`backend-cpu` `reaction.rs`).
+        rf_keep: f32,
+        rf_old: f32,
+        rf_new: f32,
     }
 }
 
@@ -200,6 +202,14 @@ gpu_struct! {
         /// Bend/twist stiffness and damping of the clamp's node (`EndNode::stiffness`,
         /// `EndNode::damping`).
         e: [f32; 4],
+        /// The end's filtered reaction force (w: the largest so far) [N]: state.
+        rf: [f32; 4],
+        /// The end's filtered reaction torque (world) [N m]: state.
+        rt: [f32; 4],
+        /// Last step's raw reaction force: state (the filter's input).
+        xf: [f32; 4],
+        /// Last step's raw reaction torque: state.
+        xt: [f32; 4],
     }
 }
 
@@ -328,7 +338,10 @@ mod tests {
                 ],
             ),
             (1, vec!["PERSTEP", "LOADS", "FAST", "REGC", "CLAMP"]),
-            (32, vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC"]),
+            (
+                32,
+                vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC", "REACT"],
+            ),
             (1, vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "CLAMP"]),
         ] {
             let cfg = KernelConfig {

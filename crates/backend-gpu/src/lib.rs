@@ -160,6 +160,9 @@ pub struct GpuOptions {
     /// finished; polling returns as soon as the copy is done, at the price of one busy CPU
     /// core while it waits. 0 always blocks.
     pub spin_wait_us: u32,
+    /// Cut-off of the low-pass filter on the reactions at held ends [Hz] (as the CPU's;
+    /// `f64::INFINITY` reports the raw value).
+    pub reaction_cutoff_hz: f64,
 }
 
 impl Default for GpuOptions {
@@ -172,6 +175,7 @@ impl Default for GpuOptions {
             max_threads: 256,
             max_steps_per_dispatch: 10_000,
             spin_wait_us: 2_000,
+            reaction_cutoff_hz: cosserat_problem::report::DEFAULT_CUTOFF_HZ,
         }
     }
 }

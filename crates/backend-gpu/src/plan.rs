@@ -142,6 +142,13 @@ impl Plan {
         {
             flags.push("CLAMP");
         }
+        // Reactions at held ends (every clamped end holds its point too).
+        if rods
+            .iter()
+            .any(|r| r.ends.iter().any(EndCondition::holds_point))
+        {
+            flags.push("REACT");
+        }
         // Contact with a mesh and the introducer: only in the workgroup layout of the
         // single-workgroup path (their per-step counts and the guide's extent are agreed
         // through workgroup memory).

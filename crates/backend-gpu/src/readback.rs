@@ -422,7 +422,7 @@ impl GpuSimulation {
             &floats[3 * quarter..],
         );
         let v3 = |a: &[f32], i: usize| Vec3::new(a[4 * i], a[4 * i + 1], a[4 * i + 2]);
-        Ok(self
+        let states = self
             .rods
             .iter()
             .enumerate()
@@ -445,7 +445,32 @@ impl GpuSimulation {
                     clamp_frames: [clamp(0), clamp(1)],
                 }
             })
-            .collect())
+            .collect();
+        self.ends_read = clamps;
+        Ok(states)
+    }
+
+    /// The filtered reaction at end `end` of rod `rod` as of the last [`Self::read_state`]
+    /// (`None` for an end that holds nothing): the force and (clamped ends) the torque the
+    /// holder applies to the rod, low-pass filtered at [`crate::GpuOptions::reaction_cutoff_hz`]
+    /// as on the CPU.
+    pub fn end_reaction(&self, rod: usize, end: usize) -> Option<cosserat_problem::EndReaction> {
+        let held = self.ends_held.get(rod)?[end];
+        let c = self.ends_read.get(2 * rod + end)?;
+        let v = |a: [f32; 4]| [a[0], a[1], a[2]].map(f64::from);
+        held.then(|| cosserat_problem::EndReaction {
+            force: v(c.rf),
+            torque: v(c.rt),
+        })
+    }
+
+    /// The largest filtered reaction force at any held end so far [N], as of the last
+    /// [`Self::read_state`]; `None` when no end is held.
+    pub fn max_reaction_force(&self) -> Option<f64> {
+        let held = self.ends_held.iter().flatten().zip(&self.ends_read);
+        held.filter(|(h, _)| **h)
+            .map(|(_, c)| f64::from(c.rf[3]))
+            .reduce(f64::max)
     }
 
     /// The whole device state (points, frames, their velocities, the status words, the clamps)
@@ -488,6 +513,11 @@ impl GpuSimulation {
         self.gpu
             .queue
             .write_buffer(&self.clamps_buf, 0, &snapshot.state[clamps_at..]);
+        // The held ends' reactions read back are those of the snapshot again.
+        self.ends_read = snapshot.state[clamps_at..]
+            .chunks_exact(std::mem::size_of::<ClampG>())
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
         self.steps = snapshot.steps;
         self.drives.clone_from(&snapshot.drives);
         self.tracks.clone_from(&snapshot.tracks);

@@ -24,13 +24,14 @@ pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wg
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 12] = [
+pub(crate) const FLAGS: [&str; 13] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
     "DRAG",
     "LOADS",
     "CLAMP",
+    "REACT",
     "GRID",
     "PERSTEP",
     "SUBGROUP",
@@ -96,7 +97,14 @@ impl KernelConfig {
             self.spin_cap,
             self.group.max(1)
         );
-        let body = preprocess(kernel, &self.flags);
+        // A clamped end holds its point, and a clamp's state sits in the held ends' buffer
+        // that REACT binds: CLAMP implies REACT (the plan sets both; a hand-made
+        // configuration gets the same kernel).
+        let mut flags = self.flags.clone();
+        if flags.contains(&"CLAMP") && !flags.contains(&"REACT") {
+            flags.push("REACT");
+        }
+        let body = preprocess(kernel, &flags);
         let body = expand_loops(&body, self.per_thread, self.unroll);
         let wall = if self.flags.contains(&"MESH") {
             WALL_CONTACT_WGSL

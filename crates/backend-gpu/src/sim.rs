@@ -65,6 +65,8 @@ pub struct GpuSimulation {
     pub(crate) clamps: Vec<ClampG>,
     /// Which ends of each rod are clamped (`[first, last]`).
     pub(crate) clamped: Vec<[bool; 2]>,
+    /// Which ends of each rod hold their point (`[first, last]`): those with a reaction.
+    pub(crate) ends_held: Vec<[bool; 2]>,
     sync_buf: Option<wgpu::Buffer>,
     drives_buf: wgpu::Buffer,
     pub(crate) drives: Vec<DriveG>,
@@ -85,6 +87,10 @@ pub struct GpuSimulation {
     pub(crate) wall: Option<WallBuffers>,
     /// The wall's statistics and contacts as last read with the state.
     pub(crate) wall_read: Option<WallRead>,
+    /// The reaction filter's weights for one step (`ParamsU::rf_keep` and the next two).
+    reaction_filter: [f32; 3],
+    /// The held ends as last read with the state (their reactions), two per rod.
+    pub(crate) ends_read: Vec<ClampG>,
 }
 
 /// The wall buffers as read back with the state ([`GpuSimulation::read_state`]).
@@ -348,6 +354,7 @@ impl GpuSimulation {
                     q: [q.i, q.j, q.k, q.w],
                     d: [u.x, u.y, u.z, p.end_node_length(end)],
                     e: [k.x, k.y, k.z, node.damping],
+                    ..ClampG::default()
                 });
             }
             for (end, point) in [(0, 0), (1, n)] {
@@ -366,8 +373,13 @@ impl GpuSimulation {
             .iter()
             .map(|r| r.ends.each_ref().map(|e| e.holds_frame()))
             .collect();
+        let ends_held = rods
+            .iter()
+            .map(|r| r.ends.each_ref().map(|e| e.holds_point()))
+            .collect();
         let has_loads = plan.cfg.flags.contains(&"LOADS");
-        let has_clamps = plan.cfg.flags.contains(&"CLAMP");
+        // Held ends' clamps and reactions (every kernel with CLAMP has REACT).
+        let has_ends = plan.cfg.flags.contains(&"REACT");
         let has_mesh = plan.cfg.flags.contains(&"MESH");
         let has_touch = has_mesh || plan.cfg.flags.contains(&"GUIDE");
         let touch: Vec<TouchG> = rods
@@ -573,7 +585,7 @@ impl GpuSimulation {
         if grid {
             entries.extend([rw(15), rw(16)]);
         }
-        if has_clamps {
+        if has_ends {
             entries.push(rw(17));
         }
         if has_mesh {
@@ -702,7 +714,7 @@ impl GpuSimulation {
                     resource: whole(x),
                 });
             }
-            if has_clamps {
+            if has_ends {
                 e.push(wgpu::BindGroupEntry {
                     binding: 17,
                     resource: whole(&clamps_buf),
@@ -784,6 +796,8 @@ impl GpuSimulation {
             current: 0,
             status_buf,
             clamps_buf,
+            ends_read: clamps.clone(),
+            ends_held,
             clamps,
             clamped,
             sync_buf,
@@ -801,6 +815,13 @@ impl GpuSimulation {
             timestamp_period_ns,
             wall: wall_bufs.map(|(_, _, w)| w),
             wall_read: None,
+            reaction_filter: {
+                let (keep, old, new) = cosserat_problem::report::reaction_filter_weights(
+                    options.reaction_cutoff_hz,
+                    f64::from(settings.dt),
+                );
+                [keep as f32, old as f32, new as f32]
+            },
         })
     }
 
@@ -1084,9 +1105,9 @@ impl GpuSimulation {
                 base_step: self.steps as u32,
                 num_items: self.plan.items.len() as u32,
                 epoch0: self.epochs,
-                pad0: 0,
-                pad1: 0,
-                pad2: 0,
+                rf_keep: self.reaction_filter[0],
+                rf_old: self.reaction_filter[1],
+                rf_new: self.reaction_filter[2],
             };
             self.epochs += self.table_exchanges;
             self.gpu

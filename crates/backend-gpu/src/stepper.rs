@@ -406,12 +406,19 @@ impl Stepper for GpuStepper {
             })
     }
 
-    fn end_reaction(&self, _rod: usize, _end: usize) -> Option<EndReaction> {
-        None
+    fn end_reaction(&self, rod: usize, end: usize) -> Option<EndReaction> {
+        if rod >= self.states.len() || end > 1 {
+            return None;
+        }
+        let (k, local) = self.part_of(rod);
+        self.parts[k].end_reaction(local, end)
     }
 
     fn max_reaction_force(&self) -> Option<f64> {
-        None
+        self.parts
+            .iter()
+            .filter_map(GpuSimulation::max_reaction_force)
+            .reduce(f64::max)
     }
 
     fn contacts(&self, rod: usize, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {

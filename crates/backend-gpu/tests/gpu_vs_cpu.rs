@@ -28,7 +28,7 @@ use cosserat_model::energy::{ForceModel, energies};
 use cosserat_model::quat::exp_rotation;
 use cosserat_model::rod::{RodSpec, build_rod, straight_polyline};
 use cosserat_model::{Material, Quat, RodParams, RodState, Vec3};
-use cosserat_problem::{StateField, Stepper};
+use cosserat_problem::{EndReaction, StateField, Stepper};
 
 /// Relative agreement required (see the module docs).
 const REL_TOL: f64 = 5e-3;
@@ -1167,4 +1167,64 @@ fn the_stepper_keeps_its_clamps_through_snapshots_and_writes() {
         after < 1e-8,
         "bending energy {after:e} 10 steps after the write"
     );
+}
+
+/// Reactions at held ends (a driven clamp at the first end, a pin at the last) follow the CPU
+/// oracle's on every path: on the windowed path the last end's force is summed by the window
+/// that owns the end point, the first end's torque by the thread that steps the end frame.
+#[test]
+fn reactions_at_held_ends_match_cpu_on_every_path() {
+    let mut case = busy_case();
+    for rod in &mut case.rods {
+        rod.2[1] = EndCondition::pinned();
+    }
+    let s = settings(false);
+    let steps = 100;
+    let cpu: Vec<[Option<EndReaction>; 2]> = case
+        .rods
+        .iter()
+        .enumerate()
+        .map(|(r, (st, p, e, l))| {
+            let mut rod = CpuRod::new(st.clone(), p.clone(), e.clone(), l.clone());
+            for k in 0..steps {
+                step_rod(&mut rod, &s, k as f64 * s.dt as f64, r, k).expect("the CPU oracle");
+            }
+            [rod.end_reaction(0), rod.end_reaction(1)]
+        })
+        .collect();
+    for path in [KernelPath::SingleWorkgroup, KernelPath::DispatchPerStep] {
+        let options = GpuOptions {
+            path,
+            max_threads: 64,
+            ..GpuOptions::default()
+        };
+        let Some(mut sim) = gpu(&case, &s, options) else {
+            return;
+        };
+        sim.step(steps as u32).expect("submit");
+        sim.read_state().expect("read");
+        for (r, ends) in cpu.iter().enumerate() {
+            for (end, want) in ends.iter().enumerate() {
+                let want = want.expect("a held end");
+                let got = sim.end_reaction(r, end).expect("a held end on the GPU");
+                let scale = |v: [f64; 3]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                let (fs, ts) = (scale(want.force), scale(want.torque));
+                for k in 0..3 {
+                    assert!(
+                        (got.force[k] - want.force[k]).abs() <= 0.02 * fs,
+                        "{path}, rod {r}, end {end}: force {:?}, CPU {:?}",
+                        got.force,
+                        want.force
+                    );
+                    assert!(
+                        (got.torque[k] - want.torque[k]).abs() <= 1e-3 * ts + 1e-12,
+                        "{path}, rod {r}, end {end}: torque {:?}, CPU {:?}",
+                        got.torque,
+                        want.torque
+                    );
+                }
+                assert!(fs > 0.0 && (end == 1 || ts > 0.0), "{path}: {want:?}");
+            }
+        }
+    }
 }

@@ -986,13 +986,13 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
             }
         })
         .collect();
-    let stepper = cosserat_backend_gpu::GpuStepper::on_gpus(
-        inputs,
-        &b.settings.cast(),
-        cosserat_backend_gpu::GpuOptions::default(),
-        b.gpus,
-    )
-    .map_err(|e| BuildError::Setting(e.to_string()))?;
+    let mut options = cosserat_backend_gpu::GpuOptions::default();
+    if let Some(hz) = b.reaction_cutoff_hz {
+        options.reaction_cutoff_hz = hz;
+    }
+    let stepper =
+        cosserat_backend_gpu::GpuStepper::on_gpus(inputs, &b.settings.cast(), options, b.gpus)
+            .map_err(|e| BuildError::Setting(e.to_string()))?;
     Ok(Box::new(stepper))
 }
 

@@ -1,6 +1,30 @@
 //! Measurements a stepper reports besides the state: reactions at held ends, contact and
 //! coupling statistics, what the stiff solver did.
 
+/// Default cut-off of the low-pass filter on reported end reactions [Hz]: well below a haptic
+/// loop's 1 kHz and above the few hertz of deliberate hand motion.
+pub const DEFAULT_CUTOFF_HZ: f64 = 50.0;
+
+/// The weights `(keep, from_old, from_new)` of one step `h` of the reactions' first-order
+/// low-pass filter at `cutoff_hz`: `y ← keep y + from_old x_old + from_new x`, the exact
+/// solution of `ẏ = a (x − y)`, `a = 2π f_c`, over a step whose input runs linearly from the
+/// last raw value `x_old` to this one `x` (a first-order hold; `cosserat_backend_cpu`'s
+/// `reaction` module says why). Without a finite positive cut-off the output is the raw value.
+pub fn reaction_filter_weights(cutoff_hz: f64, h: f64) -> (f64, f64, f64) {
+    if !(cutoff_hz.is_finite() && cutoff_hz > 0.0) {
+        return (0.0, 0.0, 1.0);
+    }
+    let ah = 2.0 * std::f64::consts::PI * cutoff_hz * h;
+    let e = (-ah).exp();
+    // (1 − E)/(a h) by its series where a h is tiny (no cancellation).
+    let mean = if ah < 1e-4 {
+        1.0 - ah * (0.5 - ah / 6.0)
+    } else {
+        (1.0 - e) / ah
+    };
+    (e, mean - e, 1.0 - mean)
+}
+
 /// Force and torque applied by the holder of an end to the rod.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EndReaction {

@@ -12,6 +12,11 @@
 //   CLAMP         clamped ends: a clamp frame per clamped end (state, in `clamps`) turned by the
 //                 end's prescribed angular velocity, acting on the rod's end frame through its
 //                 bend–twist node (cosserat_model::rod::EndNode)
+//   REACT         held ends report the wrench their holder applies (backend-cpu reaction.rs):
+//                 the momentum balance of the held point (its force, the velocity change its
+//                 motion needs, the impulses its distance constraint gives its neighbour) and
+//                 a clamp's torque, low-pass filtered at every step, kept in `clamps` (every
+//                 kernel with CLAMP has REACT)
 //   MESH          contact with a static triangle mesh (wall_contact.wgsl): points detected once
 //                 per step (swept test, then sphere query unless the point's clearance from the
 //                 wall has not run out), each contact resolved with Coulomb friction after every
@@ -68,9 +73,11 @@ struct Params {
     num_items: u32,
     // GRID: halo exchanges since the synchronisation words were last cleared.
     epoch0: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    // REACT: the reaction filter's weights of its last output, the last raw value and this
+    // step's (reaction.rs `Reactions::finish`).
+    rf_keep: f32,
+    rf_old: f32,
+    rf_new: f32,
 }
 
 // One 256-byte entry per dispatch of a submission (dynamic uniform offset).
@@ -131,14 +138,20 @@ struct Drive {
     origin: vec4<f32>,
 }
 
-// A clamped end (CLAMP), per rod and end: the clamp's frame `q` (xyzw; state, turned by the
-// end's prescribed angular velocity every step) and its bend–twist node to the rod's end frame:
-// rest Darboux vector and length (half the end element) in `d`, stiffness and damping in `e`,
-// as a Slot's node.
+// A held end, per rod and end. A clamped one (CLAMP): the clamp's frame `q` (xyzw; state,
+// turned by the end's prescribed angular velocity every step) and its bend–twist node to the
+// rod's end frame: rest Darboux vector and length (half the end element) in `d`, stiffness and
+// damping in `e`, as a Slot's node. Its reaction (REACT, state): the filtered force `rf` (w:
+// the largest filtered force so far) and torque `rt` (world), and last step's raw force `xf`
+// and torque `xt`.
 struct Clamp {
     q: vec4<f32>,
     d: vec4<f32>,
     e: vec4<f32>,
+    rf: vec4<f32>,
+    rt: vec4<f32>,
+    xf: vec4<f32>,
+    xt: vec4<f32>,
 }
 
 // What a rod touches (MESH, GUIDE): `wall` = (static friction, kinetic friction, margin,
@@ -166,9 +179,10 @@ struct Touch {
 //#if LOADS
 @group(0) @binding(10) var<storage, read> loads: array<vec4<f32>>;
 //#endif
-//#if CLAMP
+//#if REACT
 // Read at the start of a dispatch and written at its end only by the thread that steps the
-// end frame in the item that owns it, so one copy serves every path.
+// end frame (clamp, torque) or the end point (force) in the item that owns it, so one copy
+// serves every path.
 @group(0) @binding(17) var<storage, read_write> clamps: array<Clamp>;
 //#endif
 //#if MESH
@@ -283,6 +297,15 @@ fn guide_offset(t: Touch, p: vec3<f32>) -> vec4<f32> {
     let lateral = rel - t.guide_a.xyz * along;
     let inside = along < t.guide_o.w && dot(lateral, lateral) <= t.guide_a.w * t.guide_a.w;
     return vec4<f32>(lateral, select(-1.0, 1.0, inside));
+}
+//#endif
+
+//#if REACT
+// One step of a reaction's low-pass filter (reaction.rs): the new output from the last one
+// (`y`, w the largest output norm so far), the last raw value and this step's.
+fn low_pass(y: vec4<f32>, old: vec3<f32>, raw: vec3<f32>) -> vec4<f32> {
+    let out = y.xyz * params.rf_keep + old * params.rf_old + raw * params.rf_new;
+    return vec4<f32>(out, max(y.w, length(out)));
 }
 //#endif
 
@@ -405,6 +428,43 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     if c1 {
         qc1 = clamps[2u * it.rod + 1u].q;
     }
+//#endif
+//#if REACT
+    // The held end points' reactions: the thread that owns a held end point in the item that
+    // owns it keeps the end's force filter in registers for the dispatch; the thread that
+    // steps a clamped end frame keeps its torque filter (c0, c1). The constraint between the
+    // end point and its neighbour is the thread's extended constraint 1 (first end) or rj1
+    // (last end).
+    let react0 = (it.flags & 1u) != 0u && it.o0 == 0u && lid == 0u;
+    let ln1 = it.n - it.w0;
+    let react1 = (it.flags & 4u) != 0u && it.n >= it.o0 && it.n < it.o1 && ln1 / EPT == lid;
+    let rj1 = select(NONE, ln1 % EPT, react1);
+    var rf0 = vec4<f32>(0.0);
+    var xf0 = vec3<f32>(0.0);
+    var rf1 = vec4<f32>(0.0);
+    var xf1 = vec3<f32>(0.0);
+    if react0 {
+        rf0 = clamps[2u * it.rod].rf;
+        xf0 = clamps[2u * it.rod].xf.xyz;
+    }
+    if react1 {
+        rf1 = clamps[2u * it.rod + 1u].rf;
+        xf1 = clamps[2u * it.rod + 1u].xf.xyz;
+    }
+//#if CLAMP
+    var rt0 = vec4<f32>(0.0);
+    var xt0 = vec3<f32>(0.0);
+    var rt1 = vec4<f32>(0.0);
+    var xt1 = vec3<f32>(0.0);
+    if c0 {
+        rt0 = clamps[2u * it.rod].rt;
+        xt0 = clamps[2u * it.rod].xt.xyz;
+    }
+    if c1 {
+        rt1 = clamps[2u * it.rod + 1u].rt;
+        xt1 = clamps[2u * it.rod + 1u].xt.xyz;
+    }
+//#endif
 //#endif
 
 //#if !EXTENSIBLE
@@ -843,6 +903,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             om0 = select(vec3<f32>(0.0), dr.w.xyz, step >= dr.window.x && step < dr.window.y);
             let k = clamps[2u * it.rod];
             tc0 = clamp_torque(qc0, q[0], w[0], om0, k.d.xyz, k.e.xyz, k.d.w, k.e.w, false);
+            // The clamp's torque on the rod, in world coordinates: the end's reaction torque.
+            rt0 = low_pass(rt0, xt0, quat_rotate(q[0], tc0));
+            xt0 = quat_rotate(q[0], tc0);
         }
         if c1 {
             let dr = drives[it.rod * 2u + 1u];
@@ -857,7 +920,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
             let k = clamps[2u * it.rod + 1u];
             tc1 = clamp_torque(qc1, qf, wf, om1, k.d.xyz, k.e.xyz, k.d.w, k.e.w, true);
+            rt1 = low_pass(rt1, xt1, quat_rotate(qf, tc1));
+            xt1 = quat_rotate(qf, tc1);
         }
+//#endif
+//#if REACT
+        // The held points' momentum balance before the constraints, m (v_p - v) / h - f, and
+        // the impulses their distance constraints give their neighbours.
+        var fpre0 = vec3<f32>(0.0);
+        var fpre1 = vec3<f32>(0.0);
+        var jr0 = vec3<f32>(0.0);
+        var jr1 = vec3<f32>(0.0);
 //#endif
         // Integrate velocities: v += h f / m and Euler's equations with the gyroscopic term.
 //#for e 0 EPT
@@ -909,11 +982,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     let dr = drives[it.rod * 2u];
                     let on = step >= dr.window.x && step < dr.window.y;
                     vn = select(vec3<f32>(0.0), dr.v.xyz, on);
+//#if REACT
+                    fpre0 = (vn - vx[{e+1}]) * (sl.a.z * inv_h) - f;
+//#endif
                 }
                 if gp == it.n && (it.flags & 4u) != 0u {
                     let dr = drives[it.rod * 2u + 1u];
                     let on = step >= dr.window.x && step < dr.window.y;
                     vn = select(vec3<f32>(0.0), dr.v.xyz, on);
+//#if REACT
+                    fpre1 = (vn - vx[{e+1}]) * (sl.a.z * inv_h) - f;
+//#endif
                 }
                 vx[{e+1}] = vn;
                 w[{e}] = wn;
@@ -1260,6 +1339,10 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let t = select(0.0, l0 * inverseSqrt(dot(d, d)) - 1.0, cok[{x}]);
                 vx[{x}] -= d * (t * cka[{x}]);
                 vx[{x+1}] += d * (t * ckb[{x}]);
+//#if REACT
+                // The impulse point b took (or point a gave) as if the end were free.
+                let imp = t * cinv[{x}] * inv_h;
+//#endif
 //#else
 //#if RSQRT
                 let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
@@ -1269,6 +1352,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endif
                 vx[{x}] -= d * (sc * wa);
                 vx[{x+1}] += d * (sc * wb);
+//#if REACT
+                let imp = sc;
+//#endif
+//#endif
+//#if REACT
+                if u32({x}) == 1u && react0 {
+                    jr0 += d * imp;
+                }
+                if u32({x}) == rj1 {
+                    jr1 -= d * imp;
+                }
 //#endif
             }
 //#endfor
@@ -1317,6 +1411,10 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let t = select(0.0, l0 * inverseSqrt(dot(d, d)) - 1.0, cok[{x}]);
                 vx[{x}] -= d * (t * cka[{x}]);
                 vx[{x+1}] += d * (t * ckb[{x}]);
+//#if REACT
+                // The impulse point b took (or point a gave) as if the end were free.
+                let imp = t * cinv[{x}] * inv_h;
+//#endif
 //#else
 //#if RSQRT
                 let sc = select(0.0, (l0 * inverseSqrt(dot(d, d)) - 1.0) * ci * inv_h, cok[{x}]);
@@ -1326,6 +1424,17 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endif
                 vx[{x}] -= d * (sc * wa);
                 vx[{x+1}] += d * (sc * wb);
+//#if REACT
+                let imp = sc;
+//#endif
+//#endif
+//#if REACT
+                if u32({x}) == 1u && react0 {
+                    jr0 += d * imp;
+                }
+                if u32({x}) == rj1 {
+                    jr1 -= d * imp;
+                }
 //#endif
             }
 //#endfor
@@ -1369,6 +1478,19 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
 //#endif
 
+//#if REACT
+        // The reaction forces of the step (reaction.rs `finish`), filtered.
+        if react0 {
+            let raw = fpre0 + jr0 * inv_h;
+            rf0 = low_pass(rf0, xf0, raw);
+            xf0 = raw;
+        }
+        if react1 {
+            let raw = fpre1 + jr1 * inv_h;
+            rf1 = low_pass(rf1, xf1, raw);
+            xf1 = raw;
+        }
+//#endif
         // Integrate positions and frames: r += h v, q <- normalise(q + q ⊗ (0, h ω / 2)).
 //#for e 0 EPT
         {
@@ -1548,9 +1670,23 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#if CLAMP
     if c0 {
         clamps[2u * it.rod].q = qc0;
+        clamps[2u * it.rod].rt = rt0;
+        clamps[2u * it.rod].xt = vec4<f32>(xt0, 0.0);
     }
     if c1 {
         clamps[2u * it.rod + 1u].q = qc1;
+        clamps[2u * it.rod + 1u].rt = rt1;
+        clamps[2u * it.rod + 1u].xt = vec4<f32>(xt1, 0.0);
+    }
+//#endif
+//#if REACT
+    if react0 {
+        clamps[2u * it.rod].rf = rf0;
+        clamps[2u * it.rod].xf = vec4<f32>(xf0, 0.0);
+    }
+    if react1 {
+        clamps[2u * it.rod + 1u].rf = rf1;
+        clamps[2u * it.rod + 1u].xf = vec4<f32>(xf1, 0.0);
     }
 //#endif
 }
