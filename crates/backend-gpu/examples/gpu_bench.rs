@@ -618,6 +618,35 @@ fn variant_section(quick: bool) -> Vec<Value> {
                 ..current.clone()
             },
         ),
+        (
+            "default, no reactions",
+            1000,
+            KernelPath::MultiWorkgroup,
+            KernelVariant {
+                reactions: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default (workgroup layout), no reactions",
+            1000,
+            KernelPath::SingleWorkgroup,
+            KernelVariant {
+                subgroups: false,
+                reactions: false,
+                ..current.clone()
+            },
+        ),
+        (
+            "default (workgroup layout), no reactions",
+            128,
+            KernelPath::SingleWorkgroup,
+            KernelVariant {
+                subgroups: false,
+                reactions: false,
+                ..current.clone()
+            },
+        ),
         ("default", 4096, KernelPath::MultiWorkgroup, current.clone()),
         (
             "default",

@@ -63,6 +63,9 @@ pub struct KernelVariant {
     /// Constraint impulse from one `inverseSqrt` with the per-constraint factors in registers
     /// (default).
     pub fast_impulse: bool,
+    /// Compute the reactions at held ends (default). `false` leaves them out of a kernel without
+    /// clamps, to measure what they cost (measurement only).
+    pub reactions: bool,
 }
 
 /// The knobs of a [`KernelVariant`] that switch on code no production kernel contains.
@@ -71,6 +74,7 @@ struct Measurement {
     unroll: bool,
     rsqrt: bool,
     sweep_loads: bool,
+    reactions: bool,
 }
 
 impl Measurement {
@@ -79,6 +83,7 @@ impl Measurement {
         unroll: true,
         rsqrt: false,
         sweep_loads: false,
+        reactions: true,
     };
 
     /// Switches the measurement-only code on in a production `plan`. `RSQRT` and `SWEEP_LOADS`
@@ -86,6 +91,9 @@ impl Measurement {
     /// `SWEEP_LOADS` reads the constants `FAST` keeps in registers, so it turns `FAST` off.
     fn apply(&self, plan: &mut Plan, extensible: bool) {
         plan.cfg.unroll = self.unroll;
+        if !self.reactions && !plan.cfg.flags.contains(&"CLAMP") {
+            plan.cfg.flags.retain(|f| *f != "REACT");
+        }
         if extensible {
             return;
         }
@@ -128,6 +136,7 @@ impl KernelVariant {
             shuffle_windows,
             register_constants,
             fast_impulse,
+            reactions,
         } = self.clone();
         (
             Tuning {
@@ -148,6 +157,7 @@ impl KernelVariant {
                 unroll,
                 rsqrt,
                 sweep_loads,
+                reactions,
             },
         )
     }
@@ -174,6 +184,7 @@ impl Default for KernelVariant {
             unroll,
             rsqrt,
             sweep_loads,
+            reactions,
         } = Measurement::NONE;
         Self {
             unroll,
@@ -191,6 +202,7 @@ impl Default for KernelVariant {
             shuffle_windows,
             register_constants,
             fast_impulse,
+            reactions,
         }
     }
 }
