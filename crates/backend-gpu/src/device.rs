@@ -186,17 +186,22 @@ impl Gpu {
 }
 
 /// Indices of the adapters to use, one per physical device: hardware adapters (or, when there
-/// are none, software ones), each device once (Vulkan, GL and the others can list the same
-/// card; the first listing wins, wgpu lists Vulkan first), in PCI bus order where known.
+/// are none, software ones) of the primary graphics APIs (Vulkan, Metal, DX12; GL only where
+/// none of them has one, since GL lists the same cards again under other names and ids), each
+/// device once, in PCI bus order where known.
 fn distinct_adapters(infos: Vec<wgpu::AdapterInfo>) -> Vec<usize> {
     let software = |i: &wgpu::AdapterInfo| {
         i.device_type == wgpu::DeviceType::Cpu || i.name.to_ascii_lowercase().contains("llvmpipe")
     };
+    let primary = |i: &wgpu::AdapterInfo| wgpu::Backends::PRIMARY.contains(i.backend.into());
     let any_hardware = infos.iter().any(|i| !software(i));
+    let any_primary = infos
+        .iter()
+        .any(|i| primary(i) && software(i) != any_hardware);
     let mut seen = Vec::new();
     let mut chosen: Vec<usize> = Vec::new();
     for (k, info) in infos.iter().enumerate() {
-        if software(info) == any_hardware {
+        if software(info) == any_hardware || (any_primary && !primary(info)) {
             continue;
         }
         let identity = (
@@ -316,6 +321,44 @@ mod tests {
             known_co_residency(&info("H100 lookalike", 0x1002, gpu)),
             None
         );
+    }
+
+    #[test]
+    fn each_card_is_taken_once_from_the_primary_apis() {
+        let gpu = wgpu::DeviceType::DiscreteGpu;
+        let card = |name: &str, backend: wgpu::Backend, bus: &str| wgpu::AdapterInfo {
+            device: 0x2330,
+            device_pci_bus_id: bus.into(),
+            backend,
+            ..info(name, 0x10de, gpu)
+        };
+        let infos = vec![
+            card(
+                "NVIDIA H100 80GB HBM3",
+                wgpu::Backend::Vulkan,
+                "0000:1b:00.0",
+            ),
+            card(
+                "NVIDIA H100 80GB HBM3",
+                wgpu::Backend::Vulkan,
+                "0000:0a:00.0",
+            ),
+            card("NVIDIA H100 80GB HBM3/PCIe/SSE2", wgpu::Backend::Gl, ""),
+            info(
+                "llvmpipe (LLVM 17, 256 bits)",
+                0x10005,
+                wgpu::DeviceType::Cpu,
+            ),
+        ];
+        // Two cards, in bus order; neither GL's listing nor the software adapter.
+        assert_eq!(distinct_adapters(infos), vec![1, 0]);
+        // A machine with only a software adapter uses it.
+        let lavapipe = info(
+            "llvmpipe (LLVM 17, 256 bits)",
+            0x10005,
+            wgpu::DeviceType::Cpu,
+        );
+        assert_eq!(distinct_adapters(vec![lavapipe]), vec![0]);
     }
 
     #[test]
