@@ -14,7 +14,8 @@
 //! [--batch-parts] [--gpus 1,2,4] [--batches-only] [--json FILE]`; `--batch-parts` also times
 //! the batches without the vessel and without either (what each part costs when the GPU is
 //! full); `--gpus` times every batch spread over each number of GPUs (`[batch] gpus`), for the
-//! scaling table; `--batches-only` leaves out the single copy.
+//! scaling table; `--chunk K` steps the batches in calls of `K` steps (default 500: each call
+//! reads every copy back and checks it); `--batches-only` leaves out the single copy.
 
 use cosserat::scene::parse_scene;
 use cosserat::sim::{Backend, RodHandle, Simulation};
@@ -82,6 +83,7 @@ fn main() {
         .map(|s| s.split(',').map(|c| c.parse().expect("gpus")).collect())
         .unwrap_or_else(|| vec![1]);
     let batches_only = args.iter().any(|a| a == "--batches-only");
+    let chunk: u64 = arg("--chunk").map_or(500, |c| c.parse().expect("chunk"));
     let steps: u64 = if quick { 200 } else { 20_000 };
     let mut json = serde_json::Map::new();
 
@@ -183,17 +185,29 @@ fn main() {
                 ];
                 let mut sim = build(&overrides, vessel, guide);
                 let batch_steps: u64 = if quick { 100 } else { 2_000 };
-                let per = time_steps(&mut sim, batch_steps, 500.min(batch_steps));
+                let per = time_steps(&mut sim, batch_steps, chunk.min(batch_steps));
+                // One step of every copy with the whole batch read back and checked: what a
+                // vector environment's step costs beyond its physics.
+                let tick = median(
+                    (0..5)
+                        .map(|_| {
+                            let t = Instant::now();
+                            sim.run(1).unwrap_or_else(|e| panic!("{e}"));
+                            t.elapsed().as_secs_f64() * 1e6
+                        })
+                        .collect(),
+                );
                 let report = sim.contact_report().expect("a vessel");
                 let per_copy = 1e6 / per;
                 println!(
-                    "{n} copies on {g} GPU(s), {part}: {per:.1} µs/step, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), escaped {}, max penetration {:.3e} m",
+                    "{n} copies on {g} GPU(s), {part}: {per:.1} µs/step in calls of {chunk}, {per_copy:.0} steps/s for every copy ({:.2e} element-steps/s), one step read back {tick:.0} µs, escaped {}, max penetration {:.3e} m",
                     per_copy * 512.0 * n as f64,
                     report.escaped_points,
                     report.max_penetration
                 );
                 batches.push(serde_json::json!({
                     "copies": n, "gpus": g, "part": part, "us_per_step": per,
+                    "steps_per_call": chunk, "one_step_read_back_us": tick,
                     "steps_per_s_per_copy": per_copy,
                     "element_steps_per_s": per_copy * 512.0 * n as f64,
                     "escaped_points": report.escaped_points,

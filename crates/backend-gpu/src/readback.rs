@@ -16,6 +16,7 @@ use crate::layout::{ClampG, DriveG};
 use crate::sim::{EndTrack, WALL_STATS, WallRead};
 use crate::{DivergedQuantity, Divergence, GpuError, GpuSimulation};
 use cosserat_model::{Quat, Vec3};
+use rayon::prelude::*;
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
@@ -422,9 +423,10 @@ impl GpuSimulation {
             &floats[3 * quarter..],
         );
         let v3 = |a: &[f32], i: usize| Vec3::new(a[4 * i], a[4 * i + 1], a[4 * i + 2]);
+        // Every rod's state on every core (a batch of thousands of rods is megabytes).
         let states = self
             .rods
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(r, &(base, n))| {
                 let (b, n) = (base as usize, n as usize);

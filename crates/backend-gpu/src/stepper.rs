@@ -22,6 +22,7 @@ use cosserat_problem::{
 
 use crate::device::Gpu;
 use crate::{GpuError, GpuField, GpuOptions, GpuRodInput, GpuSimulation, GpuSnapshot, Gpus};
+use rayon::prelude::*;
 
 const NAME: &str = "gpu explicit";
 
@@ -178,6 +179,52 @@ impl GpuStepper {
         &self.parts
     }
 
+    /// `steps` steps on every device, and the state read back: the rods' states in order, or
+    /// the gravest error of any device.
+    fn step_every_device(&mut self, steps: u64) -> Result<Vec<RodState<f32>>, GpuError> {
+        // Every device steps and reads back on a thread of its own: one round trip per
+        // device, the state and the divergence status together, the transfers and the
+        // host's share of the devices overlapping.
+        let batch = |sim: &mut GpuSimulation| {
+            let mut left = steps;
+            while left > 0 {
+                let k = left.min(u64::from(u32::MAX)) as u32;
+                sim.step(k)?;
+                left -= u64::from(k);
+            }
+            sim.read_state()
+        };
+        let read: Vec<Result<Vec<RodState<f32>>, GpuError>> = match &mut self.parts[..] {
+            [one] => vec![batch(one)],
+            parts => std::thread::scope(|s| {
+                let running: Vec<_> = parts.iter_mut().map(|sim| s.spawn(|| batch(sim))).collect();
+                running
+                    .into_iter()
+                    .map(|t| t.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                    .collect()
+            }),
+        };
+        // Every device is read before an error is returned, so the earliest divergence of
+        // all is the one reported.
+        let mut states = Vec::with_capacity(self.states.len());
+        let mut first: Option<GpuError> = None;
+        for (result, &start) in read.into_iter().zip(&self.starts) {
+            match result {
+                Ok(s) => states.extend(s),
+                Err(mut e) => {
+                    if let GpuError::Diverged(d) = &mut e {
+                        d.rod += start;
+                    }
+                    first = Some(match first.take() {
+                        None => e,
+                        Some(f) => graver(f, e),
+                    });
+                }
+            }
+        }
+        first.map_or(Ok(states), Err)
+    }
+
     /// The device simulation that steps `rod`, and the rod's index in it.
     fn part_of(&self, rod: usize) -> (usize, usize) {
         let k = self.starts.partition_point(|&s| s <= rod) - 1;
@@ -216,46 +263,21 @@ impl Stepper for GpuStepper {
         if steps == 0 {
             return Ok(0.0);
         }
-        let starts = &self.starts;
-        let run = (|| {
-            // Every device gets its steps before any is waited for.
-            for sim in &mut self.parts {
-                let mut left = steps;
-                while left > 0 {
-                    let k = left.min(u64::from(u32::MAX)) as u32;
-                    sim.step(k)?;
-                    left -= u64::from(k);
-                }
-            }
-            // One round trip per device: the state and the divergence status come back
-            // together. Every device is read before an error is returned, so the earliest
-            // divergence of all is the one reported.
-            let mut states = Vec::with_capacity(self.states.len());
-            let mut first: Option<GpuError> = None;
-            for (sim, &start) in self.parts.iter_mut().zip(starts) {
-                match sim.read_state() {
-                    Ok(s) => states.extend(s),
-                    Err(mut e) => {
-                        if let GpuError::Diverged(d) = &mut e {
-                            d.rod += start;
-                        }
-                        first = Some(match first.take() {
-                            None => e,
-                            Some(f) => graver(f, e),
-                        });
-                    }
-                }
-            }
-            first.map_or(Ok(states), Err)
-        })();
+        let run = self.step_every_device(steps);
         match run {
             Ok(states) => {
-                let mut worst = 0.0f64;
-                for (p, state) in self.params.iter().zip(&states) {
-                    let (lo, hi) =
-                        cosserat_constraints::strain_extremes(&state.positions, &p.rest_lengths);
-                    worst = worst.max(f64::from(hi) - 1.0).max(1.0 - f64::from(lo));
-                }
+                let worst = self
+                    .params
+                    .par_iter()
+                    .zip(&states)
+                    .map(|(p, state)| {
+                        let (lo, hi) = cosserat_constraints::strain_extremes(
+                            &state.positions,
+                            &p.rest_lengths,
+                        );
+                        (f64::from(hi) - 1.0).max(1.0 - f64::from(lo))
+                    })
+                    .reduce(|| 0.0, f64::max);
                 self.states = states;
                 self.clock = self.clock.advanced(steps);
                 Ok(worst)
@@ -460,8 +482,10 @@ impl Stepper for GpuStepper {
     }
 
     fn energies(&self) -> Energies {
-        self.states
-            .iter()
+        // Each rod's on every core, summed in rod order (the same sum on any machine).
+        let each: Vec<Energies> = self
+            .states
+            .par_iter()
             .zip(&self.params)
             .zip(&self.ends)
             .map(|((s, p), ends)| {
@@ -472,18 +496,26 @@ impl Stepper for GpuStepper {
                 };
                 energies(s, p, &model)
             })
-            .fold(Energies::default(), Energies::sum)
+            .collect();
+        each.into_iter().fold(Energies::default(), Energies::sum)
     }
 
     fn check_speed(&self, limit: f64) -> Result<(), Divergence> {
-        first_too_fast(
-            self.states
-                .iter()
-                .zip(&self.params)
-                .map(|(s, p)| (s, p.radius)),
-            limit,
-            self.clock.step,
-        )
+        // The first rod (in order) with a point too fast, each rod checked on every core.
+        let step = self.clock.step;
+        match self
+            .states
+            .par_iter()
+            .zip(&self.params)
+            .enumerate()
+            .find_map_first(|(rod, (s, p))| {
+                first_too_fast(std::iter::once((s, p.radius)), limit, step)
+                    .err()
+                    .map(|d| Divergence { rod, ..d })
+            }) {
+            Some(d) => Err(d),
+            None => Ok(()),
+        }
     }
 
     fn snapshot(&mut self) -> Result<Snapshot, StepError> {
