@@ -773,7 +773,8 @@ impl PySimulation {
     }
 
     /// Returns to a snapshot of this simulation: the steps that follow are, bit for bit, those
-    /// that followed it.
+    /// that followed it. (A snapshot of a copy of a `layout="copies"` batch writes its rods'
+    /// state instead; see `Batch.snapshot`.)
     fn restore(&self, snapshot: &PySnapshot) -> PyResult<()> {
         let mut sim = self.lock();
         let rods = 0..sim.rods().count();
