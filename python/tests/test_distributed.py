@@ -5,6 +5,7 @@ direct run, a worker killed mid-sweep, and a resumed sweep that runs only the mi
 import json
 import os
 import pathlib
+import sys
 
 import numpy as np
 import pytest
@@ -151,3 +152,14 @@ def test_random_designs_are_seeded_and_bad_parameters_are_named():
         design_points({"rod.0.elements": (8, 12)}, "random")
     with pytest.raises(ValueError, match="design = 'sobol'"):
         design_points({"rod.0.elements": [8]}, "sobol")
+
+
+def test_without_pyarrow_the_table_is_written_as_npz_and_progress_goes_to_stderr(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # `import pyarrow` now raises ImportError
+    table = sweep(PENDULUM, PARAMETERS, out=tmp_path, per_task=3, duration=DURATION)
+    assert not (tmp_path / "results.parquet").exists()
+    with np.load(tmp_path / "results.npz") as disk:
+        assert sorted(disk.files) == sorted(table)
+        assert np.array_equal(disk["rod0_tip_z"], table["rod0_tip_z"])
+        assert list(disk["error"]) == [""] * 6
+    assert "sweep: 6/6 design points, 0 with errors" in capsys.readouterr().err
