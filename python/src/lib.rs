@@ -231,7 +231,7 @@ impl PySnapshot {
             )),
             Saved::Rods(states) if states.len() != rods.len() => {
                 Err(ControlError::new_err(format!(
-                    "the snapshot holds {} rod(s), the copy has {}",
+                    "the snapshot holds {} rod(s), this has {}",
                     states.len(),
                     rods.len()
                 )))
@@ -1054,7 +1054,8 @@ impl PyBatch {
     /// `copies` copies of the scene in the TOML file `path` (overrides and backend as for
     /// `Simulation.from_file`). `layout` is `"simulations"` (one simulation per copy, stepped
     /// on rayon's pool) or `"copies"` (one simulation holding all copies' rods, one dispatch on
-    /// the GPU); by default `"copies"` on the GPU and `"simulations"` on the CPU.
+    /// the GPU); by default `"copies"` on the GPU and `"simulations"` on the CPU. With
+    /// `"copies"`, `copies` replaces a scene's own `[batch] copies`.
     #[staticmethod]
     #[pyo3(signature = (path, copies, overrides=None, backend="cpu", *, layout=None))]
     fn from_file(
