@@ -901,8 +901,9 @@ impl PyBatch {
             ));
         }
         let backend = backend_of(backend)?;
-        // One simulation per copy where rayon steps copies faster than rods, one for all on
-        // the GPU (one dispatch); docs/benchmarks/python.md has the timings.
+        // On the CPU one simulation per copy: as fast as one for all (docs/benchmarks/python.md),
+        // and a copy then fails alone and restores bit for bit. On the GPU one for all: one
+        // dispatch for the batch, not one per copy.
         let layout = layout.unwrap_or(match backend {
             Backend::Gpu => "copies",
             _ => "simulations",
