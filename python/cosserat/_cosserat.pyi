@@ -138,8 +138,12 @@ class Simulation:
         ``branches`` as ``(points, radii)``; ``None`` for other environments."""
 
 class Batch:
-    """Copies of one scene stepped together in parallel (GIL released), as arrays with a
-    leading copy axis."""
+    """Copies of one scene stepped together (GIL released), as arrays with a leading copy axis.
+
+    ``layout="simulations"`` holds one simulation per copy (stepped on rayon's pool; a copy that
+    diverges stops alone), ``layout="copies"`` one simulation of all copies' rods (one dispatch
+    on the GPU; a divergence stops every copy, and a copy's snapshot holds its rods' state and
+    end conditions). The default is ``"copies"`` on the GPU, ``"simulations"`` on the CPU."""
 
     @staticmethod
     def from_file(
@@ -147,6 +151,8 @@ class Batch:
         copies: int,
         overrides: Optional[Mapping[str, Any]] = None,
         backend: str = "cpu",
+        *,
+        layout: Optional[str] = None,
     ) -> Batch: ...
     @staticmethod
     def from_toml(
@@ -155,12 +161,19 @@ class Batch:
         overrides: Optional[Mapping[str, Any]] = None,
         backend: str = "cpu",
         name: str = "scene.toml",
+        *,
+        layout: Optional[str] = None,
     ) -> Batch: ...
     def __len__(self) -> int: ...
     @property
     def name(self) -> str: ...
     @property
     def scene_steps(self) -> int: ...
+    @property
+    def layout(self) -> str:
+        """``"simulations"`` or ``"copies"``."""
+    @property
+    def backend(self) -> str: ...
     @property
     def times(self) -> list[float]: ...
     def run(self, steps: Optional[int] = None) -> list[Optional[str]]:

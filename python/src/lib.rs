@@ -15,7 +15,7 @@
 use cosserat::scene::parse_scene;
 use cosserat::{
     Backend, ControlError as LibControlError, EndCondition, EndKind, EndPath, PointLoad, RodHandle,
-    Simulation, SimulationSnapshot, StateField,
+    Simulation, SimulationSnapshot, StateField, StepError as LibStepError,
 };
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods,
@@ -23,6 +23,7 @@ use numpy::{
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString};
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
@@ -132,8 +133,63 @@ fn vec3(name: &str, v: &[f64]) -> PyResult<[f64; 3]> {
 /// `Simulation.restore()`.
 #[pyclass(name = "Snapshot", module = "cosserat")]
 struct PySnapshot {
-    inner: Mutex<SimulationSnapshot>,
+    inner: Mutex<Saved>,
     time: f64,
+}
+
+/// What a snapshot holds.
+enum Saved {
+    /// A whole simulation: restoring and stepping repeats the steps bit for bit.
+    Whole(SimulationSnapshot),
+    /// The rods of one copy of a batch stepped as one simulation.
+    Rods(Vec<RodState>),
+}
+
+/// A rod's state and end conditions (a copy's share of a batch stepped as one simulation).
+struct RodState {
+    positions: Vec<[f64; 3]>,
+    velocities: Vec<[f64; 3]>,
+    angular_velocities: Vec<[f64; 3]>,
+    frames: Vec<[f64; 4]>,
+    ends: [EndCondition<f64>; 2],
+}
+
+impl RodState {
+    fn of(sim: &Simulation, h: RodHandle) -> Result<Self, LibControlError> {
+        let n = sim.stepper().elements(h.0)?;
+        let field = |f: StateField| -> Result<Vec<[f64; 3]>, LibControlError> {
+            let mut v = vec![[0.0; 3]; f.len(n)];
+            sim.read(h, f, &mut v)?;
+            Ok(v)
+        };
+        let mut frames = vec![[0.0; 4]; n];
+        sim.read_frames(h, &mut frames)?;
+        Ok(Self {
+            positions: field(StateField::Positions)?,
+            velocities: field(StateField::Velocities)?,
+            angular_velocities: field(StateField::AngularVelocities)?,
+            frames,
+            ends: [sim.end_condition(h, 0)?, sim.end_condition(h, 1)?],
+        })
+    }
+
+    /// Writes this state into rod `h`; motions of the ends are shifted by `shift` seconds (the
+    /// clock moved on since the state was taken).
+    fn write(&self, sim: &mut Simulation, h: RodHandle, shift: f64) -> Result<(), LibControlError> {
+        sim.write(h, StateField::Positions, &self.positions)?;
+        sim.write(h, StateField::Velocities, &self.velocities)?;
+        sim.write(h, StateField::AngularVelocities, &self.angular_velocities)?;
+        sim.write_frames(h, &self.frames)?;
+        for (end, condition) in self.ends.iter().enumerate() {
+            let mut condition = condition.clone();
+            if let Some(m) = condition.motion.as_mut() {
+                m.start_time += shift;
+                m.end_time += shift;
+            }
+            sim.set_end_condition(h, end, condition)?;
+        }
+        Ok(())
+    }
 }
 
 impl PySnapshot {
@@ -144,15 +200,50 @@ impl PySnapshot {
             .snapshot()
             .map_err(|e| StepError::new_err(e.to_string()))?;
         Ok(Self {
-            inner: Mutex::new(inner),
+            inner: Mutex::new(Saved::Whole(inner)),
             time,
         })
     }
 
-    /// Returns `sim` to this state.
-    fn restore_into(&self, sim: &mut Simulation) -> PyResult<()> {
-        let snap = self.inner.lock().unwrap_or_else(|p| p.into_inner());
-        sim.restore(&snap).map_err(control_err)
+    /// The state of rods `rods` of `sim` now.
+    fn of_rods(sim: &Simulation, rods: Range<usize>) -> PyResult<Self> {
+        let states = rods
+            .map(|r| RodState::of(sim, RodHandle(r)))
+            .collect::<Result<_, _>>()
+            .map_err(control_err)?;
+        Ok(Self {
+            inner: Mutex::new(Saved::Rods(states)),
+            time: sim.time(),
+        })
+    }
+
+    /// Returns rods `rods` of `sim` to this state: all of them from a whole snapshot (bit for
+    /// bit), or those of a copy.
+    fn restore_into(&self, sim: &mut Simulation, rods: Range<usize>) -> PyResult<()> {
+        let saved = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+        match &*saved {
+            Saved::Whole(snap) if rods == (0..sim.rods().count()) => {
+                sim.restore(snap).map_err(control_err)
+            }
+            Saved::Whole(_) => Err(ControlError::new_err(
+                "this snapshot holds a whole simulation; one copy of a batch stepped as one \
+                 simulation (layout=\"copies\") takes a snapshot of a copy of such a batch",
+            )),
+            Saved::Rods(states) if states.len() != rods.len() => {
+                Err(ControlError::new_err(format!(
+                    "the snapshot holds {} rod(s), this has {}",
+                    states.len(),
+                    rods.len()
+                )))
+            }
+            Saved::Rods(states) => {
+                let shift = sim.time() - self.time;
+                for (s, r) in states.iter().zip(rods) {
+                    s.write(sim, RodHandle(r), shift).map_err(control_err)?;
+                }
+                Ok(())
+            }
+        }
     }
 }
 
@@ -682,9 +773,12 @@ impl PySimulation {
     }
 
     /// Returns to a snapshot of this simulation: the steps that follow are, bit for bit, those
-    /// that followed it.
+    /// that followed it. (A snapshot of a copy of a `layout="copies"` batch writes its rods'
+    /// state instead; see `Batch.snapshot`.)
     fn restore(&self, snapshot: &PySnapshot) -> PyResult<()> {
-        snapshot.restore_into(&mut self.lock())
+        let mut sim = self.lock();
+        let rods = 0..sim.rods().count();
+        snapshot.restore_into(&mut sim, rods)
     }
 
     /// Contact measurements of rod `rod` since the start, `None` without mesh contact:
@@ -756,13 +850,40 @@ fn vessel_dict<'py>(py: Python<'py>, sim: &Simulation) -> PyResult<Option<Bound<
 }
 
 /// Copies of one scene stepped together (`cosserat.Batch`), for learning and Monte-Carlo loops:
-/// built once and cloned (a mesh is shared, not rebuilt), stepped in parallel on rayon's pool
-/// with the GIL released, read and steered as arrays with a leading copy axis.
+/// built once, read and steered as arrays with a leading copy axis, stepped with the GIL
+/// released. Two layouts (`Layout`): one simulation per copy on rayon's pool, or one simulation
+/// holding every copy's rods (`SimulationBuilder::copies`: one dispatch on the GPU).
 #[pyclass(name = "Batch", module = "cosserat")]
 struct PyBatch {
-    sims: Vec<Mutex<Simulation>>,
+    layout: Layout,
+    copies: usize,
     name: String,
     scene_steps: u64,
+}
+
+/// How a batch holds its copies.
+enum Layout {
+    /// One simulation per copy (cloned from one builder: a mesh is shared, not rebuilt); a copy
+    /// that fails stops alone.
+    Simulations(Vec<Mutex<Simulation>>),
+    /// One simulation of all copies: rod `r` of copy `c` is its rod `c * rods + r`.
+    Copies {
+        sim: Box<Mutex<Simulation>>,
+        rods: usize,
+    },
+}
+
+impl Layout {
+    fn name(&self) -> &'static str {
+        match self {
+            Layout::Simulations(_) => "simulations",
+            Layout::Copies { .. } => "copies",
+        }
+    }
+}
+
+fn lock(m: &Mutex<Simulation>) -> MutexGuard<'_, Simulation> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 impl PyBatch {
@@ -772,6 +893,7 @@ impl PyBatch {
         copies: usize,
         overrides: Vec<(String, String)>,
         backend: &str,
+        layout: Option<&str>,
     ) -> PyResult<Self> {
         if copies == 0 {
             return Err(SceneError::new_err(
@@ -779,37 +901,81 @@ impl PyBatch {
             ));
         }
         let backend = backend_of(backend)?;
+        // On the CPU one simulation per copy: as fast as one for all (docs/benchmarks/python.md),
+        // and a copy then fails alone and restores bit for bit. On the GPU one for all: one
+        // dispatch for the batch, not one per copy.
+        let layout = layout.unwrap_or(match backend {
+            Backend::Gpu => "copies",
+            _ => "simulations",
+        });
         let (builder, length, name) =
             parse_scene(path, text, &overrides).map_err(|e| SceneError::new_err(e.to_string()))?;
         let builder = builder.backend(backend);
-        let sims = (0..copies)
-            .map(|_| {
-                builder
-                    .clone()
-                    .build()
-                    .map(Mutex::new)
-                    .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))
-            })
-            .collect::<PyResult<_>>()?;
+        let built = |b: cosserat::SimulationBuilder| {
+            b.build()
+                .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))
+        };
+        let layout = match layout {
+            "simulations" => Layout::Simulations(
+                (0..copies)
+                    .map(|_| built(builder.clone()).map(Mutex::new))
+                    .collect::<PyResult<_>>()?,
+            ),
+            "copies" => {
+                let sim = built(builder.copies(copies))?;
+                let rods = sim.rods().count() / copies;
+                Layout::Copies {
+                    sim: Box::new(Mutex::new(sim)),
+                    rods,
+                }
+            }
+            other => {
+                return Err(SceneError::new_err(format!(
+                    "layout = {other:?}: expected \"simulations\" or \"copies\""
+                )));
+            }
+        };
         Ok(Self {
-            sims,
+            layout,
+            copies,
             name,
             scene_steps: length.steps,
         })
     }
 
-    fn lock(&self, copy: usize) -> MutexGuard<'_, Simulation> {
-        self.sims[copy].lock().unwrap_or_else(|p| p.into_inner())
+    /// The simulation that holds copy `copy` (unchecked) and its rods' range in it.
+    fn sim(&self, copy: usize) -> (MutexGuard<'_, Simulation>, Range<usize>) {
+        match &self.layout {
+            Layout::Simulations(sims) => {
+                let sim = lock(&sims[copy]);
+                let rods = 0..sim.rods().count();
+                (sim, rods)
+            }
+            Layout::Copies { sim, rods } => (lock(sim), copy * rods..(copy + 1) * rods),
+        }
     }
 
     /// Copy `copy`, or an error naming the copies there are.
-    fn copy(&self, copy: usize) -> PyResult<MutexGuard<'_, Simulation>> {
-        if copy < self.sims.len() {
-            Ok(self.lock(copy))
+    fn copy(&self, copy: usize) -> PyResult<(MutexGuard<'_, Simulation>, Range<usize>)> {
+        if copy < self.copies {
+            Ok(self.sim(copy))
         } else {
             Err(ControlError::new_err(format!(
                 "no copy {copy}: the batch has copies 0..{}",
-                self.sims.len()
+                self.copies
+            )))
+        }
+    }
+
+    /// Rod `rod` of copy `copy` (unchecked) in its simulation, or an error naming the rods.
+    fn rod(&self, copy: usize, rod: usize) -> PyResult<(MutexGuard<'_, Simulation>, RodHandle)> {
+        let (sim, rods) = self.sim(copy);
+        if rod < rods.len() {
+            Ok((sim, RodHandle(rods.start + rod)))
+        } else {
+            Err(ControlError::new_err(format!(
+                "no rod {rod}: each copy has rods 0..{}",
+                rods.len()
             )))
         }
     }
@@ -822,21 +988,19 @@ impl PyBatch {
         field: StateField,
     ) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let n = {
-            let sim = self.lock(0);
-            let h = PySimulation::handle(&sim, rod)?;
+            let (sim, h) = self.rod(0, rod)?;
             sim.stepper().elements(h.0).map_err(control_err)?
         };
         let len = field.len(n);
-        let out = PyArray3::<f64>::zeros(py, [self.sims.len(), len, 3], false);
+        let out = PyArray3::<f64>::zeros(py, [self.copies, len, 3], false);
         {
             let mut rw = out.readwrite();
             let slice = rw
                 .as_slice_mut()
                 .map_err(|e| PyValueError::new_err(e.to_string()))?;
             for (c, chunk) in slice.chunks_exact_mut(3 * len).enumerate() {
-                self.lock(c)
-                    .read(RodHandle(rod), field, rows::<3>(chunk))
-                    .map_err(control_err)?;
+                let (sim, h) = self.rod(c, rod)?;
+                sim.read(h, field, rows::<3>(chunk)).map_err(control_err)?;
             }
         }
         Ok(out)
@@ -845,7 +1009,7 @@ impl PyBatch {
     /// Rows of a `(copies, 3)` array, or one row for every copy.
     fn per_copy(&self, name: &str, values: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
         let a = values.as_array();
-        let copies = self.sims.len();
+        let copies = self.copies;
         if a.ncols() != 3 || !(a.nrows() == copies || a.nrows() == 1) {
             return Err(ControlError::new_err(format!(
                 "{name}: expected shape ({copies}, 3) or (1, 3), got {:?}",
@@ -859,34 +1023,71 @@ impl PyBatch {
             })
             .collect())
     }
+
+    /// One entry per copy after `steps` steps of the one simulation of all copies: the error
+    /// stops every copy at the same step; the copy that diverged carries the message, the
+    /// others say where they stopped.
+    fn run_copies(&self, sim: &mut Simulation, rods: usize, steps: u64) -> Vec<Option<String>> {
+        let Err(e) = sim.run(steps) else {
+            return vec![None; self.copies];
+        };
+        let failed = match &e {
+            LibStepError::Diverged(d) => Some(d.rod / rods),
+            LibStepError::Backend(_) => None,
+        };
+        let step = sim.steps();
+        (0..self.copies)
+            .map(|c| {
+                Some(match failed {
+                    Some(f) if f == c => format!("copy {c}: {e}"),
+                    Some(f) => format!(
+                        "stopped at step {step} with copy {f}, which diverged (the copies are one simulation)"
+                    ),
+                    None => e.to_string(),
+                })
+            })
+            .collect()
+    }
 }
 
 #[pymethods]
 impl PyBatch {
     /// `copies` copies of the scene in the TOML file `path` (overrides and backend as for
-    /// `Simulation.from_file`).
+    /// `Simulation.from_file`). `layout` is `"simulations"` (one simulation per copy, stepped
+    /// on rayon's pool) or `"copies"` (one simulation holding all copies' rods, one dispatch on
+    /// the GPU); by default `"copies"` on the GPU and `"simulations"` on the CPU. With
+    /// `"copies"`, `copies` replaces a scene's own `[batch] copies`.
     #[staticmethod]
-    #[pyo3(signature = (path, copies, overrides=None, backend="cpu"))]
+    #[pyo3(signature = (path, copies, overrides=None, backend="cpu", *, layout=None))]
     fn from_file(
         path: PathBuf,
         copies: usize,
         overrides: Option<&Bound<'_, PyDict>>,
         backend: &str,
+        layout: Option<&str>,
     ) -> PyResult<Self> {
         let text = std::fs::read_to_string(&path)
             .map_err(|e| SceneError::new_err(format!("{}: {e}", path.display())))?;
-        Self::from_text(&path, &text, copies, overrides_of(overrides)?, backend)
+        Self::from_text(
+            &path,
+            &text,
+            copies,
+            overrides_of(overrides)?,
+            backend,
+            layout,
+        )
     }
 
     /// `copies` copies of a scene given as TOML text.
     #[staticmethod]
-    #[pyo3(signature = (text, copies, overrides=None, backend="cpu", name="scene.toml"))]
+    #[pyo3(signature = (text, copies, overrides=None, backend="cpu", name="scene.toml", *, layout=None))]
     fn from_toml(
         text: &str,
         copies: usize,
         overrides: Option<&Bound<'_, PyDict>>,
         backend: &str,
         name: &str,
+        layout: Option<&str>,
     ) -> PyResult<Self> {
         Self::from_text(
             Path::new(name),
@@ -894,12 +1095,13 @@ impl PyBatch {
             copies,
             overrides_of(overrides)?,
             backend,
+            layout,
         )
     }
 
     /// Number of copies.
     fn __len__(&self) -> usize {
-        self.sims.len()
+        self.copies
     }
 
     /// The scene's name.
@@ -914,27 +1116,39 @@ impl PyBatch {
         self.scene_steps
     }
 
+    /// How the copies are held: `"simulations"` or `"copies"`.
+    #[getter]
+    fn layout(&self) -> &'static str {
+        self.layout.name()
+    }
+
+    /// The backend: `"cpu"`, `"cpu-rayon"` or `"gpu"`.
+    #[getter]
+    fn backend(&self) -> &'static str {
+        self.sim(0).0.backend().name()
+    }
+
     /// Simulated time of each copy [s] (they differ only after a copy failed).
     #[getter]
     fn times(&self) -> Vec<f64> {
-        (0..self.sims.len()).map(|c| self.lock(c).time()).collect()
+        (0..self.copies).map(|c| self.sim(c).0.time()).collect()
     }
 
-    /// Takes `steps` steps (the scene's run length when `None`) in every copy, in parallel with
-    /// the GIL released. Returns one entry per copy: `None`, or the message of the error that
-    /// stopped that copy (a copy that failed stays where it failed; the others go on).
+    /// Takes `steps` steps (the scene's run length when `None`) in every copy, with the GIL
+    /// released. Returns one entry per copy: `None`, or the message of the error that stopped
+    /// that copy. A copy that failed stays where it failed; with one simulation per copy the
+    /// others go on, with one for all (`layout="copies"`) they stop at the same step, each
+    /// saying so.
     #[pyo3(signature = (steps=None))]
     fn run(&self, py: Python<'_>, steps: Option<u64>) -> Vec<Option<String>> {
         use rayon::prelude::*;
         let steps = steps.unwrap_or(self.scene_steps);
-        py.detach(|| {
-            self.sims
+        py.detach(|| match &self.layout {
+            Layout::Simulations(sims) => sims
                 .par_iter()
-                .map(|m| {
-                    let mut sim = m.lock().unwrap_or_else(|p| p.into_inner());
-                    sim.run(steps).err().map(|e| e.to_string())
-                })
-                .collect()
+                .map(|m| lock(m).run(steps).err().map(|e| e.to_string()))
+                .collect(),
+            Layout::Copies { sim, rods } => self.run_copies(&mut lock(sim), *rods, steps),
         })
     }
 
@@ -964,11 +1178,10 @@ impl PyBatch {
         let v = self.per_copy("velocity", &velocity)?;
         let w = match angular_velocity {
             Some(a) => self.per_copy("angular_velocity", &a)?,
-            None => vec![[0.0; 3]; self.sims.len()],
+            None => vec![[0.0; 3]; self.copies],
         };
         for (c, (v, w)) in v.into_iter().zip(w).enumerate() {
-            let mut sim = self.lock(c);
-            let h = PySimulation::handle(&sim, rod)?;
+            let (mut sim, h) = self.rod(c, rod)?;
             sim.set_end_velocity(h, end, v, w).map_err(control_err)?;
         }
         Ok(())
@@ -989,9 +1202,8 @@ impl PyBatch {
             )));
         }
         let (mut f, mut t) = (Vec::new(), Vec::new());
-        for c in 0..self.sims.len() {
-            let sim = self.lock(c);
-            let h = PySimulation::handle(&sim, rod)?;
+        for c in 0..self.copies {
+            let (sim, h) = self.rod(c, rod)?;
             let r = sim.end_reaction(h, end);
             f.push(r.map_or(vec![f64::NAN; 3], |r| r.force.to_vec()));
             t.push(r.map_or(vec![f64::NAN; 3], |r| r.torque.to_vec()));
@@ -1009,9 +1221,8 @@ impl PyBatch {
     fn wall_contact<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<WallContact<'py>> {
         let (mut forces, mut escaped) = (Vec::new(), Vec::new());
         let mut samples = Vec::new();
-        for c in 0..self.sims.len() {
-            let sim = self.lock(c);
-            let h = PySimulation::handle(&sim, rod)?;
+        for c in 0..self.copies {
+            let (sim, h) = self.rod(c, rod)?;
             sim.contacts(h, &mut samples).map_err(control_err)?;
             forces.push(
                 samples
@@ -1033,17 +1244,27 @@ impl PyBatch {
 
     /// The generated vessel all copies share (as `Simulation.vessel`).
     fn vessel<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        vessel_dict(py, &self.lock(0))
+        vessel_dict(py, &self.sim(0).0)
     }
 
-    /// Copy `copy` as its own state snapshot (to inspect or restore one copy).
+    /// Copy `copy` as its own state snapshot (to inspect or restore one copy). With one
+    /// simulation per copy it is the copy's whole simulation (restoring repeats the steps bit
+    /// for bit); with one for all (`layout="copies"`) it holds the copy's rods' points,
+    /// velocities, frames and end conditions, and restoring writes them back while the shared
+    /// clock and the contact and reaction histories go on: the steps that follow are close to
+    /// the original ones, not equal bit for bit.
     fn snapshot(&self, copy: usize) -> PyResult<PySnapshot> {
-        PySnapshot::of(&mut *self.copy(copy)?)
+        let (mut sim, rods) = self.copy(copy)?;
+        match self.layout {
+            Layout::Simulations(_) => PySnapshot::of(&mut sim),
+            Layout::Copies { .. } => PySnapshot::of_rods(&sim, rods),
+        }
     }
 
     /// Returns copy `copy` to a snapshot taken of any copy of this batch.
     fn restore(&self, copy: usize, snapshot: &PySnapshot) -> PyResult<()> {
-        snapshot.restore_into(&mut *self.copy(copy)?)
+        let (mut sim, rods) = self.copy(copy)?;
+        snapshot.restore_into(&mut sim, rods)
     }
 }
 

@@ -2,6 +2,7 @@
 clamped cantilever, the momentum balance of its clamp, bit-for-bit replay from a snapshot, and
 the library's own error messages surfacing as exceptions."""
 
+import os
 import pathlib
 import threading
 
@@ -242,3 +243,77 @@ def test_a_batch_steps_its_copies_as_separate_simulations_would():
     assert np.array_equal(batch.positions()[3], batch.positions()[0])
     with pytest.raises(cosserat.ControlError, match="expected shape"):
         batch.set_end_velocity(0, np.zeros((3, 3)))
+
+
+def pushed_batch(layout, backend="cpu", copies=4):
+    """A batch of pendulums whose held ends are pushed at a different speed in every copy, run
+    for 500 steps."""
+    batch = cosserat.Batch.from_file(PENDULUM, copies, {"rod.0.elements": 20}, backend=backend, layout=layout)
+    pushes = np.array([[0.0, 0.02 * c, 0.01 * c] for c in range(copies)])
+    batch.set_end_velocity(0, pushes)
+    assert batch.run(500) == [None] * copies
+    return batch
+
+
+def test_a_batch_of_one_simulation_steps_its_copies_as_separate_simulations_would():
+    copies = pushed_batch("copies")
+    separate = pushed_batch("simulations")
+    assert (copies.layout, separate.layout) == ("copies", "simulations")
+    # Not a trivial equality: the copies went different ways.
+    p = copies.positions()
+    assert np.abs(p[3] - p[0]).max() > 1e-4
+    assert np.array_equal(p, separate.positions())
+    assert np.array_equal(copies.velocities(), separate.velocities())
+    assert np.array_equal(copies.end_reactions(0)[0], separate.end_reactions(0)[0])
+    assert copies.times == separate.times
+    # A copy's snapshot restores another copy; the other copies keep their state.
+    before = copies.positions()
+    copies.restore(3, copies.snapshot(0))
+    after = copies.positions()
+    assert np.array_equal(after[3], before[0])
+    assert np.array_equal(after[:3], before[:3])
+    # The restored copy then moves as copy 0 does: the same push, from the same points,
+    # velocities and frames (not bit for bit: the solver's own memory of the rod is not in a
+    # copy's snapshot).
+    copies.run(100)
+    p = copies.positions()
+    np.testing.assert_allclose(p[3], p[0], rtol=0, atol=1e-8)
+    with pytest.raises(cosserat.ControlError, match="no copy 4: the batch has copies 0..4"):
+        copies.snapshot(4)
+    with pytest.raises(cosserat.ControlError, match="no rod 1: each copy has rods 0..1"):
+        copies.positions(1)
+    with pytest.raises(cosserat.ControlError, match="holds a whole simulation"):
+        copies.restore(0, separate.snapshot(0))
+    with pytest.raises(cosserat.SceneError, match="layout = \"rows\""):
+        cosserat.Batch.from_file(PENDULUM, 2, layout="rows")
+
+
+def test_a_copy_that_diverges_stops_a_batch_of_one_simulation_and_says_which():
+    batch = cosserat.Batch.from_file(PENDULUM, 3, {"rod.0.elements": 20}, layout="copies")
+    batch.set_end_velocity(0, np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0e4, 0.0, 0.0]]))
+    errors = batch.run(2000)
+    assert errors[2] is not None and errors[2].startswith("copy 2: ")
+    assert all(e is not None and "with copy 2, which diverged" in e for e in errors[:2])
+
+
+def gpu_batch_or_skip(layout):
+    try:
+        return pushed_batch(layout, backend="gpu")
+    except cosserat.SceneError as e:
+        if "no GPU adapter" not in str(e):
+            raise
+        if os.environ.get("COSSERAT_REQUIRE_GPU") == "1":
+            pytest.fail(f"COSSERAT_REQUIRE_GPU=1 but there is no adapter: {e}")
+        pytest.skip(f"no GPU adapter: {e}")
+
+
+def test_a_gpu_batch_is_one_simulation_whose_copies_match_separate_ones():
+    copies = gpu_batch_or_skip(None)
+    assert copies.layout == "copies" and copies.backend == "gpu"
+    separate = gpu_batch_or_skip("simulations")
+    p, q = copies.positions(), separate.positions()
+    assert np.abs(p[3] - p[0]).max() > 1e-4
+    # f32 kernels: the same arithmetic per copy, dispatched together or apart.
+    np.testing.assert_allclose(p, q, rtol=0, atol=1e-5)
+    copies.restore(1, copies.snapshot(2))
+    assert np.allclose(copies.positions()[1], copies.positions()[2], rtol=0, atol=1e-6)
