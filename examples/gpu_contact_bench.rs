@@ -14,7 +14,8 @@
 //! [--batch-parts] [--gpus 1,2,4] [--batches-only] [--json FILE]`; `--batch-parts` also times
 //! the batches without the vessel and without either (what each part costs when the GPU is
 //! full); `--gpus` times every batch spread over each number of GPUs (`[batch] gpus`), for the
-//! scaling table; `--chunk K` steps the batches in calls of `K` steps (default 500: each call
+//! scaling table; `--catheter` also times `scenes/catheter-guidewire.toml` (the bound pair, v0,
+//! v1 and v2, and the whole second of v2); `--chunk K` steps the batches in calls of `K` steps (default 500: each call
 //! reads every copy back and checks it); `--batches-only` leaves out the single copy.
 
 use cosserat::scene::parse_scene;
@@ -23,6 +24,45 @@ use std::path::Path;
 use std::time::Instant;
 
 const SCENE: &str = include_str!("../scenes/guidewire-insertion.toml");
+const CATHETER: &str = include_str!("../scenes/catheter-guidewire.toml");
+
+/// The catheter and its guidewire (paper section 3.4) on the GPU: each binding variant over
+/// 20 000 steps from the start, and v2 over the scene's whole second.
+fn catheter_section(quick: bool) -> serde_json::Value {
+    let build = |variant: &str| {
+        let overrides = [("binding.0.variant".to_string(), format!("\"{variant}\""))];
+        let (b, _, _) = parse_scene(Path::new("catheter-guidewire.toml"), CATHETER, &overrides)
+            .unwrap_or_else(|e| panic!("{e}"));
+        b.backend(Backend::Gpu)
+            .build()
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let mut out = serde_json::Map::new();
+    for variant in ["none", "one-way", "two-way"] {
+        let mut sim = build(variant);
+        let steps = if quick { 200 } else { 20_000 };
+        let per = time_steps(&mut sim, steps, 10_000.min(steps));
+        println!("catheter and guidewire, {variant}: {per:.2} µs/step");
+        out.insert(variant.into(), per.into());
+    }
+    let mut sim = build("two-way");
+    let full: u64 = if quick { 2_000 } else { 200_000 };
+    let per = run_timed(&mut sim, full, 10_000);
+    let report = sim.contact_report().expect("a vessel");
+    let tips: Vec<[f64; 3]> = (0..2)
+        .map(|r| *sim.positions(RodHandle(r)).last().expect("points"))
+        .collect();
+    println!(
+        "catheter and guidewire, two-way, {full} steps: {per:.2} µs/step, escaped {}, max penetration {:.3e} m, tips {tips:?}",
+        report.escaped_points, report.max_penetration
+    );
+    out.insert(
+        "two_way_whole".into(),
+        serde_json::json!({"steps": full, "us_per_step": per, "escaped_points": report.escaped_points,
+            "max_penetration_m": report.max_penetration, "tips": tips}),
+    );
+    out.into()
+}
 
 /// The scene with `overrides`, with or without contact with its vessel and its introducer.
 fn build(overrides: &[(&str, String)], vessel: bool, guide: bool) -> Simulation {
@@ -53,6 +93,11 @@ fn build(overrides: &[(&str, String)], vessel: bool, guide: bool) -> Simulation 
 /// Wall time per step [µs] of `steps` steps taken in calls of `chunk`, after a warm-up call.
 fn time_steps(sim: &mut Simulation, steps: u64, chunk: u64) -> f64 {
     sim.run(chunk.min(steps)).expect("warm-up");
+    run_timed(sim, steps, chunk)
+}
+
+/// Wall time per step [µs] of `steps` steps taken in calls of `chunk`.
+fn run_timed(sim: &mut Simulation, steps: u64, chunk: u64) -> f64 {
     let t = Instant::now();
     let mut left = steps;
     while left > 0 {
@@ -83,6 +128,7 @@ fn main() {
         .map(|s| s.split(',').map(|c| c.parse().expect("gpus")).collect())
         .unwrap_or_else(|| vec![1]);
     let batches_only = args.iter().any(|a| a == "--batches-only");
+    let catheter = args.iter().any(|a| a == "--catheter");
     let chunk: u64 = arg("--chunk").map_or(500, |c| c.parse().expect("chunk"));
     let steps: u64 = if quick { 200 } else { 20_000 };
     let mut json = serde_json::Map::new();
@@ -121,14 +167,7 @@ fn main() {
         } else {
             (2.45f64 / 3.5e-6).ceil() as u64
         };
-        let t = Instant::now();
-        let mut left = full;
-        while left > 0 {
-            let k = left.min(10_000);
-            sim.run(k).unwrap_or_else(|e| panic!("{e}"));
-            left -= k;
-        }
-        let per = t.elapsed().as_secs_f64() * 1e6 / full as f64;
+        let per = run_timed(&mut sim, full, 10_000);
         let report = sim.contact_report().expect("a vessel");
         let tip = *sim.positions(RodHandle(0)).last().expect("points");
         let st = sim.stepper().collision_stats(0).expect("stats");
@@ -163,6 +202,10 @@ fn main() {
         let tick = median(ticks);
         println!("one tick (a step and the tip): {tick:.1} µs median");
         json.insert("tick_us".into(), tick.into());
+    }
+
+    if catheter {
+        json.insert("catheter_guidewire".into(), catheter_section(quick));
     }
 
     // Batches.

@@ -585,10 +585,18 @@ fn the_gpu_backend_agrees_with_the_cpu() {
         serde_json::from_slice(&cpu.stdout).unwrap(),
     );
     assert_eq!(g["backend"], "gpu");
-    // The pinned end's force: computed by the CPU backend, not by the GPU kernels, which
-    // report none rather than a zero.
-    assert!(c["max_reaction_force"].as_f64().unwrap() > 0.0, "{c}");
-    assert!(g.get("max_reaction_force").is_none(), "{g}");
+    // The pinned end's force, computed by both (the GPU in its kernels). Its vertical part
+    // agrees to 0.2 %; the rope's tension 8 ms after release is a small difference of large
+    // impulses that f32 rounding moves by up to 15 % (measured at step 400: f64 -0.0112 N, the
+    // CPU in f32 -0.0113, the GPU -0.0097, the GPU with the CPU's impulse formula -0.0121).
+    let force = |v: &serde_json::Value, k: usize| v["reactions"][0]["force"][k].as_f64().unwrap();
+    let (zc, zg) = (force(&c, 2), force(&g, 2));
+    assert!(
+        zc > 0.0 && (zg - zc).abs() < 0.01 * zc,
+        "gpu {zg} N, cpu {zc} N"
+    );
+    let (xc, xg) = (force(&c, 0), force(&g, 0));
+    assert!((xg - xc).abs() < 0.2 * xc.abs(), "gpu {xg} N, cpu {xc} N");
     let tip = |v: &serde_json::Value| -> Vec<f64> {
         v["tip"]
             .as_array()

@@ -52,11 +52,7 @@ impl BindingSpec {
     /// Checks this spec (the `k`-th) against `rods` and returns its capture distance [m]: both
     /// rods exist and differ, and the capture distance (the outer rod's radius by default) is
     /// finite and positive.
-    pub(crate) fn checked_capture<T: Real>(
-        &self,
-        k: usize,
-        rods: &[CpuRod<T>],
-    ) -> Result<f64, String> {
+    pub fn checked_capture<T: Real>(&self, k: usize, rods: &[CpuRod<T>]) -> Result<f64, String> {
         let n = rods.len();
         if self.inner >= n || self.outer >= n {
             return Err(format!(

@@ -67,6 +67,7 @@ fn pendulum(n: usize, angle: f64) -> GpuRodInput {
         loads: vec![],
         wall: None,
         guide: None,
+        binding: None,
     }
 }
 

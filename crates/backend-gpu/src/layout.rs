@@ -169,7 +169,20 @@ gpu_struct! {
         left: u32,
         right: u32,
         drag: f32,
-        pad: u32,
+        /// Bindings: the item's first thread in its workgroup (0 otherwise).
+        lane0: u32,
+    }
+}
+
+gpu_struct! {
+    /// An item's part in a binding (`couplings`, binding 28, kernels with `BIND`): the outer
+    /// rod's item (inner rods; [`NONE`] otherwise), its role (bit 0 inner, bit 1 outer, bit 2
+    /// two-way), the capture distance and the offset removed per step.
+    struct CouplingG as "Coupling" {
+        outer: u32,
+        role: u32,
+        capture: f32,
+        correction: f32,
     }
 }
 
@@ -231,7 +244,7 @@ gpu_struct! {
 
 /// Every struct the host uploads, for the layout test.
 #[cfg(test)]
-pub(crate) const SHARED: [GpuLayout; 7] = [
+pub(crate) const SHARED: [GpuLayout; 8] = [
     ParamsU::LAYOUT,
     ChunkG::LAYOUT,
     SlotG::LAYOUT,
@@ -239,6 +252,7 @@ pub(crate) const SHARED: [GpuLayout; 7] = [
     DriveG::LAYOUT,
     ClampG::LAYOUT,
     TouchG::LAYOUT,
+    CouplingG::LAYOUT,
 ];
 
 #[cfg(test)]
@@ -343,6 +357,7 @@ mod tests {
                 vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC", "REACT"],
             ),
             (1, vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "CLAMP"]),
+            (1, vec!["MESH", "BIND", "DRAG", "FAST", "REGC", "CLAMP"]),
         ] {
             let cfg = KernelConfig {
                 threads: 64,

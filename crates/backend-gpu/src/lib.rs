@@ -75,6 +75,25 @@ pub struct GpuRodInput {
     pub wall: Option<GpuWall>,
     /// A straight introducer the rod is fed through from its first point.
     pub guide: Option<GpuGuide>,
+    /// This rod is bound inside another one (a guidewire in a catheter).
+    pub binding: Option<GpuBinding>,
+}
+
+/// A binding of the rod it belongs to (the inner rod, a guidewire) to the centreline of an outer
+/// rod (a catheter): the CPU's `BindingSet` (`cosserat_constraints::binding`). Each inner point
+/// inside the outer rod is held on its centreline across it, free to slide along it. The two
+/// rods share one workgroup (at most four rods coupled together).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuBinding {
+    /// Index of the outer rod.
+    pub outer: usize,
+    /// Whether the outer rod takes its share of the impulses (v2); `false`: it drives the inner
+    /// rod and is not affected by it (v1).
+    pub two_way: bool,
+    /// Inner points farther than this from the outer centreline are free [m].
+    pub capture: f32,
+    /// Fraction of a bound point's offset from the centreline removed per step.
+    pub offset_correction: f32,
 }
 
 /// A rod's contact with a static triangle mesh (a vessel's lumen, or a solid's outside): the

@@ -9,7 +9,7 @@
 //! the only other source of a [`Tuning`].
 
 use crate::device::AdapterSummary;
-use crate::layout::{ItemG, NONE};
+use crate::layout::{CouplingG, ItemG, NONE};
 use crate::shader::KernelConfig;
 use crate::{EndCondition, GpuError, GpuOptions, GpuRodInput, KernelPath, SolverSettings};
 
@@ -91,6 +91,10 @@ pub(crate) struct Plan {
     pub(crate) items: Vec<ItemG>,
     /// Workgroups per dispatch (the items, or fewer with several rods per workgroup).
     pub(crate) workgroups: u32,
+    /// Bindings: per workgroup its first item and number of items, and per item its part in a
+    /// binding (both empty without bindings).
+    pub(crate) groups: Vec<[u32; 2]>,
+    pub(crate) couplings: Vec<CouplingG>,
     /// Most steps one dispatch of a persistent path runs.
     pub(crate) steps_per_dispatch: u32,
 }
@@ -160,7 +164,18 @@ impl Plan {
         if guide {
             flags.push("GUIDE");
         }
-        let contact = mesh || guide;
+        // Bindings: the rods they couple share a workgroup.
+        let bind = rods.iter().any(|r| r.binding.is_some());
+        if bind {
+            if extensible {
+                return Err(GpuError::InvalidInput(
+                    "bindings run on the GPU with inextensible rods only".into(),
+                ));
+            }
+            flags.push("BIND");
+        }
+        let coupled = coupled_groups(rods)?;
+        let contact = mesh || guide || bind;
         let iterations = if extensible {
             0
         } else {
@@ -185,8 +200,28 @@ impl Plan {
             .map(|r| r.state.elements() as u32 + 1)
             .max()
             .unwrap_or(2);
-        let single_threads = max_threads.min(round_up(points.div_ceil(2), 32));
-        let single_ept = round_up(points.div_ceil(single_threads), 2).max(2);
+        let (single_threads, single_ept) = if bind {
+            // The fewest points per thread with which every group's rods fit one workgroup.
+            let lanes = |ept: u32| -> u32 {
+                coupled
+                    .iter()
+                    .map(|g| {
+                        g.iter()
+                            .map(|&r| (rods[r].state.elements() as u32 + 1).div_ceil(ept))
+                            .sum::<u32>()
+                    })
+                    .max()
+                    .unwrap_or(1)
+            };
+            let ept = (1..=32)
+                .map(|k| 2 * k)
+                .find(|&e| lanes(e) <= max_threads)
+                .unwrap_or(64);
+            (round_up(lanes(ept), 32).min(max_threads), ept)
+        } else {
+            let threads = max_threads.min(round_up(points.div_ceil(2), 32));
+            (threads, round_up(points.div_ceil(threads), 2).max(2))
+        };
         // The subgroup layout: every rod on one subgroup, a few rods per workgroup, no barriers.
         let subgroup = adapter
             .subgroup_size
@@ -264,7 +299,7 @@ impl Plan {
                         left: if c > 0 { first + c - 1 } else { NONE },
                         right: if c + 1 < count { first + c + 1 } else { NONE },
                         drag: rod.params.drag,
-                        pad: 0,
+                        lane0: 0,
                     });
                 }
                 base += n + 1;
@@ -306,7 +341,8 @@ impl Plan {
         if contact && path != KernelPath::SingleWorkgroup {
             return Err(GpuError::PathUnavailable {
                 path,
-                reason: "mesh contact and guides run on the single-workgroup path only".into(),
+                reason: "mesh contact, guides and bindings run on the single-workgroup path only"
+                    .into(),
             });
         }
         if path == KernelPath::SingleWorkgroup && single_ept > 64 {
@@ -324,33 +360,54 @@ impl Plan {
         }
         let mut group = 1;
         let mut workgroups = None;
+        let mut groups = Vec::new();
+        let mut couplings = Vec::new();
         let mut xs_used = 1;
         let (threads, ept, items, halo_used) = match path {
             KernelPath::SingleWorkgroup => {
-                let mut base = 0u32;
-                let items = rods
+                let bases: Vec<u32> = rods
                     .iter()
-                    .enumerate()
-                    .map(|(r, rod)| {
-                        let n = rod.state.elements() as u32;
-                        let it = ItemG {
-                            rod: r as u32,
-                            base,
-                            n,
-                            flags: item_flags(rod),
-                            w0: 0,
-                            w1: n + 1,
-                            o0: 0,
-                            o1: n + 1,
-                            left: NONE,
-                            right: NONE,
-                            drag: rod.params.drag,
-                            pad: 0,
-                        };
-                        base += n + 1;
-                        it
+                    .scan(0u32, |b, rod| {
+                        let base = *b;
+                        *b += rod.state.elements() as u32 + 1;
+                        Some(base)
                     })
-                    .collect::<Vec<_>>();
+                    .collect();
+                let item = |r: usize, lane0: u32| {
+                    let rod = &rods[r];
+                    let n = rod.state.elements() as u32;
+                    ItemG {
+                        rod: r as u32,
+                        base: bases[r],
+                        n,
+                        flags: item_flags(rod),
+                        w0: 0,
+                        w1: n + 1,
+                        o0: 0,
+                        o1: n + 1,
+                        left: NONE,
+                        right: NONE,
+                        drag: rod.params.drag,
+                        lane0,
+                    }
+                };
+                let items = if bind {
+                    // The items group by group, each rod on its own run of threads.
+                    let mut items = Vec::with_capacity(rods.len());
+                    for g in &coupled {
+                        groups.push([items.len() as u32, g.len() as u32]);
+                        let mut lane = 0;
+                        for &r in g {
+                            items.push(item(r, lane));
+                            lane += (rods[r].state.elements() as u32 + 1).div_ceil(single_ept);
+                        }
+                    }
+                    couplings = coupling_of_items(rods, &items);
+                    workgroups = Some(groups.len() as u32);
+                    items
+                } else {
+                    (0..rods.len()).map(|r| item(r, 0)).collect::<Vec<_>>()
+                };
                 match subgroup {
                     Some((sg, ept)) => {
                         let cap = limits.max_compute_invocations_per_workgroup.min(1024) / sg;
@@ -427,7 +484,9 @@ impl Plan {
             }
             // A tree walk per point (nodes and triangles visited), counted generously for the
             // small meshes of software runs.
-            + if mesh { ept * 256 } else { 0 };
+            + if mesh { ept * 256 } else { 0 }
+            // A binding's walk along the outer rod and its compare-exchange loops.
+            + if bind { ept * 64 + iterations * ept * 8 } else { 0 };
         let mut spd = options.max_steps_per_dispatch.max(1);
         if adapter.software {
             spd = spd.min((SOFTWARE_LOOP_BUDGET / loops_per_step).max(1));
@@ -437,6 +496,8 @@ impl Plan {
             cfg,
             workgroups: workgroups.unwrap_or(items.len() as u32),
             items,
+            groups,
+            couplings,
             steps_per_dispatch: spd,
         })
     }
@@ -471,6 +532,74 @@ impl Plan {
             c.flags.join(", ")
         )
     }
+}
+
+/// The rods bindings couple, as groups (connected components, each in rod order, ordered by
+/// their first rod); every rod is in one, alone when unbound. Fails for a binding to a rod
+/// that does not exist, to the rod itself, or groups of more than four rods (one workgroup's
+/// `GROUP_MAX`).
+pub(crate) fn coupled_groups(rods: &[GpuRodInput]) -> Result<Vec<Vec<usize>>, GpuError> {
+    let mut root: Vec<usize> = (0..rods.len()).collect();
+    fn find(root: &mut [usize], mut r: usize) -> usize {
+        while root[r] != r {
+            root[r] = root[root[r]];
+            r = root[r];
+        }
+        r
+    }
+    for (inner, rod) in rods.iter().enumerate() {
+        if let Some(b) = &rod.binding {
+            if b.outer >= rods.len() || b.outer == inner {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {inner}: bound to rod {} (the simulation has rods 0..{}, and a rod cannot be bound to itself)",
+                    b.outer,
+                    rods.len()
+                )));
+            }
+            let (a, o) = (find(&mut root, inner), find(&mut root, b.outer));
+            root[a.max(o)] = a.min(o);
+        }
+    }
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let mut group_of = vec![usize::MAX; rods.len()];
+    for r in 0..rods.len() {
+        let top = find(&mut root, r);
+        if group_of[top] == usize::MAX {
+            group_of[top] = groups.len();
+            groups.push(Vec::new());
+        }
+        groups[group_of[top]].push(r);
+    }
+    if let Some(g) = groups.iter().find(|g| g.len() > 4) {
+        return Err(GpuError::InvalidInput(format!(
+            "rods {g:?} are bound together: the GPU binds at most 4 rods in one group"
+        )));
+    }
+    Ok(groups)
+}
+
+/// Each item's part in a binding ([`CouplingG`]), with the outer rod named by its item.
+fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG]) -> Vec<CouplingG> {
+    let item_of = |rod: usize| items.iter().position(|it| it.rod as usize == rod);
+    let mut out = vec![
+        CouplingG {
+            outer: NONE,
+            ..CouplingG::default()
+        };
+        items.len()
+    ];
+    for (k, it) in items.iter().enumerate() {
+        if let Some(b) = &rods[it.rod as usize].binding
+            && let Some(o) = item_of(b.outer)
+        {
+            out[k].outer = o as u32;
+            out[k].role |= 1 | if b.two_way { 4 } else { 0 };
+            out[k].capture = b.capture;
+            out[k].correction = b.offset_correction;
+            out[o].role |= 2;
+        }
+    }
+    out
 }
 
 /// An item's end bits ([`ItemG::flags`]): which ends hold their point and which are clamped.
@@ -514,6 +643,7 @@ pub(crate) mod fixtures {
                     loads: vec![],
                     wall: None,
                     guide: None,
+                    binding: None,
                 }
             })
             .collect()

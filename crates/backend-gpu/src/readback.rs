@@ -35,6 +35,8 @@ enum Part {
     /// Wall contact: per-rod statistics and per-slot contacts.
     WallStats,
     Contacts,
+    /// Bindings: each inner point's last outer segment.
+    BoundSegments,
 }
 
 /// A position read in flight.
@@ -311,6 +313,12 @@ impl GpuSimulation {
                 Part::AngularVelocities => &st.omg,
                 Part::Status => &self.status_buf,
                 Part::Clamps => &self.clamps_buf,
+                Part::BoundSegments => {
+                    let Some(b) = self.bind.as_ref() else {
+                        unreachable!("bound segments are read only with binding buffers")
+                    };
+                    &b.segments
+                }
                 Part::WallStats | Part::Contacts => {
                     let Some(w) = self.wall.as_ref() else {
                         unreachable!("wall parts are read only with wall buffers")
@@ -371,14 +379,18 @@ impl GpuSimulation {
     /// The parts of [`Self::read_whole_state`] and their sizes.
     fn whole_state_parts(&self) -> Vec<(Part, u64)> {
         let bytes = 16 * self.slots;
-        vec![
+        let mut parts = vec![
             (Part::Positions, bytes),
             (Part::Velocities, bytes),
             (Part::Frames, bytes),
             (Part::AngularVelocities, bytes),
             (Part::Status, self.status_bytes() as u64),
             (Part::Clamps, self.clamp_bytes() as u64),
-        ]
+        ];
+        if self.bind.is_some() {
+            parts.push((Part::BoundSegments, 4 * self.slots));
+        }
+        parts
     }
 
     /// The full state of every rod (blocking, one round trip). Fails like
@@ -410,7 +422,7 @@ impl GpuSimulation {
         let b = (16 * self.slots) as usize;
         let clamps_at = 4 * b + self.status_bytes();
         self.status_error(bytemuck::cast_slice(&all[4 * b..clamps_at]))?;
-        let clamps: Vec<ClampG> = all[clamps_at..]
+        let clamps: Vec<ClampG> = all[clamps_at..clamps_at + self.clamp_bytes()]
             .chunks_exact(std::mem::size_of::<ClampG>())
             .map(bytemuck::pod_read_unaligned)
             .collect();
@@ -496,7 +508,13 @@ impl GpuSimulation {
         self.forget_clearances();
         let bytes = (16 * self.slots) as usize;
         let clamps_at = 4 * bytes + self.status_bytes();
-        if snapshot.state.len() != clamps_at + self.clamp_bytes()
+        let bound_at = clamps_at + self.clamp_bytes();
+        let bound_bytes = if self.bind.is_some() {
+            4 * self.slots as usize
+        } else {
+            0
+        };
+        if snapshot.state.len() != bound_at + bound_bytes
             || snapshot.drives.len() != self.drives.len()
         {
             return Err(GpuError::InvalidInput(
@@ -514,9 +532,14 @@ impl GpuSimulation {
             .write_buffer(&self.status_buf, 0, &snapshot.state[4 * bytes..clamps_at]);
         self.gpu
             .queue
-            .write_buffer(&self.clamps_buf, 0, &snapshot.state[clamps_at..]);
+            .write_buffer(&self.clamps_buf, 0, &snapshot.state[clamps_at..bound_at]);
+        if let Some(b) = &self.bind {
+            self.gpu
+                .queue
+                .write_buffer(&b.segments, 0, &snapshot.state[bound_at..]);
+        }
         // The held ends' reactions read back are those of the snapshot again.
-        self.ends_read = snapshot.state[clamps_at..]
+        self.ends_read = snapshot.state[clamps_at..bound_at]
             .chunks_exact(std::mem::size_of::<ClampG>())
             .map(bytemuck::pod_read_unaligned)
             .collect();

@@ -24,7 +24,7 @@ pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wg
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 13] = [
+pub(crate) const FLAGS: [&str; 14] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -38,6 +38,7 @@ pub(crate) const FLAGS: [&str; 13] = [
     "SHFL",
     "MESH",
     "GUIDE",
+    "BIND",
 ];
 
 /// Flags of `rod_step.wgsl` chosen by [`crate::KernelVariant`], each validated with every scene
@@ -463,8 +464,11 @@ mod tests {
                     || (has("GRID") && has("PERSTEP"))
                     || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
                     || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
-                    || ((has("MESH") || has("GUIDE"))
+                    || ((has("MESH") || has("GUIDE") || has("BIND"))
                         && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
+                    || (has("BIND") && has("EXTENSIBLE"))
+                    // The composer adds REACT to CLAMP.
+                    || (has("CLAMP") && !has("REACT"))
                 {
                     continue;
                 }

@@ -9,7 +9,7 @@
 //! through `readback.rs`.
 
 use crate::device::{AdapterSummary, Gpu};
-use crate::layout::{ChunkG, ClampG, DriveG, ParamsU, SlotG, TABLE_CAPACITY, TouchG};
+use crate::layout::{ChunkG, ClampG, DriveG, NONE, ParamsU, SlotG, TABLE_CAPACITY, TouchG};
 use crate::plan::{Plan, Tuning};
 use crate::readback::Readback;
 use crate::{
@@ -87,6 +87,8 @@ pub struct GpuSimulation {
     pub(crate) wall: Option<WallBuffers>,
     /// The wall's statistics and contacts as last read with the state.
     pub(crate) wall_read: Option<WallRead>,
+    /// Bindings' buffers (kernels with `BIND`).
+    pub(crate) bind: Option<BindBuffers>,
     /// The reaction filter's weights for one step (`ParamsU::rf_keep` and the next two).
     reaction_filter: [f32; 3],
     /// The held ends as last read with the state (their reactions), two per rod.
@@ -113,6 +115,21 @@ pub(crate) struct WallBuffers {
     pub(crate) near: [wgpu::Buffer; 4],
     /// Which rods touch the wall.
     pub(crate) touching: Vec<bool>,
+}
+
+/// The buffers of a kernel with bindings (see `shaders/rod_step.wgsl`, `BIND`).
+pub(crate) struct BindBuffers {
+    /// Per workgroup, its first item and number of items.
+    groups: wgpu::Buffer,
+    /// Per item, its part in a binding ([`crate::layout::CouplingG`]).
+    couplings: wgpu::Buffer,
+    /// Per slot, two `vec4`: an outer rod's published point and velocity.
+    exchange: wgpu::Buffer,
+    /// Per slot, four words: impulses handed to an outer rod's point in a sweep.
+    impulses: wgpu::Buffer,
+    /// Per slot of an inner rod, the outer segment its point was last bound to: state (a
+    /// snapshot carries it, so that a restored run finds the same segments).
+    pub(crate) segments: wgpu::Buffer,
 }
 
 /// Statistics words per rod of a kernel with wall contact.
@@ -469,6 +486,21 @@ impl GpuSimulation {
             states.push(make_state("b"));
         }
         let clamps_buf = init("clamps", bytemuck::cast_slice(&clamps), storage);
+        // Bindings: the groups, each item's part, and the exchange between the rods of a group.
+        let bind_bufs = plan.cfg.flags.contains(&"BIND").then(|| {
+            let plain = wgpu::BufferUsages::STORAGE;
+            BindBuffers {
+                groups: init("groups", bytemuck::cast_slice(&plan.groups), plain),
+                couplings: init("couplings", bytemuck::cast_slice(&plan.couplings), plain),
+                exchange: init("binding exchange", &vec![0u8; 32 * slots_n], plain),
+                impulses: init("binding impulses", &vec![0u8; 16 * slots_n], plain),
+                segments: init(
+                    "bound segments",
+                    bytemuck::cast_slice(&vec![NONE; slots_n]),
+                    storage,
+                ),
+            }
+        });
         let touch_buf = has_touch.then(|| {
             init(
                 "touch",
@@ -602,6 +634,9 @@ impl GpuSimulation {
         }
         if has_touch {
             entries.push(ro(20));
+        }
+        if bind_bufs.is_some() {
+            entries.extend([ro(27), ro(28), rw(29), rw(30), rw(31)]);
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -743,6 +778,20 @@ impl GpuSimulation {
                     resource: whole(t),
                 });
             }
+            if let Some(b) = &bind_bufs {
+                for (binding, buf) in [
+                    (27, &b.groups),
+                    (28, &b.couplings),
+                    (29, &b.exchange),
+                    (30, &b.impulses),
+                    (31, &b.segments),
+                ] {
+                    e.push(wgpu::BindGroupEntry {
+                        binding,
+                        resource: whole(buf),
+                    });
+                }
+            }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rod step"),
                 layout: &bgl,
@@ -815,6 +864,7 @@ impl GpuSimulation {
             timestamp_period_ns,
             wall: wall_bufs.map(|(_, _, w)| w),
             wall_read: None,
+            bind: bind_bufs,
             reaction_filter: {
                 let (keep, old, new) = cosserat_problem::report::reaction_filter_weights(
                     options.reaction_cutoff_hz,

@@ -121,9 +121,10 @@ impl GpuStepper {
         })
     }
 
-    /// Splits `rods` into `parts` contiguous shares balanced by their points and builds each
-    /// share's simulation with `make` (in order). [`Self::on_gpus`] gives each share a device of
-    /// its own; a test can give two shares two devices on one adapter.
+    /// Splits `rods` into at most `parts` contiguous shares balanced by their points, never
+    /// between rods a binding couples, and builds each share's simulation with `make` (in
+    /// order). [`Self::on_gpus`] gives each share a device of its own; a test can give two
+    /// shares two devices on one adapter.
     pub fn split(
         rods: Vec<GpuRodInput>,
         settings: &SolverSettings<f32>,
@@ -131,7 +132,24 @@ impl GpuStepper {
         make: impl FnMut(Vec<GpuRodInput>) -> Result<GpuSimulation, GpuError>,
     ) -> Result<Self, GpuError> {
         let points: Vec<usize> = rods.iter().map(|r| r.state.positions.len()).collect();
-        let starts = shares(&points, parts);
+        // A share may start at rod i when no group of bound rods has members on both sides.
+        let mut cuttable = vec![true; rods.len()];
+        for g in crate::plan::coupled_groups(&rods)? {
+            let (lo, hi) = (g[0], g[g.len() - 1]);
+            for c in &mut cuttable[lo + 1..=hi] {
+                *c = false;
+            }
+        }
+        let starts = shares(&points, parts, &cuttable);
+        // Each share names its outer rods by their index in the share.
+        let mut rods = rods;
+        for w in starts.windows(2) {
+            for rod in &mut rods[w[0]..w[1]] {
+                if let Some(b) = &mut rod.binding {
+                    b.outer -= w[0];
+                }
+            }
+        }
         Self::around(rods, settings, starts, make)
     }
 
@@ -162,10 +180,14 @@ impl GpuStepper {
         })
     }
 
-    /// What the GPU stepper runs besides free rods: contact with one static mesh and the
-    /// introducer guide (on the single-workgroup path).
+    /// What the GPU stepper runs besides free rods: contact with one static mesh, the
+    /// introducer guide and bindings (on the single-workgroup path).
     pub fn supported() -> Capabilities {
-        Capabilities::of(&[Capability::MeshContact, Capability::Guide])
+        Capabilities::of(&[
+            Capability::MeshContact,
+            Capability::Guide,
+            Capability::Bindings,
+        ])
     }
 
     /// The (first device's) simulation underneath, for what the trait does not cover (adapter,
@@ -566,10 +588,10 @@ fn graver(a: GpuError, b: GpuError) -> GpuError {
     }
 }
 
-/// The first rod of each of `parts` contiguous shares of rods with `points` points each, and
-/// the end: shares as equal in points as whole rods allow, none empty (`parts` is at most the
-/// number of rods).
-fn shares(points: &[usize], parts: usize) -> Vec<usize> {
+/// The first rod of each of at most `parts` contiguous shares of rods with `points` points
+/// each, and the end: shares as equal in points as whole rods allow, none empty, each starting
+/// at a rod that is `cuttable` (fewer shares where too few are).
+fn shares(points: &[usize], parts: usize, cuttable: &[bool]) -> Vec<usize> {
     let parts = parts.clamp(1, points.len().max(1));
     let total: usize = points.iter().sum();
     let mut starts = vec![0];
@@ -580,7 +602,11 @@ fn shares(points: &[usize], parts: usize) -> Vec<usize> {
         // for each share still to come.
         let rods_left = points.len() - i;
         let shares_left = parts - (k - 1);
-        if k < parts && i > starts[k - 1] && (sum * parts >= total * k || rods_left < shares_left) {
+        if k < parts
+            && i > starts[k - 1]
+            && cuttable[i]
+            && (sum * parts >= total * k || rods_left < shares_left)
+        {
             starts.push(i);
         }
         sum += p;
@@ -595,19 +621,28 @@ mod tests {
 
     #[test]
     fn shares_are_contiguous_balanced_and_never_empty() {
-        assert_eq!(shares(&[10; 8], 2), vec![0, 4, 8]);
-        assert_eq!(shares(&[10; 8], 4), vec![0, 2, 4, 6, 8]);
-        assert_eq!(shares(&[10; 7], 2), vec![0, 4, 7]);
-        assert_eq!(shares(&[10; 3], 3), vec![0, 1, 2, 3]);
+        assert_eq!(shares(&[10; 8], 2, &[true; 8]), vec![0, 4, 8]);
+        assert_eq!(shares(&[10; 8], 4, &[true; 8]), vec![0, 2, 4, 6, 8]);
+        assert_eq!(shares(&[10; 7], 2, &[true; 7]), vec![0, 4, 7]);
+        assert_eq!(shares(&[10; 3], 3, &[true; 3]), vec![0, 1, 2, 3]);
         // A long rod first: the short ones share the second device.
-        assert_eq!(shares(&[100, 10, 10, 10], 2), vec![0, 1, 4]);
+        assert_eq!(shares(&[100, 10, 10, 10], 2, &[true; 4]), vec![0, 1, 4]);
         // More shares than rods cannot leave one empty.
-        assert_eq!(shares(&[5, 5], 4), vec![0, 1, 2]);
-        assert_eq!(shares(&[5], 1), vec![0, 1]);
+        assert_eq!(shares(&[5, 5], 4, &[true; 2]), vec![0, 1, 2]);
+        assert_eq!(shares(&[5], 1, &[true]), vec![0, 1]);
         for parts in 1..6 {
-            let s = shares(&[3, 1, 4, 1, 5, 9, 2, 6], parts);
+            let s = shares(&[3, 1, 4, 1, 5, 9, 2, 6], parts, &[true; 8]);
             assert_eq!(s.len(), parts + 1);
             assert!(s.windows(2).all(|w| w[0] < w[1]), "{s:?}");
         }
+        // Pairs of bound rods stay together: cuts only between pairs.
+        let pairs = [true, false, true, false, true, false, true, false];
+        assert_eq!(shares(&[10; 8], 4, &pairs), vec![0, 2, 4, 6, 8]);
+        assert_eq!(shares(&[10; 8], 3, &pairs), vec![0, 4, 6, 8]);
+        // One group of everything: one share.
+        assert_eq!(
+            shares(&[10; 4], 2, &[true, false, false, false]),
+            vec![0, 4]
+        );
     }
 }

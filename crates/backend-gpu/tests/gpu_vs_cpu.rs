@@ -115,6 +115,7 @@ impl Case {
                 loads: l.clone(),
                 wall: None,
                 guide: None,
+                binding: None,
             })
             .collect()
     }

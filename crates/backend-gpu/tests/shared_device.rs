@@ -58,6 +58,7 @@ fn rods() -> Vec<GpuRodInput> {
                 loads: vec![PointLoad::new(n, Vec3::new(0.0, 0.0, 0.05))],
                 wall: None,
                 guide: None,
+                binding: None,
             }
         })
         .collect()

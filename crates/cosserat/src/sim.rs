@@ -961,9 +961,35 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
         "use --backend cpu",
     )?;
     let rods = cpu_rods::<f32>(b)?;
+    // Bindings: each inner rod names its outer rod (v0 binds nothing).
+    let mut bound: Vec<Option<cosserat_backend_gpu::GpuBinding>> = vec![None; rods.len()];
+    for (k, spec) in b.bindings.iter().enumerate() {
+        let two_way = match spec.variant {
+            BindingVariant::None => continue,
+            BindingVariant::OneWay => false,
+            BindingVariant::TwoWay => true,
+        };
+        let capture = spec
+            .checked_capture(k, &rods)
+            .map_err(BuildError::Setting)?;
+        let slot = &mut bound[spec.inner];
+        if slot.is_some() {
+            return Err(BuildError::Setting(format!(
+                "binding {k}: rod {} is already bound inside another rod; the GPU binds a rod inside one rod only (use --backend cpu)",
+                spec.inner
+            )));
+        }
+        *slot = Some(cosserat_backend_gpu::GpuBinding {
+            outer: spec.outer,
+            two_way,
+            capture: capture as f32,
+            offset_correction: cosserat_constraints::binding::DEFAULT_OFFSET_CORRECTION as f32,
+        });
+    }
     let inputs = rods
         .into_iter()
-        .map(|r| {
+        .zip(bound)
+        .map(|(r, binding)| {
             let wall = r.mesh_settings().map(|m| cosserat_backend_gpu::GpuWall {
                 collider: m.collider.clone(),
                 static_friction: m.friction.static_coefficient as f32,
@@ -983,6 +1009,7 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
                 loads: r.loads,
                 wall,
                 guide,
+                binding,
             }
         })
         .collect();

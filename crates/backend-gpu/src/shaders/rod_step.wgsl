@@ -25,6 +25,11 @@
 //   GUIDE         a straight introducer: the points from 1 up to the first one outside it are
 //                 held on its axis before the sweeps, their velocities along it after them
 //                 (backend-cpu guide.rs; workgroup layout of the single-workgroup path only)
+//   BIND          bindings (an inner rod held on an outer one's centreline, constraints
+//                 binding.rs): the rods a binding couples share one workgroup, each on its own
+//                 run of threads (`Item::lane0`, `groups`); the binding sweep follows each
+//                 constraint iteration, its data exchanged through storage (single-workgroup
+//                 workgroup layout only, inextensible rods)
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -123,7 +128,8 @@ struct Item {
     left: u32,
     right: u32,
     drag: f32,
-    pad: u32,
+    // BIND: the item's first thread in its workgroup.
+    lane0: u32,
 }
 
 // Prescribed motion of one end: velocity, angular velocity (world), active steps [x, y).
@@ -164,6 +170,18 @@ struct Touch {
     on: vec4<u32>,
 }
 
+// A rod's part in a binding (BIND; constraints binding.rs: an inner rod, a guidewire, held on
+// the centreline of an outer one, a catheter, in the same workgroup), per item: `outer` the
+// outer rod's item (NONE: the item is no inner rod), `role` bit 0 inner, bit 1 outer (publishes
+// its points), bit 2 the binding is two-way (the outer rod takes its share), the capture
+// distance and the fraction of the offset removed per step.
+struct Coupling {
+    outer: u32,
+    role: u32,
+    capture: f32,
+    correction: f32,
+}
+
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<uniform> chunk: Chunk;
 @group(0) @binding(2) var<storage, read> slots: array<Slot>;
@@ -196,7 +214,7 @@ struct Touch {
 // the point in the last step as a velocity change (normal and friction).
 @group(0) @binding(22) var<storage, read_write> contact_out: array<vec4<f32>>;
 // Contacts and escaped points of the step, double-buffered by the step's parity.
-var<workgroup> wg_count: array<atomic<u32>, 4>;
+var<workgroup> wg_count: array<atomic<u32>, 4 * GROUP_MAX>;
 // Each thread's first and last point's own gap and clearance, for the elements between threads.
 var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 //#else
@@ -204,9 +222,26 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 @group(0) @binding(20) var<storage, read> touch: array<Touch>;
 //#endif
 //#endif
+//#if BIND
+// Per workgroup: its first item and number of items.
+@group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
+@group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
+// Per slot, two vec4: an outer rod's point at the step's start and its velocity after each
+// sweep, published for the inner rods of its workgroup.
+@group(0) @binding(29) var<storage, read_write> bind_x: array<vec4<f32>>;
+// Per slot, four words: the impulse (as a velocity change before the point's inverse mass, f32
+// bits) the inner rods give an outer rod's point in one sweep, summed by compare-exchange.
+@group(0) @binding(30) var<storage, read_write> bind_j: array<atomic<u32>>;
+// Per slot of an inner rod: the outer segment its point was last bound to (where the next
+// search walks from), NONE before the first.
+@group(0) @binding(31) var<storage, read_write> bind_seg: array<u32>;
+const GROUP_MAX: u32 = 4u;
+//#else
+const GROUP_MAX: u32 = 1u;
+//#endif
 //#if GUIDE
 // The first point (from 1) outside the guide, double-buffered by the step's parity.
-var<workgroup> wg_guide: array<atomic<u32>, 2>;
+var<workgroup> wg_guide: array<atomic<u32>, 2 * GROUP_MAX>;
 //#endif
 //#if PERSTEP
 @group(0) @binding(11) var<storage, read> src_pos: array<vec4<f32>>;
@@ -309,6 +344,126 @@ fn low_pass(y: vec4<f32>, old: vec3<f32>, raw: vec3<f32>) -> vec4<f32> {
 }
 //#endif
 
+//#if BIND
+// A bound point (binding.rs `BoundPoint`): its outer segment, the parameter along it, the
+// segment's unit tangent and the point's offset from the centreline at the step's start; `on`
+// false for a free point (whose `seg` still says where the next search starts).
+struct Bound {
+    seg: u32,
+    s: f32,
+    t: vec3<f32>,
+    off: vec3<f32>,
+    on: bool,
+}
+
+// The published points a and b - a of outer segment j of the rod at slot `base`.
+fn bind_segment(base: u32, j: u32) -> array<vec3<f32>, 2> {
+    let a = bind_x[2u * (base + j)].xyz;
+    return array<vec3<f32>, 2>(a, bind_x[2u * (base + j + 1u)].xyz - a);
+}
+
+// Unclamped parameter of the projection of `p` onto outer segment j.
+fn bind_param(p: vec3<f32>, base: u32, j: u32) -> f32 {
+    let g = bind_segment(base, j);
+    let l2 = dot(g[1], g[1]);
+    return select(0.0, dot(p - g[0], g[1]) / l2, l2 > 0.0);
+}
+
+// The nearest point to `p` of the outer centreline (`m` segments from slot `base`), walking
+// from segment `start` along the polyline to the local minimum of the distance (NONE: the
+// nearest of all segments first), as `BindingSet::update`: a point whose nearest point lies
+// before the outer rod's first point or past its tip, or farther than `capture`, is free. The
+// offset is taken from the segment's start point, so that f32 coordinates far from the origin
+// do not round it.
+fn bind_nearest(p: vec3<f32>, start: u32, base: u32, m: u32, capture: f32) -> Bound {
+    var j = start;
+    if j == NONE {
+        var best = 3.0e38;
+        j = 0u;
+        for (var k = 0u; k < m; k++) {
+            let g = bind_segment(base, k);
+            let l2 = dot(g[1], g[1]);
+            let u = clamp(select(0.0, dot(p - g[0], g[1]) / l2, l2 > 0.0), 0.0, 1.0);
+            let d = p - g[0] - g[1] * u;
+            if dot(d, d) < best {
+                best = dot(d, d);
+                j = k;
+            }
+        }
+    }
+    j = min(j, m - 1u);
+    var u = bind_param(p, base, j);
+    var s = clamp(u, 0.0, 1.0);
+    var walking = true;
+    for (var steps = 0u; steps <= m && walking; steps++) {
+        if u > 1.0 && j + 1u < m {
+            let u2 = bind_param(p, base, j + 1u);
+            if u2 < 0.0 {
+                // At the joint between j and j + 1.
+                s = 1.0;
+                walking = false;
+            } else {
+                j += 1u;
+                u = u2;
+                s = clamp(u, 0.0, 1.0);
+            }
+        } else if u < 0.0 && j > 0u {
+            let u2 = bind_param(p, base, j - 1u);
+            if u2 > 1.0 {
+                s = 0.0;
+                walking = false;
+            } else {
+                j -= 1u;
+                u = u2;
+                s = clamp(u, 0.0, 1.0);
+            }
+        } else {
+            s = u;
+            walking = false;
+        }
+    }
+    var out: Bound;
+    out.seg = j;
+    out.on = false;
+    if s < 0.0 || s > 1.0 {
+        return out;
+    }
+    let g = bind_segment(base, j);
+    let off = (p - g[0]) - g[1] * s;
+    let len = length(g[1]);
+    if dot(off, off) > capture * capture || !(len > 0.0) {
+        return out;
+    }
+    out.s = s;
+    out.t = g[1] / len;
+    out.off = off;
+    out.on = true;
+    return out;
+}
+
+// Adds `x` to the f32 in word `i` of `bind_j` (several inner points can hand one outer point
+// their shares in the same sweep).
+fn bind_add(i: u32, x: f32) {
+    if x == 0.0 {
+        return;
+    }
+    var old = atomicLoad(&bind_j[i]);
+    for (var k = 0u; k < 256u; k++) {
+        let r = atomicCompareExchangeWeak(&bind_j[i], old, bitcast<u32>(bitcast<f32>(old) + x));
+        if r.exchanged {
+            break;
+        }
+        old = r.old_value;
+    }
+}
+
+fn bind_add3(slot: u32, x: vec3<f32>) {
+    bind_add(4u * slot, x.x);
+    bind_add(4u * slot + 1u, x.y);
+    bind_add(4u * slot + 2u, x.z);
+}
+//#endif
+
 fn key_of(rel_step: u32, local_elem: u32, code: u32) -> u32 {
     return (rel_step << 16u) | (local_elem << 2u) | code;
 }
@@ -371,12 +526,38 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     }
     let has_right = lid + 1u < SG;
     var stop = false;
+    let gi = 0u;
+//#else
+    // `tid` indexes the workgroup's exchange arrays, `lid` is the thread's place in its rod.
+    let tid = lid_wg;
+//#if BIND
+    // A group of rods per workgroup (those a binding couples), each on its own run of threads
+    // from its item's `lane0`; threads past the last rod's points idle through the barriers.
+    let grp = groups[wid.x];
+    var item_index = grp.x;
+    for (var k = 1u; k < grp.y; k++) {
+        if lid_wg >= items[grp.x + k].lane0 {
+            item_index = grp.x + k;
+        }
+    }
+    let lid = lid_wg - items[item_index].lane0;
+    let gi = item_index - grp.x;
+    var lane_end = WG;
+    if gi + 1u < grp.y {
+        lane_end = items[item_index + 1u].lane0;
+    }
+    let has_right = lid_wg + 1u < lane_end;
 //#else
     let lid = lid_wg;
     let item_index = wid.x;
+    let gi = 0u;
     let has_right = lid + 1u < WG;
 //#endif
+//#endif
     let has_left = lid > 0u;
+    // The rod's share of the workgroup's per-rod counters.
+    let wc = gi * 4u;
+    let wgd = gi * 2u;
     let it = items[item_index];
     let h = params.gravity.w;
     let inv_h = 1.0 / h;
@@ -523,6 +704,28 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
 //#endif
 
+//#if BIND
+    // This rod's part in a binding: the outer rod's first slot and segments (inner rods), and
+    // each point's last outer segment, in registers for the dispatch.
+    let cp = couplings[item_index];
+    let b_inner = (cp.role & 1u) != 0u;
+    let b_outer = (cp.role & 2u) != 0u;
+    let b_two = (cp.role & 4u) != 0u;
+    var ob = 0u;
+    var om = 1u;
+    if b_inner {
+        let ot = items[cp.outer];
+        ob = ot.base;
+        om = ot.n;
+    }
+    var bseg: array<u32, EPT>;
+//#for e 0 EPT
+    bseg[{e}] = NONE;
+    if b_inner && it.w0 + b0 + {e} < it.w1 {
+        bseg[{e}] = bind_seg[it.base + it.w0 + b0 + {e}];
+    }
+//#endfor
+//#endif
 //#if MESH
     // Wall contact: per point, the contact of this step (normal, gap, accumulated normal and
     // friction impulses), the point's inverse mass, and its anchor (where it last walked the
@@ -570,7 +773,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     var max_pen = 0.0;
     if lid == 0u {
         for (var k = 0u; k < 4u; k++) {
-            atomicStore(&wg_count[k], 0u);
+            atomicStore(&wg_count[wc + k], 0u);
         }
     }
 //#endif
@@ -578,15 +781,21 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let tg = touch[it.rod];
     let guide_on = tg.on.y != 0u;
     if lid == 0u {
-        atomicStore(&wg_guide[0], NONE);
-        atomicStore(&wg_guide[1], NONE);
+        atomicStore(&wg_guide[wgd + 0], NONE);
+        atomicStore(&wg_guide[wgd + 1], NONE);
     }
 //#endif
 //#if !SUBGROUP
-    if lid == 0u {
+    if tid == 0u {
         atomicStore(&wg_key, NONE);
-        // A rod that has diverged stays where it stopped.
-        wg_stop = select(0u, 1u, atomicLoad(&status[item_index * 4u]) != 0u);
+        wg_stop = 0u;
+    }
+//#if BIND
+    workgroupBarrier();
+//#endif
+    // A rod that has diverged stays where it stopped (with the rods of its group).
+    if lid == 0u && atomicLoad(&status[item_index * 4u]) != 0u {
+        wg_stop = 1u;
     }
 //#else
     // A rod that has diverged stays where it stopped.
@@ -761,39 +970,39 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#else
         // Publish this thread's first and last point for its neighbours.
-        sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
-        sh_r[2u * lid + 1u] = vec4<f32>(r[EPT - 1u], 0.0);
-        sh_q[2u * lid] = q[0];
-        sh_q[2u * lid + 1u] = q[EPT - 1u];
+        sh_r[2u * tid] = vec4<f32>(r[0], 0.0);
+        sh_r[2u * tid + 1u] = vec4<f32>(r[EPT - 1u], 0.0);
+        sh_q[2u * tid] = q[0];
+        sh_q[2u * tid + 1u] = q[EPT - 1u];
 //#if BEND_DAMP
-        sh_w[2u * lid] = vec4<f32>(w[0], 0.0);
-        sh_w[2u * lid + 1u] = vec4<f32>(w[EPT - 1u], 0.0);
+        sh_w[2u * tid] = vec4<f32>(w[0], 0.0);
+        sh_w[2u * tid + 1u] = vec4<f32>(w[EPT - 1u], 0.0);
 //#endif
 //#if STRETCH_DAMP
-        sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(v[0], 0.0);
-        sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(v[EPT - 1u], 0.0);
+        sh_v[xpar * 2u * WG + 2u * tid] = vec4<f32>(v[0], 0.0);
+        sh_v[xpar * 2u * WG + 2u * tid + 1u] = vec4<f32>(v[EPT - 1u], 0.0);
 //#endif
         if workgroupUniformLoad(&wg_stop) != 0u {
             break;
         }
         if has_left {
-            rx[0] = sh_r[2u * lid - 1u].xyz;
-            qx[0] = sh_q[2u * lid - 1u];
+            rx[0] = sh_r[2u * tid - 1u].xyz;
+            qx[0] = sh_q[2u * tid - 1u];
 //#if BEND_DAMP
-            wx[0] = sh_w[2u * lid - 1u].xyz;
+            wx[0] = sh_w[2u * tid - 1u].xyz;
 //#endif
 //#if STRETCH_DAMP
-            vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
+            vx[0] = sh_v[xpar * 2u * WG + 2u * tid - 1u].xyz;
 //#endif
         }
         if has_right {
-            rx[EPT + 1u] = sh_r[2u * lid + 2u].xyz;
-            qx[EPT + 1u] = sh_q[2u * lid + 2u];
+            rx[EPT + 1u] = sh_r[2u * tid + 2u].xyz;
+            qx[EPT + 1u] = sh_q[2u * tid + 2u];
 //#if BEND_DAMP
-            wx[EPT + 1u] = sh_w[2u * lid + 2u].xyz;
+            wx[EPT + 1u] = sh_w[2u * tid + 2u].xyz;
 //#endif
 //#if STRETCH_DAMP
-            vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
+            vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * tid + 2u].xyz;
 //#endif
         }
 //#if STRETCH_DAMP
@@ -1008,21 +1217,21 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         {
             let gpar = s & 1u;
             if lid == 0u {
-                atomicStore(&wg_guide[gpar ^ 1u], NONE);
+                atomicStore(&wg_guide[wgd + (gpar ^ 1u)], NONE);
             }
             if guide_on {
 //#for e 0 EPT
                 {
                     let gp = it.w0 + b0 + {e};
                     if gp >= 1u && gp < it.w1 && guide_offset(tg, rx[{e+1}]).w < 0.0 {
-                        atomicMin(&wg_guide[gpar], gp);
+                        atomicMin(&wg_guide[wgd + gpar], gp);
                     }
                 }
 //#endfor
             }
             workgroupBarrier();
             if guide_on {
-                guide_end = atomicLoad(&wg_guide[gpar]);
+                guide_end = atomicLoad(&wg_guide[wgd + gpar]);
             }
 //#for x 0 XP
             {
@@ -1049,8 +1258,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if wall_on {
             if lid == 0u {
                 if s > 0u {
-                    let c = atomicExchange(&wg_count[(cpar ^ 1u) * 2u], 0u);
-                    let esc = atomicExchange(&wg_count[(cpar ^ 1u) * 2u + 1u], 0u);
+                    let c = atomicExchange(&wg_count[wc + (cpar ^ 1u) * 2u], 0u);
+                    let esc = atomicExchange(&wg_count[wc + (cpar ^ 1u) * 2u + 1u], 0u);
                     atomicStore(&wall_stats[it.rod * WALL_STATS + 2u], c);
                     atomicMax(&wall_stats[it.rod * WALL_STATS + 3u], c);
                     atomicMax(&wall_stats[it.rod * WALL_STATS + 1u], esc);
@@ -1156,7 +1365,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             }
 //#endfor
             if n_escaped > 0u {
-                atomicAdd(&wg_count[cpar * 2u + 1u], n_escaped);
+                atomicAdd(&wg_count[wc + cpar * 2u + 1u], n_escaped);
             }
         }
         // Elements nearer a ridge of the wall between their points than at them: each point's
@@ -1173,20 +1382,20 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             }
         }
 //#endfor
-        sh_g[2u * lid] = vec2<f32>(ogx[1], cex[1]);
-        sh_g[2u * lid + 1u] = vec2<f32>(ogx[EPT], cex[EPT]);
+        sh_g[2u * tid] = vec2<f32>(ogx[1], cex[1]);
+        sh_g[2u * tid + 1u] = vec2<f32>(ogx[EPT], cex[EPT]);
         workgroupBarrier();
         ogx[0] = margin;
         cex[0] = 0.0;
         ogx[EPT + 1u] = margin;
         cex[EPT + 1u] = 0.0;
         if has_left {
-            let g = sh_g[2u * lid - 1u];
+            let g = sh_g[2u * tid - 1u];
             ogx[0] = g.x;
             cex[0] = g.y;
         }
         if has_right {
-            let g = sh_g[2u * lid + 2u];
+            let g = sh_g[2u * tid + 2u];
             ogx[EPT + 1u] = g.x;
             cex[EPT + 1u] = g.y;
         }
@@ -1257,15 +1466,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#endfor
         // The last element to the right neighbour (through the exchange arrays, free here).
-        sh_r[2u * lid] = vec4<f32>(seg_n[EPT], select(0.0, 1.0, seg_on[EPT]));
-        sh_q[2u * lid] = vec4<f32>(seg_w[EPT], 0.0);
+        sh_r[2u * tid] = vec4<f32>(seg_n[EPT], select(0.0, 1.0, seg_on[EPT]));
+        sh_q[2u * tid] = vec4<f32>(seg_w[EPT], 0.0);
         workgroupBarrier();
         seg_on[0] = false;
         if has_left {
-            let l = sh_r[2u * lid - 2u];
+            let l = sh_r[2u * tid - 2u];
             seg_on[0] = l.w > 0.5;
             seg_n[0] = l.xyz;
-            seg_w[0] = sh_q[2u * lid - 2u].xyz;
+            seg_w[0] = sh_q[2u * tid - 2u].xyz;
         }
         if wall_on {
             // A point between ridge elements takes their planes' contacts as one: the mean of
@@ -1301,9 +1510,36 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             }
 //#endfor
             if n_contacts > 0u {
-                atomicAdd(&wg_count[cpar * 2u], n_contacts);
+                atomicAdd(&wg_count[wc + cpar * 2u], n_contacts);
             }
         }
+//#endif
+//#if BIND
+        // Bindings: the outer rods publish their points at the step's start, and each inner
+        // point is bound to the nearest point of the outer centreline (BindingSet::update).
+        if b_outer {
+//#for e 0 EPT
+            if it.w0 + b0 + {e} < it.w1 {
+                bind_x[2u * (it.base + it.w0 + b0 + {e})] = vec4<f32>(rx[{e+1}], 0.0);
+            }
+//#endfor
+        }
+        storageBarrier();
+        var b_on: array<bool, EPT>;
+        var b_s: array<f32, EPT>;
+        var b_t: array<vec3<f32>, EPT>;
+        var b_off: array<vec3<f32>, EPT>;
+//#for e 0 EPT
+        b_on[{e}] = false;
+        if b_inner && it.w0 + b0 + {e} < it.w1 {
+            let bd = bind_nearest(rx[{e+1}], bseg[{e}], ob, om, cp.capture);
+            bseg[{e}] = bd.seg;
+            b_on[{e}] = bd.on;
+            b_s[{e}] = bd.s;
+            b_t[{e}] = bd.t;
+            b_off[{e}] = bd.off;
+        }
+//#endfor
 //#endif
 
 //#if !EXTENSIBLE
@@ -1375,14 +1611,14 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 vx[EPT + 1u] = select(vx[EPT + 1u], vr, has_right);
             }
 //#else
-            sh_v[xpar * 2u * WG + 2u * lid] = vec4<f32>(vx[1], 0.0);
-            sh_v[xpar * 2u * WG + 2u * lid + 1u] = vec4<f32>(vx[EPT], 0.0);
+            sh_v[xpar * 2u * WG + 2u * tid] = vec4<f32>(vx[1], 0.0);
+            sh_v[xpar * 2u * WG + 2u * tid + 1u] = vec4<f32>(vx[EPT], 0.0);
             workgroupBarrier();
             if has_left {
-                vx[0] = sh_v[xpar * 2u * WG + 2u * lid - 1u].xyz;
+                vx[0] = sh_v[xpar * 2u * WG + 2u * tid - 1u].xyz;
             }
             if has_right {
-                vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * lid + 2u].xyz;
+                vx[EPT + 1u] = sh_v[xpar * 2u * WG + 2u * tid + 2u].xyz;
             }
             xpar ^= 1u;
 //#endif
@@ -1448,6 +1684,61 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 ct_lt[{e}] = rc.lt;
             }
 //#endfor
+//#endif
+//#if BIND
+            // The binding sweep after the rods' own (BindingSet::sweep, as one Jacobi pass): the
+            // outer rods publish their velocities, each bound inner point takes the impulse that
+            // removes its offset across the outer segment by the step's end and hands the outer
+            // points their shares (two-way), which the outer rods then apply.
+            if b_outer {
+//#for e 0 EPT
+                if it.w0 + b0 + {e} < it.w1 {
+                    bind_x[2u * (it.base + it.w0 + b0 + {e}) + 1u] = vec4<f32>(vx[{e+1}], 0.0);
+                }
+//#endfor
+            }
+            storageBarrier();
+            if b_inner {
+//#for e 0 EPT
+                if b_on[{e}] {
+                    let j = bseg[{e}];
+                    let s = b_s[{e}];
+                    let wi = wm[{e+1}];
+                    var wa = 0.0;
+                    var wb = 0.0;
+                    if b_two {
+                        wa = slots[ob + j].a.y;
+                        wb = slots[ob + j + 1u].a.y;
+                    }
+                    let wsum = wi + (1.0 - s) * (1.0 - s) * wa + s * s * wb;
+                    if wsum > 0.0 {
+                        let vc = bind_x[2u * (ob + j) + 1u].xyz * (1.0 - s) + bind_x[2u * (ob + j + 1u) + 1u].xyz * s;
+                        let d = b_off[{e}] * cp.correction + (vx[{e+1}] - vc) * h;
+                        let dp = d - b_t[{e}] * dot(b_t[{e}], d);
+                        let imp = dp * (-1.0 / (h * wsum));
+                        vx[{e+1}] += imp * wi;
+                        if b_two {
+                            bind_add3(ob + j, imp * (s - 1.0));
+                            bind_add3(ob + j + 1u, imp * (-s));
+                        }
+                    }
+                }
+//#endfor
+            }
+            storageBarrier();
+            if b_outer {
+//#for e 0 EPT
+                if it.w0 + b0 + {e} < it.w1 {
+                    let k = 4u * (it.base + it.w0 + b0 + {e});
+                    let jv = vec3<f32>(
+                        bitcast<f32>(atomicExchange(&bind_j[k], 0u)),
+                        bitcast<f32>(atomicExchange(&bind_j[k + 1u], 0u)),
+                        bitcast<f32>(atomicExchange(&bind_j[k + 2u], 0u)),
+                    );
+                    vx[{e+1}] += jv * wm[{e+1}];
+                }
+//#endfor
+            }
 //#endif
         }
 //#else
@@ -1553,9 +1844,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let rn = subgroupShuffleDown(r[0], 1u);
     let stopped = workgroupUniformLoad(&wg_stop) != 0u;
 //#else
-    sh_r[2u * lid] = vec4<f32>(r[0], 0.0);
+    sh_r[2u * tid] = vec4<f32>(r[0], 0.0);
     let stopped = workgroupUniformLoad(&wg_stop) != 0u;
-    let rn = sh_r[2u * lid + 2u].xyz;
+    let rn = sh_r[2u * tid + 2u].xyz;
 //#endif
 //#endif
 //#if GRID
@@ -1619,10 +1910,10 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     if wall_on {
         if lid == 0u && steps_done > 0u {
             let lp = ((steps_done - 1u) & 1u) * 2u;
-            let c = atomicLoad(&wg_count[lp]);
+            let c = atomicLoad(&wg_count[wc + lp]);
             atomicStore(&wall_stats[it.rod * WALL_STATS + 2u], c);
             atomicMax(&wall_stats[it.rod * WALL_STATS + 3u], c);
-            atomicMax(&wall_stats[it.rod * WALL_STATS + 1u], atomicLoad(&wg_count[lp + 1u]));
+            atomicMax(&wall_stats[it.rod * WALL_STATS + 1u], atomicLoad(&wg_count[wc + lp + 1u]));
         }
         if max_pen > 0.0 {
             atomicMax(&wall_stats[it.rod * WALL_STATS], bitcast<u32>(max_pen));
@@ -1677,6 +1968,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         clamps[2u * it.rod + 1u].q = qc1;
         clamps[2u * it.rod + 1u].rt = rt1;
         clamps[2u * it.rod + 1u].xt = vec4<f32>(xt1, 0.0);
+    }
+//#endif
+//#if BIND
+    if b_inner {
+//#for e 0 EPT
+        if it.w0 + b0 + {e} < it.w1 {
+            bind_seg[it.base + it.w0 + b0 + {e}] = bseg[{e}];
+        }
+//#endfor
     }
 //#endif
 //#if REACT
