@@ -368,6 +368,7 @@ mod tests {
                 spin_cap: 1024,
                 group,
                 unroll: true,
+                bind_points: 0,
                 flags: flags.clone(),
             };
             let src = cfg.source();
@@ -436,6 +437,7 @@ mod tests {
             spin_cap: 1,
             group: 1,
             unroll: true,
+            bind_points: 0,
             flags: vec![],
         }
         .source();

@@ -200,8 +200,25 @@ impl Plan {
             .map(|r| r.state.elements() as u32 + 1)
             .max()
             .unwrap_or(2);
+        // Bindings exchange the outer rods' points in workgroup memory (a vec4 and three words
+        // each): as many as the largest group's outer rods have.
+        let bind_points = if bind {
+            coupled
+                .iter()
+                .map(|g| {
+                    g.iter()
+                        .filter(|&&r| rods.iter().any(|o| o.binding.is_some_and(|b| b.outer == r)))
+                        .map(|&r| rods[r].state.elements() as u32 + 1)
+                        .sum::<u32>()
+                })
+                .max()
+                .unwrap_or(0)
+        } else {
+            0
+        };
         let (single_threads, single_ept) = if bind {
-            // The fewest points per thread with which every group's rods fit one workgroup.
+            // The fewest points per thread with which every group's rods fit one workgroup, in
+            // its threads and its memory.
             let lanes = |ept: u32| -> u32 {
                 coupled
                     .iter()
@@ -213,10 +230,20 @@ impl Plan {
                     .max()
                     .unwrap_or(1)
             };
+            let bytes = |ept: u32| {
+                round_up(lanes(ept), 32) * (per_thread_bytes + if mesh { 16 } else { 0 })
+                    + 28 * bind_points
+                    + 256
+            };
             let ept = (1..=32)
                 .map(|k| 2 * k)
-                .find(|&e| lanes(e) <= max_threads)
-                .unwrap_or(64);
+                .find(|&e| lanes(e) <= max_threads && bytes(e) <= storage_cap)
+                .ok_or_else(|| {
+                    GpuError::InvalidInput(format!(
+                        "bound rods with {bind_points} points in their outer rods do not fit one workgroup's {} bytes of memory",
+                        limits.max_compute_workgroup_storage_size
+                    ))
+                })?;
             (round_up(lanes(ept), 32).min(max_threads), ept)
         } else {
             let threads = max_threads.min(round_up(points.div_ceil(2), 32));
@@ -402,7 +429,7 @@ impl Plan {
                             lane += (rods[r].state.elements() as u32 + 1).div_ceil(single_ept);
                         }
                     }
-                    couplings = coupling_of_items(rods, &items);
+                    couplings = coupling_of_items(rods, &items, &groups);
                     workgroups = Some(groups.len() as u32);
                     items
                 } else {
@@ -471,6 +498,7 @@ impl Plan {
             spin_cap: options.spin_cap.max(1),
             group,
             unroll: true,
+            bind_points,
             flags,
         };
         // Loop iterations per step and invocation, generously counted, for software adapters.
@@ -578,8 +606,10 @@ pub(crate) fn coupled_groups(rods: &[GpuRodInput]) -> Result<Vec<Vec<usize>>, Gp
     Ok(groups)
 }
 
-/// Each item's part in a binding ([`CouplingG`]), with the outer rod named by its item.
-fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG]) -> Vec<CouplingG> {
+/// Each item's part in a binding ([`CouplingG`]), with the outer rod named by its item, and each
+/// outer rod's first entry in its workgroup's exchange arrays (after the group's earlier outer
+/// rods) in `role` from bit 3.
+fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG], groups: &[[u32; 2]]) -> Vec<CouplingG> {
     let item_of = |rod: usize| items.iter().position(|it| it.rod as usize == rod);
     let mut out = vec![
         CouplingG {
@@ -597,6 +627,15 @@ fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG]) -> Vec<CouplingG> {
             out[k].capture = b.capture;
             out[k].correction = b.offset_correction;
             out[o].role |= 2;
+        }
+    }
+    for &[first, count] in groups {
+        let mut entry = 0;
+        for k in first as usize..(first + count) as usize {
+            if out[k].role & 2 != 0 {
+                out[k].role |= entry << 3;
+                entry += items[k].n + 1;
+            }
         }
     }
     out

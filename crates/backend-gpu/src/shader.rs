@@ -70,6 +70,9 @@ pub(crate) struct KernelConfig {
     pub(crate) exchange_steps: u32,
     /// Iteration cap of the grid barrier's spin loop.
     pub(crate) spin_cap: u32,
+    /// `BIND`: the outer rods' points of the largest group, which the binding exchanges in
+    /// workgroup memory (0 otherwise).
+    pub(crate) bind_points: u32,
     /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
     pub(crate) group: u32,
     /// Unroll the per-thread `//#for` loops (the default); `false` emits them as WGSL loops.
@@ -89,14 +92,15 @@ impl KernelConfig {
         // naga 30 takes subgroup built-ins without (and rejects) `enable subgroups;`; the device
         // must have been created with `Features::SUBGROUP`.
         let prelude = format!(
-            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst XS: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\n",
+            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst XS: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\nconst BIND_PTS: u32 = {}u;\n",
             self.threads,
             self.per_thread,
             self.iterations,
             self.halo,
             self.exchange_steps.max(1),
             self.spin_cap,
-            self.group.max(1)
+            self.group.max(1),
+            self.bind_points.max(1)
         );
         // A clamped end holds its point, and a clamp's state sits in the held ends' buffer
         // that REACT binds: CLAMP implies REACT (the plan sets both; a hand-made
@@ -333,6 +337,7 @@ mod tests {
             spin_cap: 1,
             group: 1,
             unroll: true,
+            bind_points: 0,
             flags: vec![],
         };
         let src = cfg.source();
@@ -358,6 +363,7 @@ mod tests {
             spin_cap: 1,
             group: 1,
             unroll: true,
+            bind_points: 0,
             flags: vec![],
         };
         let src = cfg.source();
@@ -513,6 +519,7 @@ mod tests {
                             spin_cap: 1024,
                             group,
                             unroll,
+                            bind_points: 0,
                             flags: flags.clone(),
                         };
                         let composed = cfg.source_of(&text);

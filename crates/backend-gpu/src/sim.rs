@@ -123,10 +123,6 @@ pub(crate) struct BindBuffers {
     groups: wgpu::Buffer,
     /// Per item, its part in a binding ([`crate::layout::CouplingG`]).
     couplings: wgpu::Buffer,
-    /// Per slot, two `vec4`: an outer rod's published point and velocity.
-    exchange: wgpu::Buffer,
-    /// Per slot, four words: impulses handed to an outer rod's point in a sweep.
-    impulses: wgpu::Buffer,
     /// Per slot of an inner rod, the outer segment its point was last bound to: state (a
     /// snapshot carries it, so that a restored run finds the same segments).
     pub(crate) segments: wgpu::Buffer,
@@ -492,8 +488,6 @@ impl GpuSimulation {
             BindBuffers {
                 groups: init("groups", bytemuck::cast_slice(&plan.groups), plain),
                 couplings: init("couplings", bytemuck::cast_slice(&plan.couplings), plain),
-                exchange: init("binding exchange", &vec![0u8; 32 * slots_n], plain),
-                impulses: init("binding impulses", &vec![0u8; 16 * slots_n], plain),
                 segments: init(
                     "bound segments",
                     bytemuck::cast_slice(&vec![NONE; slots_n]),
@@ -636,7 +630,7 @@ impl GpuSimulation {
             entries.push(ro(20));
         }
         if bind_bufs.is_some() {
-            entries.extend([ro(27), ro(28), rw(29), rw(30), rw(31)]);
+            entries.extend([ro(27), ro(28), rw(31)]);
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -779,13 +773,7 @@ impl GpuSimulation {
                 });
             }
             if let Some(b) = &bind_bufs {
-                for (binding, buf) in [
-                    (27, &b.groups),
-                    (28, &b.couplings),
-                    (29, &b.exchange),
-                    (30, &b.impulses),
-                    (31, &b.segments),
-                ] {
+                for (binding, buf) in [(27, &b.groups), (28, &b.couplings), (31, &b.segments)] {
                     e.push(wgpu::BindGroupEntry {
                         binding,
                         resource: whole(buf),

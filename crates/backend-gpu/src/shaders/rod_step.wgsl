@@ -28,8 +28,8 @@
 //   BIND          bindings (an inner rod held on an outer one's centreline, constraints
 //                 binding.rs): the rods a binding couples share one workgroup, each on its own
 //                 run of threads (`Item::lane0`, `groups`); the binding sweep follows each
-//                 constraint iteration, its data exchanged through storage (single-workgroup
-//                 workgroup layout only, inextensible rods)
+//                 constraint iteration, the outer rods' points and impulses exchanged in
+//                 workgroup memory (single-workgroup workgroup layout only, inextensible rods)
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -173,8 +173,9 @@ struct Touch {
 // A rod's part in a binding (BIND; constraints binding.rs: an inner rod, a guidewire, held on
 // the centreline of an outer one, a catheter, in the same workgroup), per item: `outer` the
 // outer rod's item (NONE: the item is no inner rod), `role` bit 0 inner, bit 1 outer (publishes
-// its points), bit 2 the binding is two-way (the outer rod takes its share), the capture
-// distance and the fraction of the offset removed per step.
+// its points), bit 2 the binding is two-way (the outer rod takes its share), and from bit 3 an
+// outer rod's first entry in the workgroup's exchange arrays; the capture distance and the
+// fraction of the offset removed per step.
 struct Coupling {
     outer: u32,
     role: u32,
@@ -226,12 +227,12 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 // Per workgroup: its first item and number of items.
 @group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
 @group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
-// Per slot, two vec4: an outer rod's point at the step's start and its velocity after each
-// sweep, published for the inner rods of its workgroup.
-@group(0) @binding(29) var<storage, read_write> bind_x: array<vec4<f32>>;
-// Per slot, four words: the impulse (as a velocity change before the point's inverse mass, f32
-// bits) the inner rods give an outer rod's point in one sweep, summed by compare-exchange.
-@group(0) @binding(30) var<storage, read_write> bind_j: array<atomic<u32>>;
+// Per point of the group's outer rods (an outer rod's from its `Coupling::role >> 3`): the point
+// at the step's start, then its velocity after each sweep, published for the inner rods.
+var<workgroup> wb_x: array<vec4<f32>, BIND_PTS>;
+// The same points' impulses from the inner rods in one sweep (three f32 as bits each), summed
+// by compare-exchange.
+var<workgroup> wb_j: array<atomic<u32>, 3 * BIND_PTS>;
 // Per slot of an inner rod: the outer segment its point was last bound to (where the next
 // search walks from), NONE before the first.
 @group(0) @binding(31) var<storage, read_write> bind_seg: array<u32>;
@@ -356,10 +357,11 @@ struct Bound {
     on: bool,
 }
 
-// The published points a and b - a of outer segment j of the rod at slot `base`.
+// The published points a and b - a of outer segment j of the rod whose exchange entries start
+// at `base`.
 fn bind_segment(base: u32, j: u32) -> array<vec3<f32>, 2> {
-    let a = bind_x[2u * (base + j)].xyz;
-    return array<vec3<f32>, 2>(a, bind_x[2u * (base + j + 1u)].xyz - a);
+    let a = wb_x[base + j].xyz;
+    return array<vec3<f32>, 2>(a, wb_x[base + j + 1u].xyz - a);
 }
 
 // Unclamped parameter of the projection of `p` onto outer segment j.
@@ -441,15 +443,15 @@ fn bind_nearest(p: vec3<f32>, start: u32, base: u32, m: u32, capture: f32) -> Bo
     return out;
 }
 
-// Adds `x` to the f32 in word `i` of `bind_j` (several inner points can hand one outer point
+// Adds `x` to the f32 in word `i` of `wb_j` (several inner points can hand one outer point
 // their shares in the same sweep).
 fn bind_add(i: u32, x: f32) {
     if x == 0.0 {
         return;
     }
-    var old = atomicLoad(&bind_j[i]);
+    var old = atomicLoad(&wb_j[i]);
     for (var k = 0u; k < 256u; k++) {
-        let r = atomicCompareExchangeWeak(&bind_j[i], old, bitcast<u32>(bitcast<f32>(old) + x));
+        let r = atomicCompareExchangeWeak(&wb_j[i], old, bitcast<u32>(bitcast<f32>(old) + x));
         if r.exchanged {
             break;
         }
@@ -457,10 +459,10 @@ fn bind_add(i: u32, x: f32) {
     }
 }
 
-fn bind_add3(slot: u32, x: vec3<f32>) {
-    bind_add(4u * slot, x.x);
-    bind_add(4u * slot + 1u, x.y);
-    bind_add(4u * slot + 2u, x.z);
+fn bind_add3(entry: u32, x: vec3<f32>) {
+    bind_add(3u * entry, x.x);
+    bind_add(3u * entry + 1u, x.y);
+    bind_add(3u * entry + 2u, x.z);
 }
 //#endif
 
@@ -711,12 +713,22 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let b_inner = (cp.role & 1u) != 0u;
     let b_outer = (cp.role & 2u) != 0u;
     let b_two = (cp.role & 4u) != 0u;
+    // An outer rod's first exchange entry; an inner rod's outer rod's, its first slot and its
+    // segments.
+    let xo = cp.role >> 3u;
+    var oxo = 0u;
     var ob = 0u;
     var om = 1u;
     if b_inner {
         let ot = items[cp.outer];
+        oxo = couplings[cp.outer].role >> 3u;
         ob = ot.base;
         om = ot.n;
+    }
+    if tid == 0u {
+        for (var k = 0u; k < 3u * BIND_PTS; k++) {
+            atomicStore(&wb_j[k], 0u);
+        }
     }
     var bseg: array<u32, EPT>;
 //#for e 0 EPT
@@ -1520,11 +1532,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if b_outer {
 //#for e 0 EPT
             if it.w0 + b0 + {e} < it.w1 {
-                bind_x[2u * (it.base + it.w0 + b0 + {e})] = vec4<f32>(rx[{e+1}], 0.0);
+                wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(rx[{e+1}], 0.0);
             }
 //#endfor
         }
-        storageBarrier();
+        workgroupBarrier();
         var b_on: array<bool, EPT>;
         var b_s: array<f32, EPT>;
         var b_t: array<vec3<f32>, EPT>;
@@ -1532,7 +1544,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#for e 0 EPT
         b_on[{e}] = false;
         if b_inner && it.w0 + b0 + {e} < it.w1 {
-            let bd = bind_nearest(rx[{e+1}], bseg[{e}], ob, om, cp.capture);
+            let bd = bind_nearest(rx[{e+1}], bseg[{e}], oxo, om, cp.capture);
             bseg[{e}] = bd.seg;
             b_on[{e}] = bd.on;
             b_s[{e}] = bd.s;
@@ -1693,11 +1705,11 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             if b_outer {
 //#for e 0 EPT
                 if it.w0 + b0 + {e} < it.w1 {
-                    bind_x[2u * (it.base + it.w0 + b0 + {e}) + 1u] = vec4<f32>(vx[{e+1}], 0.0);
+                    wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], 0.0);
                 }
 //#endfor
             }
-            storageBarrier();
+            workgroupBarrier();
             if b_inner {
 //#for e 0 EPT
                 if b_on[{e}] {
@@ -1712,28 +1724,28 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     }
                     let wsum = wi + (1.0 - s) * (1.0 - s) * wa + s * s * wb;
                     if wsum > 0.0 {
-                        let vc = bind_x[2u * (ob + j) + 1u].xyz * (1.0 - s) + bind_x[2u * (ob + j + 1u) + 1u].xyz * s;
+                        let vc = wb_x[oxo + j].xyz * (1.0 - s) + wb_x[oxo + j + 1u].xyz * s;
                         let d = b_off[{e}] * cp.correction + (vx[{e+1}] - vc) * h;
                         let dp = d - b_t[{e}] * dot(b_t[{e}], d);
                         let imp = dp * (-1.0 / (h * wsum));
                         vx[{e+1}] += imp * wi;
                         if b_two {
-                            bind_add3(ob + j, imp * (s - 1.0));
-                            bind_add3(ob + j + 1u, imp * (-s));
+                            bind_add3(oxo + j, imp * (s - 1.0));
+                            bind_add3(oxo + j + 1u, imp * (-s));
                         }
                     }
                 }
 //#endfor
             }
-            storageBarrier();
+            workgroupBarrier();
             if b_outer {
 //#for e 0 EPT
                 if it.w0 + b0 + {e} < it.w1 {
-                    let k = 4u * (it.base + it.w0 + b0 + {e});
+                    let k = 3u * (xo + it.w0 + b0 + {e});
                     let jv = vec3<f32>(
-                        bitcast<f32>(atomicExchange(&bind_j[k], 0u)),
-                        bitcast<f32>(atomicExchange(&bind_j[k + 1u], 0u)),
-                        bitcast<f32>(atomicExchange(&bind_j[k + 2u], 0u)),
+                        bitcast<f32>(atomicExchange(&wb_j[k], 0u)),
+                        bitcast<f32>(atomicExchange(&wb_j[k + 1u], 0u)),
+                        bitcast<f32>(atomicExchange(&wb_j[k + 2u], 0u)),
                     );
                     vx[{e+1}] += jv * wm[{e+1}];
                 }
