@@ -228,7 +228,8 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 @group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
 @group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
 // Per point of the group's outer rods (an outer rod's from its `Coupling::role >> 3`): the point
-// at the step's start, then its velocity after each sweep, published for the inner rods.
+// at the step's start, then its velocity after each sweep, with its inverse mass in w,
+// published for the inner rods.
 var<workgroup> wb_x: array<vec4<f32>, BIND_PTS>;
 // The same points' impulses from the inner rods in one sweep (three f32 as bits each), summed
 // by compare-exchange.
@@ -713,17 +714,13 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let b_inner = (cp.role & 1u) != 0u;
     let b_outer = (cp.role & 2u) != 0u;
     let b_two = (cp.role & 4u) != 0u;
-    // An outer rod's first exchange entry; an inner rod's outer rod's, its first slot and its
-    // segments.
+    // An outer rod's first exchange entry; an inner rod's outer rod's, and its segments.
     let xo = cp.role >> 3u;
     var oxo = 0u;
-    var ob = 0u;
     var om = 1u;
     if b_inner {
-        let ot = items[cp.outer];
         oxo = couplings[cp.outer].role >> 3u;
-        ob = ot.base;
-        om = ot.n;
+        om = items[cp.outer].n;
     }
     if tid == 0u {
         for (var k = 0u; k < 3u * BIND_PTS; k++) {
@@ -1532,7 +1529,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         if b_outer {
 //#for e 0 EPT
             if it.w0 + b0 + {e} < it.w1 {
-                wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(rx[{e+1}], 0.0);
+                wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(rx[{e+1}], wm[{e+1}]);
             }
 //#endfor
         }
@@ -1705,7 +1702,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             if b_outer {
 //#for e 0 EPT
                 if it.w0 + b0 + {e} < it.w1 {
-                    wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], 0.0);
+                    wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], wm[{e+1}]);
                 }
 //#endfor
             }
@@ -1716,15 +1713,14 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                     let j = bseg[{e}];
                     let s = b_s[{e}];
                     let wi = wm[{e+1}];
-                    var wa = 0.0;
-                    var wb = 0.0;
-                    if b_two {
-                        wa = slots[ob + j].a.y;
-                        wb = slots[ob + j + 1u].a.y;
-                    }
+                    let xa = wb_x[oxo + j];
+                    let xb = wb_x[oxo + j + 1u];
+                    // The outer points' inverse masses come with their velocities (w).
+                    let wa = select(0.0, xa.w, b_two);
+                    let wb = select(0.0, xb.w, b_two);
                     let wsum = wi + (1.0 - s) * (1.0 - s) * wa + s * s * wb;
                     if wsum > 0.0 {
-                        let vc = wb_x[oxo + j].xyz * (1.0 - s) + wb_x[oxo + j + 1u].xyz * s;
+                        let vc = xa.xyz * (1.0 - s) + xb.xyz * s;
                         let d = b_off[{e}] * cp.correction + (vx[{e+1}] - vc) * h;
                         let dp = d - b_t[{e}] * dot(b_t[{e}], d);
                         let imp = dp * (-1.0 / (h * wsum));
