@@ -177,12 +177,17 @@ gpu_struct! {
 gpu_struct! {
     /// An item's part in a binding (`couplings`, binding 28, kernels with `BIND`): the outer
     /// rod's item (inner rods; [`NONE`] otherwise), its role (bit 0 inner, bit 1 outer, bit 2
-    /// two-way), the capture distance and the offset removed per step.
+    /// two-way), the capture distance and the offset removed per step, and its first entries in
+    /// the workgroup's outer and inner exchange arrays.
     struct CouplingG as "Coupling" {
         outer: u32,
         role: u32,
         capture: f32,
         correction: f32,
+        xo: u32,
+        xi: u32,
+        pad0: u32,
+        pad1: u32,
     }
 }
 
@@ -369,6 +374,7 @@ mod tests {
                 group,
                 unroll: true,
                 bind_points: 0,
+                bind_inner: 0,
                 flags: flags.clone(),
             };
             let src = cfg.source();
@@ -438,6 +444,7 @@ mod tests {
             group: 1,
             unroll: true,
             bind_points: 0,
+            bind_inner: 0,
             flags: vec![],
         }
         .source();

@@ -200,21 +200,28 @@ impl Plan {
             .map(|r| r.state.elements() as u32 + 1)
             .max()
             .unwrap_or(2);
-        // Bindings exchange the outer rods' points in workgroup memory (a vec4 and three words
-        // each): as many as the largest group's outer rods have.
-        let bind_points = if bind {
+        // Bindings exchange in workgroup memory the outer rods' points (a vec4 and two words
+        // each) and the inner rods' impulses (a vec4 each): as many as the largest group has.
+        let group_points = |of: &dyn Fn(usize) -> bool| -> u32 {
             coupled
                 .iter()
                 .map(|g| {
                     g.iter()
-                        .filter(|&&r| rods.iter().any(|o| o.binding.is_some_and(|b| b.outer == r)))
+                        .filter(|&&r| of(r))
                         .map(|&r| rods[r].state.elements() as u32 + 1)
                         .sum::<u32>()
                 })
                 .max()
                 .unwrap_or(0)
+        };
+        let is_outer = |r: usize| rods.iter().any(|o| o.binding.is_some_and(|b| b.outer == r));
+        let (bind_points, bind_inner) = if bind {
+            (
+                group_points(&is_outer),
+                group_points(&|r| rods[r].binding.is_some()),
+            )
         } else {
-            0
+            (0, 0)
         };
         let (single_threads, single_ept) = if bind {
             // The fewest points per thread with which every group's rods fit one workgroup, in
@@ -232,7 +239,8 @@ impl Plan {
             };
             let bytes = |ept: u32| {
                 round_up(lanes(ept), 32) * (per_thread_bytes + if mesh { 16 } else { 0 })
-                    + 28 * bind_points
+                    + 24 * bind_points
+                    + 16 * bind_inner
                     + 256
             };
             let ept = (1..=32)
@@ -240,7 +248,7 @@ impl Plan {
                 .find(|&e| lanes(e) <= max_threads && bytes(e) <= storage_cap)
                 .ok_or_else(|| {
                     GpuError::InvalidInput(format!(
-                        "bound rods with {bind_points} points in their outer rods do not fit one workgroup's {} bytes of memory",
+                        "bound rods with {bind_points} points in their outer rods and {bind_inner} in their inner rods do not fit one workgroup's {} bytes of memory",
                         limits.max_compute_workgroup_storage_size
                     ))
                 })?;
@@ -499,6 +507,7 @@ impl Plan {
             group,
             unroll: true,
             bind_points,
+            bind_inner,
             flags,
         };
         // Loop iterations per step and invocation, generously counted, for software adapters.
@@ -607,8 +616,8 @@ pub(crate) fn coupled_groups(rods: &[GpuRodInput]) -> Result<Vec<Vec<usize>>, Gp
 }
 
 /// Each item's part in a binding ([`CouplingG`]), with the outer rod named by its item, and each
-/// outer rod's first entry in its workgroup's exchange arrays (after the group's earlier outer
-/// rods) in `role` from bit 3.
+/// outer (inner) rod's first entry in its workgroup's outer (inner) exchange arrays, after the
+/// group's earlier outer (inner) rods.
 fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG], groups: &[[u32; 2]]) -> Vec<CouplingG> {
     let item_of = |rod: usize| items.iter().position(|it| it.rod as usize == rod);
     let mut out = vec![
@@ -630,11 +639,15 @@ fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG], groups: &[[u32; 2]])
         }
     }
     for &[first, count] in groups {
-        let mut entry = 0;
+        let (mut outer, mut inner) = (0, 0);
         for k in first as usize..(first + count) as usize {
             if out[k].role & 2 != 0 {
-                out[k].role |= entry << 3;
-                entry += items[k].n + 1;
+                out[k].xo = outer;
+                outer += items[k].n + 1;
+            }
+            if out[k].role & 1 != 0 {
+                out[k].xi = inner;
+                inner += items[k].n + 1;
             }
         }
     }

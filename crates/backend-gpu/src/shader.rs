@@ -73,6 +73,8 @@ pub(crate) struct KernelConfig {
     /// `BIND`: the outer rods' points of the largest group, which the binding exchanges in
     /// workgroup memory (0 otherwise).
     pub(crate) bind_points: u32,
+    /// `BIND`: the inner rods' points of the largest group (0 otherwise).
+    pub(crate) bind_inner: u32,
     /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
     pub(crate) group: u32,
     /// Unroll the per-thread `//#for` loops (the default); `false` emits them as WGSL loops.
@@ -92,7 +94,7 @@ impl KernelConfig {
         // naga 30 takes subgroup built-ins without (and rejects) `enable subgroups;`; the device
         // must have been created with `Features::SUBGROUP`.
         let prelude = format!(
-            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst XS: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\nconst BIND_PTS: u32 = {}u;\n",
+            "const WG: u32 = {}u;\nconst EPT: u32 = {}u;\nconst ITER: u32 = {}u;\nconst HALO: u32 = {}u;\nconst XS: u32 = {}u;\nconst SPIN_CAP: u32 = {}u;\nconst SG: u32 = {}u;\nconst BIND_PTS: u32 = {}u;\nconst BIND_IN: u32 = {}u;\n",
             self.threads,
             self.per_thread,
             self.iterations,
@@ -100,7 +102,8 @@ impl KernelConfig {
             self.exchange_steps.max(1),
             self.spin_cap,
             self.group.max(1),
-            self.bind_points.max(1)
+            self.bind_points.max(1),
+            self.bind_inner.max(1)
         );
         // A clamped end holds its point, and a clamp's state sits in the held ends' buffer
         // that REACT binds: CLAMP implies REACT (the plan sets both; a hand-made
@@ -338,6 +341,7 @@ mod tests {
             group: 1,
             unroll: true,
             bind_points: 0,
+            bind_inner: 0,
             flags: vec![],
         };
         let src = cfg.source();
@@ -364,6 +368,7 @@ mod tests {
             group: 1,
             unroll: true,
             bind_points: 0,
+            bind_inner: 0,
             flags: vec![],
         };
         let src = cfg.source();
@@ -520,6 +525,7 @@ mod tests {
                             group,
                             unroll,
                             bind_points: 0,
+                            bind_inner: 0,
                             flags: flags.clone(),
                         };
                         let composed = cfg.source_of(&text);

@@ -173,14 +173,18 @@ struct Touch {
 // A rod's part in a binding (BIND; constraints binding.rs: an inner rod, a guidewire, held on
 // the centreline of an outer one, a catheter, in the same workgroup), per item: `outer` the
 // outer rod's item (NONE: the item is no inner rod), `role` bit 0 inner, bit 1 outer (publishes
-// its points), bit 2 the binding is two-way (the outer rod takes its share), and from bit 3 an
-// outer rod's first entry in the workgroup's exchange arrays; the capture distance and the
-// fraction of the offset removed per step.
+// its points), bit 2 the binding is two-way (the outer rod takes its share); the capture
+// distance and the fraction of the offset removed per step; an outer rod's first entry in the
+// workgroup's outer exchange arrays (`xo`), an inner rod's in the inner one (`xi`).
 struct Coupling {
     outer: u32,
     role: u32,
     capture: f32,
     correction: f32,
+    xo: u32,
+    xi: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -227,13 +231,17 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 // Per workgroup: its first item and number of items.
 @group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
 @group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
-// Per point of the group's outer rods (an outer rod's from its `Coupling::role >> 3`): the point
-// at the step's start, then its velocity after each sweep, with its inverse mass in w,
-// published for the inner rods.
+// Per point of the group's outer rods (an outer rod's from its `Coupling::xo`): the point at the
+// step's start, then its velocity after each sweep, with its inverse mass in w, published for
+// the inner rods.
 var<workgroup> wb_x: array<vec4<f32>, BIND_PTS>;
-// The same points' impulses from the inner rods in one sweep (three f32 as bits each), summed
-// by compare-exchange.
-var<workgroup> wb_j: array<atomic<u32>, 3 * BIND_PTS>;
+// Per outer segment (the entry of its first point): the first and last inner entries bound to
+// it this step, where the outer rod looks for the shares of its two segments.
+var<workgroup> wb_lo: array<atomic<u32>, BIND_PTS>;
+var<workgroup> wb_hi: array<atomic<u32>, BIND_PTS>;
+// Per point of the group's inner rods (from `Coupling::xi`): the impulse of its binding in the
+// sweep (f32 bits) and its outer segment and parameter (`bind_code`).
+var<workgroup> wb_i: array<vec4<u32>, BIND_IN>;
 // Per slot of an inner rod: the outer segment its point was last bound to (where the next
 // search walks from), NONE before the first.
 @group(0) @binding(31) var<storage, read_write> bind_seg: array<u32>;
@@ -431,6 +439,8 @@ fn bind_nearest(p: vec3<f32>, start: u32, base: u32, m: u32, capture: f32) -> Bo
     if s < 0.0 || s > 1.0 {
         return out;
     }
+    // The parameter as both rods read it (`bind_code`).
+    s = bind_param_of(bind_code(0u, s));
     let g = bind_segment(base, j);
     let off = (p - g[0]) - g[1] * s;
     let len = length(g[1]);
@@ -444,26 +454,34 @@ fn bind_nearest(p: vec3<f32>, start: u32, base: u32, m: u32, capture: f32) -> Bo
     return out;
 }
 
-// Adds `x` to the f32 in word `i` of `wb_j` (several inner points can hand one outer point
-// their shares in the same sweep).
-fn bind_add(i: u32, x: f32) {
-    if x == 0.0 {
-        return;
-    }
-    var old = atomicLoad(&wb_j[i]);
-    for (var k = 0u; k < 256u; k++) {
-        let r = atomicCompareExchangeWeak(&wb_j[i], old, bitcast<u32>(bitcast<f32>(old) + x));
-        if r.exchanged {
-            break;
-        }
-        old = r.old_value;
-    }
+// A bound point's outer segment and parameter in one word (`segment << 16 | s · 65535`; the
+// parameter is kept to 1/65535 of a segment, so that the inner and the outer rod read the same
+// one), or BIND_FREE.
+const BIND_FREE: u32 = 0xffffffffu;
+
+fn bind_code(seg: u32, s: f32) -> u32 {
+    return (seg << 16u) | u32(round(s * 65535.0));
 }
 
-fn bind_add3(entry: u32, x: vec3<f32>) {
-    bind_add(3u * entry, x.x);
-    bind_add(3u * entry + 1u, x.y);
-    bind_add(3u * entry + 2u, x.z);
+fn bind_param_of(code: u32) -> f32 {
+    return f32(code & 0xffffu) / 65535.0;
+}
+
+// What the inner points bound to outer segment `seg` (entries `seg_entry` in the exchange)
+// hand the segment's point at its start (`end` 0, a share 1 - s) or its end (1, a share s) in
+// this sweep, summed in the inner points' order.
+fn bind_gather(seg_entry: u32, seg: u32, end: u32) -> vec3<f32> {
+    var acc = vec3<f32>(0.0);
+    let lo = atomicLoad(&wb_lo[seg_entry]);
+    let hi = atomicLoad(&wb_hi[seg_entry]);
+    for (var i = lo; i <= hi; i++) {
+        let q = wb_i[i];
+        if (q.w >> 16u) == seg {
+            let s = bind_param_of(q.w);
+            acc -= bitcast<vec3<f32>>(q.xyz) * select(1.0 - s, s, end == 1u);
+        }
+    }
+    return acc;
 }
 //#endif
 
@@ -714,18 +732,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     let b_inner = (cp.role & 1u) != 0u;
     let b_outer = (cp.role & 2u) != 0u;
     let b_two = (cp.role & 4u) != 0u;
-    // An outer rod's first exchange entry; an inner rod's outer rod's, and its segments.
-    let xo = cp.role >> 3u;
+    // An outer rod's first exchange entry; an inner rod's own, its outer rod's, and its
+    // outer rod's segments.
+    let xo = cp.xo;
+    let xi = cp.xi;
     var oxo = 0u;
     var om = 1u;
     if b_inner {
-        oxo = couplings[cp.outer].role >> 3u;
+        oxo = couplings[cp.outer].xo;
         om = items[cp.outer].n;
-    }
-    if tid == 0u {
-        for (var k = 0u; k < 3u * BIND_PTS; k++) {
-            atomicStore(&wb_j[k], 0u);
-        }
     }
     var bseg: array<u32, EPT>;
 //#for e 0 EPT
@@ -1530,6 +1545,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#for e 0 EPT
             if it.w0 + b0 + {e} < it.w1 {
                 wb_x[xo + it.w0 + b0 + {e}] = vec4<f32>(rx[{e+1}], wm[{e+1}]);
+                atomicStore(&wb_lo[xo + it.w0 + b0 + {e}], NONE);
+                atomicStore(&wb_hi[xo + it.w0 + b0 + {e}], 0u);
             }
 //#endfor
         }
@@ -1547,6 +1564,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             b_s[{e}] = bd.s;
             b_t[{e}] = bd.t;
             b_off[{e}] = bd.off;
+            // Two-way: listed where the outer rod will look for its share.
+            let entry = xi + it.w0 + b0 + {e};
+            var code = BIND_FREE;
+            if bd.on && b_two {
+                code = bind_code(bd.seg, bd.s);
+                atomicMin(&wb_lo[oxo + bd.seg], entry);
+                atomicMax(&wb_hi[oxo + bd.seg], entry);
+            }
+            wb_i[entry] = vec4<u32>(0u, 0u, 0u, code);
         }
 //#endfor
 //#endif
@@ -1697,8 +1723,10 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#if BIND
             // The binding sweep after the rods' own (BindingSet::sweep, as one Jacobi pass): the
             // outer rods publish their velocities, each bound inner point takes the impulse that
-            // removes its offset across the outer segment by the step's end and hands the outer
-            // points their shares (two-way), which the outer rods then apply.
+            // removes its offset across the outer segment by the step's end and publishes it
+            // (two-way), and each outer point adds the shares of the inner points bound to its
+            // two segments (found once per step, summed in their order: the same sum on every
+            // run).
             if b_outer {
 //#for e 0 EPT
                 if it.w0 + b0 + {e} < it.w1 {
@@ -1726,8 +1754,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                         let imp = dp * (-1.0 / (h * wsum));
                         vx[{e+1}] += imp * wi;
                         if b_two {
-                            bind_add3(oxo + j, imp * (s - 1.0));
-                            bind_add3(oxo + j + 1u, imp * (-s));
+                            let entry = xi + it.w0 + b0 + {e};
+                            wb_i[entry] = vec4<u32>(bitcast<vec3<u32>>(imp), wb_i[entry].w);
                         }
                     }
                 }
@@ -1736,14 +1764,20 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             workgroupBarrier();
             if b_outer {
 //#for e 0 EPT
-                if it.w0 + b0 + {e} < it.w1 {
-                    let k = 3u * (xo + it.w0 + b0 + {e});
-                    let jv = vec3<f32>(
-                        bitcast<f32>(atomicExchange(&wb_j[k], 0u)),
-                        bitcast<f32>(atomicExchange(&wb_j[k + 1u], 0u)),
-                        bitcast<f32>(atomicExchange(&wb_j[k + 2u], 0u)),
-                    );
-                    vx[{e+1}] += jv * wm[{e+1}];
+                {
+                    // The shares of the inner points bound to the segment before this point and
+                    // to the one after it.
+                    let gp = it.w0 + b0 + {e};
+                    if gp < it.w1 {
+                        var jv = vec3<f32>(0.0);
+                        if gp >= 1u {
+                            jv += bind_gather(xo + gp - 1u, gp - 1u, 1u);
+                        }
+                        if gp < it.n {
+                            jv += bind_gather(xo + gp, gp, 0u);
+                        }
+                        vx[{e+1}] += jv * wm[{e+1}];
+                    }
                 }
 //#endfor
             }
