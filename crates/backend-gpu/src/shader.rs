@@ -403,6 +403,83 @@ mod tests {
         assert!(!src.contains("var<workgroup>"));
     }
 
+    /// Composes `text` (the kernel file `name`) with the flags of `mask`, where the host ever
+    /// composes them, with every shape and variant they can meet, and validates each.
+    fn validate_combination(name: &str, text: &str, mask: u32) {
+        let flags: Vec<&'static str> = FLAGS
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| mask & (1 << i) != 0)
+            .map(|(_, f)| *f)
+            .collect();
+        let has = |f: &str| flags.contains(&f);
+        // Combinations the host never composes.
+        if (has("STRETCH_DAMP") && !has("EXTENSIBLE"))
+            || (has("GRID") && has("PERSTEP"))
+            || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
+            || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
+            || ((has("MESH") || has("GUIDE") || has("BIND"))
+                && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
+            || (has("BIND") && has("EXTENSIBLE"))
+            // The composer adds REACT to CLAMP.
+            || (has("CLAMP") && !has("REACT"))
+        {
+            return;
+        }
+        // The variant flags, with every scene/path combination they can meet.
+        let mut variants = vec![flags.clone()];
+        // Contact kernels are composed only with the production variant flags.
+        let contact = has("MESH") || has("GUIDE");
+        if contact {
+            variants[0].push("REGC");
+            if !has("EXTENSIBLE") {
+                variants[0].push("FAST");
+            }
+        }
+        for v in VARIANT_FLAGS.iter().filter(|_| !contact) {
+            let inextensible_only = v.iter().any(|f| *f != "REGC");
+            if (inextensible_only && has("EXTENSIBLE"))
+                || ((v.contains(&"NBR_SYNC") || v.contains(&"COHERENT")) && !has("GRID"))
+            {
+                return;
+            }
+            let mut f = flags.clone();
+            f.extend_from_slice(v);
+            variants.push(f);
+        }
+        for (v, flags) in variants.into_iter().enumerate() {
+            let group = if has("SUBGROUP") { 32 } else { 1 };
+            // Every shape for the scene's own flags, one for each variant on top.
+            let shapes: &[(u32, u32, bool)] = if contact {
+                &[(32, 2, true), (64, 6, false)]
+            } else if v == 0 {
+                &[(32, 2, true), (256, 4, true), (64, 6, false)]
+            } else {
+                &[(32, 2, true)]
+            };
+            for &(threads, per_thread, unroll) in shapes {
+                let cfg = KernelConfig {
+                    threads,
+                    per_thread,
+                    iterations: 10,
+                    halo: 24,
+                    exchange_steps: 2,
+                    spin_cap: 1024,
+                    group,
+                    unroll,
+                    bind_points: 0,
+                    bind_inner: 0,
+                    flags: flags.clone(),
+                };
+                let composed = cfg.source_of(text);
+                validate(
+                    &format!("{name} {flags:?} WG={threads} EPT={per_thread} unroll={unroll}"),
+                    &composed,
+                );
+            }
+        }
+    }
+
     fn validate(name: &str, src: &str) {
         let module = naga::front::wgsl::parse_str(src)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
@@ -462,82 +539,21 @@ mod tests {
                     "rod_step.wgsl on disk differs from the compiled-in copy"
                 );
             }
-            for mask in 0u32..(1 << FLAGS.len()) {
-                let flags: Vec<&'static str> = FLAGS
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| mask & (1 << i) != 0)
-                    .map(|(_, f)| *f)
-                    .collect();
-                let has = |f: &str| flags.contains(&f);
-                // Combinations the host never composes.
-                if (has("STRETCH_DAMP") && !has("EXTENSIBLE"))
-                    || (has("GRID") && has("PERSTEP"))
-                    || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
-                    || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
-                    || ((has("MESH") || has("GUIDE") || has("BIND"))
-                        && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
-                    || (has("BIND") && has("EXTENSIBLE"))
-                    // The composer adds REACT to CLAMP.
-                    || (has("CLAMP") && !has("REACT"))
-                {
-                    continue;
+            // Each thread validates every n-th combination (naga's validation of some thousand
+            // kernels dominates the test).
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            std::thread::scope(|s| {
+                for t in 0..threads {
+                    let (name, text) = (&name, &text);
+                    s.spawn(move || {
+                        for mask in
+                            (0u32..(1 << FLAGS.len())).filter(|m| *m as usize % threads == t)
+                        {
+                            validate_combination(name, text, mask);
+                        }
+                    });
                 }
-                // The variant flags, with every scene/path combination they can meet.
-                let mut variants = vec![flags.clone()];
-                // Contact kernels are composed only with the production variant flags.
-                let contact = has("MESH") || has("GUIDE");
-                if contact {
-                    variants[0].push("REGC");
-                    if !has("EXTENSIBLE") {
-                        variants[0].push("FAST");
-                    }
-                }
-                for v in VARIANT_FLAGS.iter().filter(|_| !contact) {
-                    let inextensible_only = v.iter().any(|f| *f != "REGC");
-                    if (inextensible_only && has("EXTENSIBLE"))
-                        || ((v.contains(&"NBR_SYNC") || v.contains(&"COHERENT")) && !has("GRID"))
-                    {
-                        continue;
-                    }
-                    let mut f = flags.clone();
-                    f.extend_from_slice(v);
-                    variants.push(f);
-                }
-                for (v, flags) in variants.into_iter().enumerate() {
-                    let group = if has("SUBGROUP") { 32 } else { 1 };
-                    // Every shape for the scene's own flags, one for each variant on top.
-                    let shapes: &[(u32, u32, bool)] = if contact {
-                        &[(32, 2, true), (64, 6, false)]
-                    } else if v == 0 {
-                        &[(32, 2, true), (256, 4, true), (64, 6, false)]
-                    } else {
-                        &[(32, 2, true)]
-                    };
-                    for &(threads, per_thread, unroll) in shapes {
-                        let cfg = KernelConfig {
-                            threads,
-                            per_thread,
-                            iterations: 10,
-                            halo: 24,
-                            exchange_steps: 2,
-                            spin_cap: 1024,
-                            group,
-                            unroll,
-                            bind_points: 0,
-                            bind_inner: 0,
-                            flags: flags.clone(),
-                        };
-                        let composed = cfg.source_of(&text);
-                        validate(
-                            &format!(
-                                "{name} {flags:?} WG={threads} EPT={per_thread} unroll={unroll}"
-                            ),
-                            &composed,
-                        );
-                    }
-                }
-            }
+            });
         }
         assert!(kernels >= 1, "no kernel files found");
     }
