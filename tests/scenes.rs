@@ -229,6 +229,14 @@ fn copies_of_a_scene_step_as_the_scene_alone() {
         assert_eq!(p, copies.positions(RodHandle(2 - still)));
         assert_ne!(p, pushed, "copy {still} was not pushed");
     }
+    // Several GPUs alone ask for no copies.
+    let (b, _, _) = parse_scene(
+        Path::new("gpus.toml"),
+        &(GOOD.to_string() + "[batch]\ngpus = 2\n"),
+        &[],
+    )
+    .unwrap();
+    assert_eq!(b.build().unwrap().rods().count(), 1);
 }
 
 #[test]

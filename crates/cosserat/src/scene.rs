@@ -147,8 +147,9 @@ pub struct RodContactSection {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BatchSection {
-    /// Number of copies (at least 1).
-    pub copies: usize,
+    /// Number of copies (at least 1; default 1, e.g. a scene of several rods that only asks
+    /// for several GPUs).
+    pub copies: Option<usize>,
     /// GPUs to spread the copies over with the GPU backend: a number, or `"all"` (default 1).
     pub gpus: Option<GpuCount>,
 }
@@ -1029,17 +1030,18 @@ impl Checker<'_> {
             b = b.reaction_cutoff_hz(self.positive("haptics.cutoff_hz", h.cutoff_hz)?);
         }
         if let Some(batch) = &scene.batch {
-            if batch.copies == 0 {
+            let copies = batch.copies.unwrap_or(1);
+            if copies == 0 {
                 return Err(self.invalid("batch.copies", 0, "expected at least 1"));
             }
-            if batch.copies > 1 && scene.rod_contact.is_some() {
+            if copies > 1 && scene.rod_contact.is_some() {
                 return Err(self.invalid(
                     "batch.copies",
-                    batch.copies,
+                    copies,
                     "copies share one space, so with [rod_contact] their rods would touch each other",
                 ));
             }
-            b = b.copies(batch.copies);
+            b = b.copies(copies);
             match &batch.gpus {
                 None => {}
                 Some(GpuCount::Count(n)) if *n >= 1 => b = b.gpus(Gpus::Count(*n as usize)),
