@@ -156,6 +156,18 @@ impl Gpu {
         Ok(Self::with_errors(device, queue, errors, options))
     }
 
+    /// Waits until the device has finished everything submitted (two minutes at most), then
+    /// reports any error it raised meanwhile.
+    pub(crate) fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: Some(std::time::Duration::from_secs(120)),
+            })
+            .map_err(|e| GpuError::Wgpu(format!("waiting for the GPU: {e}")))?;
+        self.errors.take()
+    }
+
     /// A caller's device and queue. The features and limits are those the device was created
     /// with; its uncaptured-error handler is left to its owner.
     pub(crate) fn shared(device: wgpu::Device, queue: wgpu::Queue, options: &GpuOptions) -> Self {
@@ -223,10 +235,13 @@ fn distinct_adapters(infos: Vec<wgpu::AdapterInfo>) -> Vec<usize> {
     chosen
 }
 
-/// The optional features of `available` the kernels use: subgroups and `@coherent` buffers
-/// always, timestamps when asked for.
+/// The optional features of `available` the kernels use: subgroups, `@coherent` buffers and
+/// double precision (the stiff scheme's banded solve, `banded.rs`) always, timestamps when
+/// asked for.
 fn wanted_features(available: wgpu::Features, options: &GpuOptions) -> wgpu::Features {
-    let mut wanted = wgpu::Features::SUBGROUP | wgpu::Features::MEMORY_DECORATION_COHERENT;
+    let mut wanted = wgpu::Features::SUBGROUP
+        | wgpu::Features::MEMORY_DECORATION_COHERENT
+        | wgpu::Features::SHADER_F64;
     if options.timestamps {
         wanted |= wgpu::Features::TIMESTAMP_QUERY;
     }

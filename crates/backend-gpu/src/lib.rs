@@ -38,6 +38,7 @@
 //! kernel shape), `device.rs`, `sim.rs` (upload and stepping), `readback.rs`, and `variants.rs`
 //! (measurement-only kernel variants, outside the production path).
 
+pub mod banded;
 mod device;
 mod layout;
 mod plan;

@@ -651,13 +651,7 @@ impl GpuSimulation {
         for b in &pending {
             b.map_async(wgpu::MapMode::Read, .., |_| {});
         }
-        self.gpu
-            .device
-            .poll(wgpu::PollType::Wait {
-                submission_index: None,
-                timeout: Some(Duration::from_secs(120)),
-            })
-            .map_err(|e| GpuError::Wgpu(format!("waiting for the GPU: {e}")))?;
+        self.gpu.wait_idle()?;
         let mut total = 0.0;
         for b in &pending {
             {

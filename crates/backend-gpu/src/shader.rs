@@ -21,6 +21,8 @@ pub(crate) const COMMON_WGSL: &str = include_str!("shaders/common.wgsl");
 pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 /// The wall-contact queries, composed after `common.wgsl` into kernels with `MESH`.
 pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wgsl");
+/// The stiff scheme's banded factorisation and solve (`banded.rs`).
+pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
