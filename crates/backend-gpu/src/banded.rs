@@ -33,7 +33,10 @@ pub const BLOCK_ROW: usize = 24;
 pub enum Precision {
     /// Double precision (needs `SHADER_F64`).
     F64,
-    /// Single precision (measurement only).
+    /// Single precision (measurement only), the system scaled symmetrically by its diagonal
+    /// on the host before it is rounded (`(S A S) y = S b`, `x = S y`, `S = diag(A)^(-1/2)`):
+    /// unscaled, the bend–twist unknowns of a real wire's system come out wrong in `f32`
+    /// (backend-cpu `stiff/precision_tests.rs` measures both).
     F32,
 }
 
@@ -70,6 +73,8 @@ pub struct BandedBatch {
     strategy: Strategy,
     rods: usize,
     count: usize,
+    /// Per rod and block row, the scale of each unknown ([`Precision::F32`]; ones otherwise).
+    scale: Vec<[f64; 3]>,
     rows: wgpu::Buffer,
     x: wgpu::Buffer,
     staging: wgpu::Buffer,
@@ -190,6 +195,7 @@ impl BandedBatch {
             strategy,
             rods,
             count,
+            scale: vec![[1.0; 3]; rods * count],
             rows,
             x,
             staging,
@@ -221,9 +227,27 @@ impl BandedBatch {
                     self.count
                 )));
             }
+            let scale = &mut self.scale[rod * self.count..(rod + 1) * self.count];
+            for (s, row) in scale.iter_mut().zip(r) {
+                *s = match self.precision {
+                    Precision::F64 => [1.0; 3],
+                    Precision::F32 => {
+                        [row[0], row[3], row[5]].map(|d| if d > 0.0 { 1.0 / d.sqrt() } else { 1.0 })
+                    }
+                };
+            }
+            let s = |k: usize| scale.get(k).copied().unwrap_or([1.0; 3]);
             for (k, row) in r.iter().enumerate() {
+                // Entry e of block (k, k + off) at (i, j) scales by s_k,i s_{k+off},j.
+                let (sk, s1, s2) = (s(k), s(k + 1), s(k + 2));
+                let diag = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
                 for (e, v) in row.iter().enumerate() {
-                    flat[(k * BLOCK_ROW + e) * self.rods + rod] = *v;
+                    let f = match e {
+                        0..6 => sk[diag[e].0] * sk[diag[e].1],
+                        6..15 => sk[(e - 6) / 3] * s1[(e - 6) % 3],
+                        _ => sk[(e - 15) / 3] * s2[(e - 15) % 3],
+                    };
+                    flat[(k * BLOCK_ROW + e) * self.rods + rod] = *v * f;
                 }
             }
         }
@@ -231,7 +255,8 @@ impl BandedBatch {
         Ok(())
     }
 
-    /// Uploads every rod's right-hand side: `rhs[rod][k]` belongs to block row `k`.
+    /// Uploads every rod's right-hand side: `rhs[rod][k]` belongs to block row `k` (after the
+    /// rows, whose scale it takes in [`Precision::F32`]).
     pub fn set_rhs(&mut self, rhs: &[Vec<[f64; 3]>]) -> Result<(), GpuError> {
         self.check_rods(rhs.len(), "right-hand sides")?;
         let mut flat = vec![0.0f64; self.rods * self.count * 3];
@@ -244,8 +269,9 @@ impl BandedBatch {
                 )));
             }
             for (k, v) in b.iter().enumerate() {
+                let s = self.scale[rod * self.count + k];
                 for (c, x) in v.iter().enumerate() {
-                    flat[(k * 3 + c) * self.rods + rod] = *x;
+                    flat[(k * 3 + c) * self.rods + rod] = *x * s[c];
                 }
             }
         }
@@ -304,7 +330,10 @@ impl BandedBatch {
         Ok((0..self.rods)
             .map(|rod| {
                 (0..self.count)
-                    .map(|k| [0, 1, 2].map(|c| flat[(k * 3 + c) * self.rods + rod]))
+                    .map(|k| {
+                        let s = self.scale[rod * self.count + k];
+                        [0, 1, 2].map(|c| flat[(k * 3 + c) * self.rods + rod] * s[c])
+                    })
                     .collect()
             })
             .collect())

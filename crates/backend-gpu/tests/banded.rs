@@ -163,14 +163,18 @@ fn solves_a_batch_of_chain_systems_to_double_precision() {
     // 37 elements: not a power of two, so the cyclic reduction's last levels have rows with
     // one neighbour only.
     for strategy in STRATEGIES {
-        solve_chain_systems(strategy, 5, 37);
-        solve_chain_systems(strategy, 2, 1);
-        solve_chain_systems(strategy, 2, 2);
+        solve_chain_systems(Precision::F64, strategy, 5, 37);
+        solve_chain_systems(Precision::F64, strategy, 2, 1);
+        solve_chain_systems(Precision::F64, strategy, 2, 2);
+        // The single-precision kernels keep a backward error of single precision's order.
+        // (Whether their solution is accurate is a question of the matrix's conditioning, which
+        // backend-cpu `stiff/precision_tests.rs` answers on real wires' matrices.)
+        solve_chain_systems(Precision::F32, strategy, 5, 37);
     }
 }
 
-fn solve_chain_systems(strategy: Strategy, rods: usize, elements: usize) {
-    let Some(mut b) = batch(Precision::F64, strategy, rods, elements) else {
+fn solve_chain_systems(precision: Precision, strategy: Strategy, rods: usize, elements: usize) {
+    let Some(mut b) = batch(precision, strategy, rods, elements) else {
         return;
     };
     let count = b.block_rows();
@@ -197,8 +201,13 @@ fn solve_chain_systems(strategy: Strategy, rods: usize, elements: usize) {
     let res = backward_errors(&mut b, &rows, &rhs);
     let worst = res.iter().cloned().fold(0.0, f64::max);
     assert!(
-        worst < 1e-12,
-        "{strategy:?}, {rods} rods of {elements} elements: backward error {worst:e}"
+        worst
+            < if precision == Precision::F64 {
+                1e-12
+            } else {
+                1e-5
+            },
+        "{precision:?} {strategy:?}, {rods} rods of {elements} elements: backward error {worst:e}"
     );
 }
 

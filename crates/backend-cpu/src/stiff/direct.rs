@@ -290,7 +290,7 @@ impl Assembled {
 
     /// Block row `k` of the unknowns' order `(λ_Γ0, λ_Ω0, λ_Γ1, …)`.
     #[inline(always)]
-    fn block_row(&self, k: usize) -> (M3, B4, B4) {
+    pub(crate) fn block_row(&self, k: usize) -> (M3, B4, B4) {
         let base = if k.is_multiple_of(2) { 0 } else { Self::BEND };
         let e = &self.records[k / 2][base..base + Self::BEND];
         let d = [[e[0], e[1], e[2]], [e[1], e[3], e[4]], [e[2], e[4], e[5]]];

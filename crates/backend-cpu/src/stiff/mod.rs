@@ -1259,3 +1259,5 @@ mod tests {
 
 #[cfg(test)]
 mod damping_tests;
+#[cfg(test)]
+mod precision_tests;
