@@ -120,6 +120,8 @@ class Simulation:
         [rad] at each time [s from now], zero at the first (0), linear between, held after."""
     def slide_end(self, end: int, axis: Optional[Sequence[float]], rod: int = 0) -> None:
         """Lets a held end slide freely along ``axis`` (world), or holds it again with ``None``."""
+    def hinge_end(self, end: int, axis: Optional[Sequence[float]], rod: int = 0) -> None:
+        """Lets a clamp turn freely about ``axis`` (world), or holds its frame again with ``None``."""
     def end_reaction(
         self, end: int, rod: int = 0
     ) -> Optional[Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:

@@ -705,6 +705,26 @@ impl PySimulation {
             .map_err(control_err)
     }
 
+    /// Lets the clamp of end `end` of rod `rod` turn freely about `axis` (world axes now; it
+    /// turns with the clamp's prescribed rotation): a hinge. `axis=None` holds the frame in every
+    /// direction again (explicit CPU scheme).
+    #[pyo3(signature = (end, axis, rod=0))]
+    fn hinge_end(&self, end: usize, axis: Option<Vec<f64>>, rod: usize) -> PyResult<()> {
+        let axis = axis.map(|a| vec3("axis", &a)).transpose()?;
+        let mut sim = self.lock();
+        let h = Self::handle(&sim, rod)?;
+        let mut condition = sim.end_condition(h, end).map_err(control_err)?;
+        condition = match axis {
+            Some(a) => condition.hinged_about(a.into()),
+            None => EndCondition {
+                hinge: None,
+                ..condition
+            },
+        };
+        sim.set_end_condition(h, end, condition)
+            .map_err(control_err)
+    }
+
     /// The filtered reaction at held end `end` of rod `rod` after the last step, the wrench the
     /// holder applies to the rod: `(force [N], torque about the held point [N m])` as arrays in
     /// world axes (a haptic device renders their negative); `None` for a free end or a backend

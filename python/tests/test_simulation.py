@@ -148,6 +148,22 @@ def test_an_end_follows_its_path_and_slides_along_its_axis():
         sim.slide_end(1, [1.0, 0.0, 0.0])
 
 
+def test_a_hinged_clamp_swings_like_a_pin():
+    # Hinged about y, the axis the rope's weight turns it about, a clamp leaves that turn
+    # free, as a pin does.
+    pinned = cosserat.Simulation.from_file(PENDULUM, {"rod.0.elements": 20})
+    hinged = cosserat.Simulation.from_file(PENDULUM, {"rod.0.elements": 20})
+    hinged.hold_end(0, "clamped")
+    hinged.hinge_end(0, [0.0, 1.0, 0.0])
+    pinned.run(2000)
+    hinged.run(2000)
+    assert hinged.positions() == pytest.approx(pinned.positions(), abs=1e-4)
+    hinged.hinge_end(0, None)
+    hinged.run(10)
+    with pytest.raises(cosserat.ControlError, match="only a clamped end"):
+        pinned.hinge_end(0, [0.0, 1.0, 0.0])
+
+
 def test_a_moment_turns_the_end_it_acts_on():
     sim = cosserat.Simulation.from_toml(
         CANTILEVER.replace('scheme = "stiff"', 'scheme = "explicit"').replace(

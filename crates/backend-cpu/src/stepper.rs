@@ -50,6 +50,9 @@ pub struct CpuRod<T: Real> {
     pub(crate) held_path: [HeldPath; 2],
     /// The velocity across its axis that a sliding end's motion prescribes over this step.
     pub(crate) slide_velocity: [Vec3<T>; 2],
+    /// A hinged clamp's axis in the clamp's own frame, fixed when the hinge is first stepped
+    /// (the condition gives it in the world frame; turning about itself leaves it in place).
+    pub(crate) hinge_body: [Option<Vec3<T>>; 2],
 }
 
 /// The path of a held end point, accumulated in `f64`.
@@ -162,6 +165,7 @@ impl<T: Real> CpuRod<T> {
             guide: None,
             held_path: [HeldPath::default(); 2],
             slide_velocity: [Vec3::zeros(); 2],
+            hinge_body: [None; 2],
         }
     }
 
@@ -240,6 +244,9 @@ impl<T: Real> CpuRod<T> {
     pub fn set_end_condition(&mut self, end: usize, condition: EndCondition<T>) {
         let old = std::mem::replace(&mut self.ends[end], condition);
         let condition = &self.ends[end];
+        if old.hinge != condition.hinge || old.kind != condition.kind {
+            self.hinge_body[end] = None;
+        }
         if old.kind == condition.kind
             && old.slide_axis().is_some() == condition.slide_axis().is_some()
         {
@@ -445,7 +452,14 @@ pub(crate) fn before_constraints<T: Real>(
     // frame then turns with the clamp's prescribed rotation.
     for (e, (end, frame)) in rod.ends.iter().zip([0, n - 1]).enumerate() {
         if end.holds_frame() {
-            let omega = end.velocities_over(t, h.to_f64()).1;
+            let mut omega = end.velocities_over(t, h.to_f64()).1;
+            if let Some(axis) = end.hinge_axis() {
+                let clamp = &mut rod.state.clamp_frames[e];
+                let body = *rod.hinge_body[e].get_or_insert_with(|| rotate_inv(clamp, &axis));
+                let turn = settle_hinge(clamp, &w.frame(frame), &rod.params, e, &body);
+                // The clamp's own turn this step, for the node's damping.
+                omega += rotate(clamp, &body) * (turn / h);
+            }
             let torque = clamp_torque(w, &rod.state.clamp_frames[e], &rod.params, e, frame, omega);
             w.tq.set(frame, w.tq.get(frame) + torque);
             if let Some(rx) = rod.reaction.as_deref_mut() {
@@ -499,6 +513,52 @@ pub fn moment_shares(point: usize, n: usize) -> impl Iterator<Item = (usize, f64
         .into_iter()
         .flatten()
         .map(move |f| (f, share))
+}
+
+/// Turns a hinged clamp (`clamp`, of end `e`) about its hinge axis (`axis`, in its own frame) to
+/// where its node's elastic torque about that axis vanishes, the end frame being `q`, and
+/// returns the angle it turned by. A hinge is a clamp without inertia about its axis, so it sits
+/// where the rod leaves it no moment about the axis, step by step. The torque about the axis is
+/// nearly linear in the angle (the node's relative rotation changes by a few milliradians a
+/// step), so a few secant steps from the present angle find it to rounding.
+fn settle_hinge<T: Real>(
+    clamp: &mut Quat<T>,
+    q: &Quat<T>,
+    params: &RodParams<T>,
+    e: usize,
+    axis: &Vec3<T>,
+) -> T {
+    let node = &params.end_nodes[e];
+    let l = params.end_node_length(e);
+    let turned = |phi: T| {
+        let c = *clamp * exp_rotation(&(axis * phi));
+        c / c.norm()
+    };
+    // The node's torque on the clamp (clamp axes) about the hinge axis.
+    let moment = |phi: T| clamp_node_of(&turned(phi), q, node, l, e).2.dot(axis);
+    let (mut a, mut b) = (T::zero(), T::lit(1e-3));
+    let (mut ga, mut gb) = (moment(a), moment(b));
+    let at_rest = ga.abs();
+    for _ in 0..4 {
+        let slope = (gb - ga) / (b - a);
+        if !(slope.abs() > T::zero()) || !slope.is_finite() {
+            break;
+        }
+        let next = b - gb / slope;
+        (a, ga) = (b, gb);
+        b = next;
+        gb = moment(b);
+    }
+    // The better of the last two, unless neither beats not turning (a flat or noisy moment
+    // leaves the clamp where it was).
+    let (phi, g) = if gb.abs() <= ga.abs() {
+        (b, gb)
+    } else {
+        (a, ga)
+    };
+    let phi = if g.abs() <= at_rest { phi } else { T::zero() };
+    *clamp = turned(phi);
+    phi
 }
 
 /// The body torque the clamp of end `e` gives the end frame `frame` of the working layout: its

@@ -92,6 +92,7 @@ impl<T: Real> Scheme<T> for Explicit {
         cpu_base()
             .with(Capability::DirectConstraints)
             .with(Capability::SlidingEnds)
+            .with(Capability::HingedEnds)
             .with(Capability::Moments)
     }
 
@@ -121,6 +122,7 @@ impl<T: Real> Scheme<T> for Coupled<T> {
             .with(Capability::Bindings)
             .with(Capability::RodContact)
             .with(Capability::SlidingEnds)
+            .with(Capability::HingedEnds)
             .with(Capability::Moments)
     }
 

@@ -541,6 +541,9 @@ pub struct EndSection {
     /// An axis (world frame) along which the held end point is free: the rod and loads on the
     /// end point move it along the axis, the motion or path only across it.
     pub slide: Option<[f64; 3]>,
+    /// An axis (world frame) about which a clamped end's clamp turns freely (a hinge); it
+    /// holds the end frame in every other direction.
+    pub hinge: Option<[f64; 3]>,
 }
 
 /// `rod.start.path` / `rod.end.path`: keyframes of a held end's displacement and rotation
@@ -1720,6 +1723,7 @@ impl Checker<'_> {
             guide: e.guide,
             path: e.path.clone(),
             slide: e.slide,
+            hinge: e.hinge,
         };
         let kind = match e.kind.as_deref() {
             None | Some("free") => EndKind::Free,
@@ -1769,6 +1773,24 @@ impl Checker<'_> {
                 ));
             }
             cond = cond.sliding_along(axis.into());
+        }
+        if let Some(axis) = e.hinge {
+            let axis = self.finite3(&format!("{field}.hinge"), axis)?;
+            if kind != EndKind::Clamped {
+                return Err(self.invalid(
+                    format!("{field}.kind"),
+                    e.kind.as_deref().unwrap_or("free"),
+                    "a hinged end (hinge) must be \"clamped\": only a clamp has a frame to turn",
+                ));
+            }
+            if axis == [0.0; 3] {
+                return Err(self.invalid(
+                    format!("{field}.hinge"),
+                    axis,
+                    "expected an axis of non-zero length",
+                ));
+            }
+            cond = cond.hinged_about(axis.into());
         }
         if let Some(p) = &e.path {
             if driven {

@@ -25,6 +25,8 @@ pub enum Capability {
     EndPaths,
     /// Held end points that slide along an axis.
     SlidingEnds,
+    /// Clamps that turn freely about an axis (hinges).
+    HingedEnds,
     /// Loads varying in time.
     VaryingLoads,
     /// Point moments.
@@ -33,7 +35,7 @@ pub enum Capability {
 
 impl Capability {
     /// Every capability, in a fixed order.
-    pub const ALL: [Capability; 12] = [
+    pub const ALL: [Capability; 13] = [
         Capability::MeshContact,
         Capability::Guide,
         Capability::Bindings,
@@ -44,6 +46,7 @@ impl Capability {
         Capability::DoublePrecision,
         Capability::EndPaths,
         Capability::SlidingEnds,
+        Capability::HingedEnds,
         Capability::VaryingLoads,
         Capability::Moments,
     ];
@@ -67,6 +70,7 @@ impl Capability {
             Capability::DoublePrecision => "f64 (solver.precision = \"f64\")",
             Capability::EndPaths => "keyframed end paths (rod.start.path / rod.end.path)",
             Capability::SlidingEnds => "sliding ends (rod.start.slide / rod.end.slide)",
+            Capability::HingedEnds => "hinged clamps (rod.start.hinge / rod.end.hinge)",
             Capability::VaryingLoads => "time-varying loads ([[rod.load]] profile)",
             Capability::Moments => "point moments ([[rod.load]] moment)",
         }

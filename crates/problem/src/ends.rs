@@ -10,7 +10,9 @@
 //! recorded hand motion). A held end may also slide along a fixed axis ([`EndCondition::slide`]):
 //! its point is then free along that axis, moved there by the rod and by loads on it, and held
 //! across it (a prismatic clamp, or a pin on a rail). That is how a rod is twisted or pulled
-//! under a given tension rather than a given length.
+//! under a given tension rather than a given length. A clamp may also turn freely about an
+//! axis ([`EndCondition::hinge`]): a revolute joint, which with a slide along the same axis is a
+//! cylindrical one.
 
 use cosserat_model::{Real, Vec3};
 use nalgebra::UnitQuaternion;
@@ -237,6 +239,11 @@ pub struct EndCondition<T: Real> {
     /// the end point move it along the axis, the motion or path only across it. `None`: held
     /// in every direction.
     pub slide: Option<Vec3<T>>,
+    /// A unit axis (world frame when the condition is set) about which a clamp turns freely: a
+    /// hinge. The clamp holds the end frame in every other direction; the axis turns with the
+    /// clamp's prescribed rotation. `None`: held in every direction. Only a clamped end has a
+    /// frame to hinge.
+    pub hinge: Option<Vec3<T>>,
 }
 
 impl<T: Real> EndCondition<T> {
@@ -280,6 +287,14 @@ impl<T: Real> EndCondition<T> {
         self.slide = (norm > T::zero()).then(|| axis / norm);
         self
     }
+    /// This condition with its clamp free to turn about `axis` (normalised here; a zero axis
+    /// holds the frame in every direction).
+    #[must_use]
+    pub fn hinged_about(mut self, axis: Vec3<T>) -> Self {
+        let norm = axis.norm();
+        self.hinge = (norm > T::zero()).then(|| axis / norm);
+        self
+    }
     /// The same condition in another precision.
     pub fn cast<U: Real>(&self) -> EndCondition<U> {
         EndCondition {
@@ -287,7 +302,12 @@ impl<T: Real> EndCondition<T> {
             motion: self.motion.map(|m| m.cast()),
             path: self.path.clone(),
             slide: self.slide.map(|a| cast_vec(&a)),
+            hinge: self.hinge.map(|a| cast_vec(&a)),
         }
+    }
+    /// The hinge axis of a clamp, if it turns about one.
+    pub fn hinge_axis(&self) -> Option<Vec3<T>> {
+        self.hinge.filter(|_| self.holds_frame())
     }
     /// The slide axis of a held end point, if it slides.
     pub fn slide_axis(&self) -> Option<Vec3<T>> {

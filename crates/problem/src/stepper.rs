@@ -415,6 +415,7 @@ pub fn condition_needs(condition: &EndCondition<f64>) -> Capabilities {
     Capabilities::NONE
         .with_if(Capability::EndPaths, condition.path.is_some())
         .with_if(Capability::SlidingEnds, condition.slide_axis().is_some())
+        .with_if(Capability::HingedEnds, condition.hinge_axis().is_some())
 }
 
 /// Checks an end condition's motion: finite velocities and a start no later than its end; a
@@ -431,6 +432,20 @@ pub fn check_condition(condition: &EndCondition<f64>) -> Result<(), ControlError
             return Err(ControlError::Value {
                 field: "end slide axis",
                 why: "a free end has no point to slide: hold it (pinned or clamped)".into(),
+            });
+        }
+    }
+    if let Some(a) = condition.hinge {
+        if !a.iter().all(|x| x.is_finite()) {
+            return Err(ControlError::Value {
+                field: "end hinge axis",
+                why: format!("{:?} is not finite", [a.x, a.y, a.z]),
+            });
+        }
+        if !condition.holds_frame() {
+            return Err(ControlError::Value {
+                field: "end hinge axis",
+                why: "only a clamped end has a frame to turn about a hinge".into(),
             });
         }
     }
