@@ -1137,8 +1137,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             let k = clamps[2u * it.rod];
             tc0 = clamp_torque(qc0, q[0], w[0], om0, k.d.xyz, k.e.xyz, k.d.w, k.e.w, false);
             // The clamp's torque on the rod, in world coordinates: the end's reaction torque.
-            rt0 = low_pass(rt0, xt0, quat_rotate(q[0], tc0));
-            xt0 = quat_rotate(q[0], tc0);
+            let world0 = quat_rotate(q[0], tc0);
+            rt0 = low_pass(rt0, xt0, world0);
+            xt0 = world0;
         }
         if c1 {
             let dr = drives[it.rod * 2u + 1u];
@@ -1153,8 +1154,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
             let k = clamps[2u * it.rod + 1u];
             tc1 = clamp_torque(qc1, qf, wf, om1, k.d.xyz, k.e.xyz, k.d.w, k.e.w, true);
-            rt1 = low_pass(rt1, xt1, quat_rotate(qf, tc1));
-            xt1 = quat_rotate(qf, tc1);
+            let world1 = quat_rotate(qf, tc1);
+            rt1 = low_pass(rt1, xt1, world1);
+            xt1 = world1;
         }
 //#endif
 //#if REACT
