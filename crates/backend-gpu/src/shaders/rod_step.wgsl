@@ -1755,6 +1755,16 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                         let dp = d - b_t[{e}] * dot(b_t[{e}], d);
                         let imp = dp * (-1.0 / (h * wsum));
                         vx[{e+1}] += imp * wi;
+//#if REACT
+                        // A held point does not move; the binding's push on it is part of its
+                        // reaction, as on the CPU (`KinematicImpulses`).
+                        if (react0 && it.w0 + b0 + {e} == 0u) {
+                            jr0 -= imp;
+                        }
+                        if (react1 && it.w0 + b0 + {e} == it.n) {
+                            jr1 -= imp;
+                        }
+//#endif
                         if b_two {
                             let entry = xi + it.w0 + b0 + {e};
                             wb_i[entry] = vec4<u32>(bitcast<vec3<u32>>(imp), wb_i[entry].w);
@@ -1779,6 +1789,15 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                             jv += bind_gather(xo + gp, gp, 0u);
                         }
                         vx[{e+1}] += jv * wm[{e+1}];
+//#if REACT
+                        // A held point's share goes into its reaction.
+                        if (react0 && gp == 0u) {
+                            jr0 -= jv;
+                        }
+                        if (react1 && gp == it.n) {
+                            jr1 -= jv;
+                        }
+//#endif
                     }
                 }
 //#endfor
