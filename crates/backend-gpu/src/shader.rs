@@ -304,6 +304,7 @@ fn expand_block(lines: &[&str], ept: u32, unroll: bool, out: &mut String) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::banded::{Precision, source};
 
     #[test]
     fn preprocessor_selects_blocks() {
@@ -532,6 +533,17 @@ mod tests {
                     text, WALL_CONTACT_WGSL,
                     "wall_contact.wgsl on disk differs from the compiled-in copy"
                 );
+                continue;
+            }
+            if file.file_name().is_some_and(|f| f == "banded_solve.wgsl") {
+                // Not composed with flags: its number type is the only thing filled in.
+                assert_eq!(
+                    text, BANDED_SOLVE_WGSL,
+                    "banded_solve.wgsl on disk differs from the compiled-in copy"
+                );
+                for precision in [Precision::F64, Precision::F32] {
+                    validate(&format!("{name} {precision:?}"), &source(precision));
+                }
                 continue;
             }
             kernels += 1;
