@@ -141,6 +141,84 @@ fn a_run_is_drawn_into_frames_and_a_gif() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `--format mp4` pipes the frames through ffmpeg into an H.264 MP4 with one picture per frame
+/// (checked with ffprobe). Without ffmpeg the command refuses mp4 with a message that says so;
+/// `COSSERAT_REQUIRE_FFMPEG=1` (set by CI, which installs it) makes a missing ffmpeg a failure.
+#[test]
+fn render_writes_an_mp4_through_ffmpeg() {
+    let has_ffmpeg = Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_ffmpeg {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_FFMPEG").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_FFMPEG=1 but ffmpeg does not run"
+        );
+    }
+    let dir = scratch("mp4");
+    let out = cosserat(&[
+        "run",
+        "scenes/pendulum.toml",
+        "--elements",
+        "8",
+        "--steps",
+        "40",
+        "--frames",
+        "4",
+        "--out",
+        text(&dir),
+        "--render",
+        "--format",
+        "mp4",
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    if no_adapter(&out) {
+        return;
+    }
+    if !has_ffmpeg {
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("needs ffmpeg"), "{err}");
+        return;
+    }
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mp4 = dir.join("render").join("pendulum.mp4");
+    let bytes = std::fs::read(&mp4).unwrap_or_else(|e| panic!("{}: {e}", mp4.display()));
+    assert_eq!(&bytes[4..8], b"ftyp", "not an MP4 file");
+    let probe = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-count_frames",
+            "-show_entries",
+            "stream=codec_name,nb_read_frames,width,height",
+            "-of",
+            "default=nw=1",
+        ])
+        .arg(&mp4)
+        .output();
+    if let Ok(probe) = probe.filter(|p| p.status.success()) {
+        let info = String::from_utf8_lossy(&probe.stdout);
+        for line in [
+            "codec_name=h264",
+            "width=64",
+            "height=48",
+            "nb_read_frames=5",
+        ] {
+            assert!(info.contains(line), "ffprobe says:\n{info}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `run --render` draws what the run wrote; `--last-only` writes one still.
 #[test]
 fn run_render_draws_the_run_it_made() {
