@@ -68,8 +68,8 @@ pub trait Scheme<T: Real>: Clone + Send + Sync + 'static {
     }
 }
 
-/// What every CPU scheme can do: mesh contact, the guide, reactions at held ends, `f64`, held
-/// ends along keyframed paths.
+/// What every CPU scheme can do: mesh contact, several obstacles (moving ones too), the guide,
+/// reactions at held ends, `f64`, held ends along keyframed paths.
 fn cpu_base() -> Capabilities {
     Capabilities::of(&[
         Capability::MeshContact,
@@ -78,6 +78,8 @@ fn cpu_base() -> Capabilities {
         Capability::DoublePrecision,
         Capability::EndPaths,
         Capability::VaryingLoads,
+        Capability::Obstacles,
+        Capability::MovingObstacles,
     ])
 }
 

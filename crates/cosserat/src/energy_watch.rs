@@ -33,6 +33,10 @@
 //! its initial energy within 129 steps (a case of `tests/stability.rs`), while staying far
 //! below any blow-up.
 //!
+//! A moving obstacle (`crate::obstacles`) does work on the rods through its contacts, which
+//! nothing measures (a conveyor gives a rope its speed, a rising floor lifts it): a scene with
+//! one is not watched.
+//!
 //! A held end that moves where the stepper measures no reaction makes the work unknown: the
 //! watch stops until it is reset. Writing the state, restoring a snapshot or changing an end's
 //! condition resets it (the energy then is the user's, not the run's).

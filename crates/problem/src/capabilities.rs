@@ -29,11 +29,16 @@ pub enum Capability {
     VaryingLoads,
     /// Point moments.
     Moments,
+    /// Several obstacles, obstacles of different friction, or analytic shapes (half-spaces,
+    /// infinite cylinders).
+    Obstacles,
+    /// Obstacles moving along keyframed paths.
+    MovingObstacles,
 }
 
 impl Capability {
     /// Every capability, in a fixed order.
-    pub const ALL: [Capability; 12] = [
+    pub const ALL: [Capability; 14] = [
         Capability::MeshContact,
         Capability::Guide,
         Capability::Bindings,
@@ -46,6 +51,8 @@ impl Capability {
         Capability::SlidingEnds,
         Capability::VaryingLoads,
         Capability::Moments,
+        Capability::Obstacles,
+        Capability::MovingObstacles,
     ];
 
     fn bit(self) -> u32 {
@@ -69,6 +76,10 @@ impl Capability {
             Capability::SlidingEnds => "sliding ends (rod.start.slide / rod.end.slide)",
             Capability::VaryingLoads => "time-varying loads ([[rod.load]] profile)",
             Capability::Moments => "point moments ([[rod.load]] moment)",
+            Capability::Obstacles => {
+                "several obstacles or analytic shapes ([[obstacles]]: half-spaces, infinite cylinders, meshes of their own friction)"
+            }
+            Capability::MovingObstacles => "moving obstacles ([[obstacles]] path)",
         }
     }
 }
