@@ -941,4 +941,72 @@ mod tests {
         assert!(skipped_some, "no point was ever skipped");
         assert!(reused_list, "no point ever reused its near list");
     }
+
+    #[test]
+    fn a_point_touching_two_shapes_gets_one_contact_with_the_nearest_ones_surface() {
+        let f = |mu: f64| Friction {
+            static_coefficient: mu,
+            kinetic_coefficient: mu,
+        };
+        // A floor z = 0 (μ 0.2) and a wall x = 0 (μ 0.6) moving along z at 1 m/s.
+        let path = EndPath::new(
+            0.0,
+            vec![0.0, 1.0],
+            vec![[0.0; 3], [0.0, 0.0, 1.0]],
+            vec![[0.0; 3]; 2],
+        )
+        .unwrap();
+        let shapes: Arc<[ShapeObstacle]> = Arc::new([
+            ShapeObstacle {
+                shape: Shape::half_space([0.0; 3], [0.0, 0.0, 1.0]).unwrap(),
+                friction: f(0.2),
+                path: None,
+            },
+            ShapeObstacle {
+                shape: Shape::half_space([0.0; 3], [1.0, 0.0, 0.0]).unwrap(),
+                friction: f(0.6),
+                path: Some(path),
+            },
+        ]);
+        let settings = MeshContactSettings {
+            collider: None,
+            friction: f(0.2),
+            margin: 1e-4,
+            triangle_friction: None,
+            shapes,
+        };
+        let mut rmc = RodMeshContact::<f64>::new(settings);
+        rmc.pose_shapes(0.5, 0.5, 1e-3);
+        let r = 0.01;
+        // Point 0 in the corner, nearer the wall; point 1 on the floor only; point 2 free.
+        let (x, y, z) = (
+            vec![0.009, 0.5, 0.5],
+            vec![0.0; 3],
+            vec![0.0095, 0.0099, 0.5],
+        );
+        rmc.detect(&x, &y, &z, r, Motion::From([&x, &y, &z]));
+        let got: Vec<PointContact<f64>> = rmc.contacts.contacts().collect();
+        assert_eq!(got.len(), 2, "{got:?}");
+        // The corner: the mean of both normals weighted by their reach into the inflated
+        // sphere (1.1e-3 and 6e-4), the wall's gap, and the wall's friction and speed.
+        let (dw, df) = (1e-4 + 1e-3, 1e-4 + 5e-4);
+        let n = Vec3::new(dw, 0.0, df).normalize();
+        assert!((got[0].normal - n).norm() < 1e-12, "{:?}", got[0]);
+        assert!((got[0].gap + 1e-3).abs() < 1e-12);
+        assert_eq!(rmc.friction_at(0).static_coefficient, 0.6);
+        assert_eq!(rmc.friction_at(1).static_coefficient, 0.2);
+        let shift = rmc.wall_shift(0, &Vec3::new(x[0], y[0], z[0]), 1e-3);
+        assert!(
+            (shift - Vec3::new(0.0, 0.0, 1e-3)).norm() < 1e-12,
+            "{shift:?}"
+        );
+        assert!(rmc.wall_shift(1, &Vec3::zeros(), 1e-3).norm() == 0.0);
+        assert_eq!(got[1].point, 1);
+        assert!((got[1].gap + 1e-4).abs() < 1e-12);
+        // A point behind a shape's surface is escaped, at any depth.
+        let (x, z) = (vec![0.5], vec![-0.3]);
+        rmc.detect(&x, &[0.0], &z, r, Motion::From([&x, &[0.0], &z]));
+        assert_eq!(rmc.stats.escaped_points, 1);
+        assert!((rmc.stats.max_penetration - 0.31).abs() < 1e-12);
+    }
 }
