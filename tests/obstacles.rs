@@ -499,3 +499,58 @@ fn timings_of_joined_trees_and_shapes() {
         println!("{name}: {:.2} µs per step", step_us(obstacles));
     }
 }
+
+/// A floor set moving by the control call lifts the rope resting on it from where the floor
+/// is; a snapshot taken before the call brings back the floor that stood still; a mesh refuses
+/// to move.
+#[test]
+fn a_floor_set_moving_by_a_control_call_lifts_the_rope() {
+    for stiff in [false, true] {
+        let (mut sim, dt) = on_moving_floor(
+            EndPath::new(0.0, vec![0.0, 1.0], vec![[0.0; 3]; 2], vec![[0.0; 3]; 2]).unwrap(),
+            0.3,
+            stiff,
+        );
+        let h = sim.rods().next().unwrap();
+        sim.run((0.05 / dt).round() as u64).unwrap();
+        let still = sim.snapshot().unwrap();
+        let rise = EndPath::new(
+            sim.time(),
+            vec![0.0, 0.1],
+            vec![[0.0; 3], [0.0, 0.0, 0.01]],
+            vec![[0.0; 3]; 2],
+        )
+        .unwrap();
+        sim.set_obstacle_path(0, Some(rise)).unwrap();
+        sim.run((0.15 / dt).round() as u64).unwrap();
+        let z = mean(positions(&sim, h).iter().map(|p| p[2]));
+        assert!(
+            (z - 0.01 - R).abs() < 0.1 * R,
+            "stiff {stiff}: the rope is at {z} m"
+        );
+        sim.restore(&still).unwrap();
+        sim.run((0.15 / dt).round() as u64).unwrap();
+        let z = mean(positions(&sim, h).iter().map(|p| p[2]));
+        assert!(
+            (z - R).abs() < 0.1 * R,
+            "stiff {stiff}: restored, the rope is at {z} m"
+        );
+        assert_eq!(sim.check_lumen().unwrap().count, 0);
+    }
+    let mut sim = SimulationBuilder::new()
+        .dt(5e-5)
+        .obstacle(Obstacle::mesh(
+            Environment::sphere([0.0; 3], 0.05, 32).unwrap(),
+        ))
+        .with_rod(RodBuilder::straight(
+            [0.0, 0.0, 0.1],
+            [1.0, 0.0, 0.0],
+            0.1,
+            10,
+            material(),
+        ))
+        .build()
+        .unwrap();
+    let e = sim.set_obstacle_path(0, None).unwrap_err().to_string();
+    assert!(e.contains("meshes do not move"), "{e}");
+}

@@ -589,6 +589,45 @@ impl<T: Real> RodMeshContact<T> {
         }
     }
 
+    /// Makes shape `k` follow `path` from where it is at time `now` [s] (see
+    /// `Stepper::set_obstacle_path`). Returns false when there is no shape `k`.
+    pub(crate) fn set_shape_path(&mut self, k: usize, path: Option<EndPath>, now: f64) -> bool {
+        let Some(old) = self.settings.shapes.get(k) else {
+            return false;
+        };
+        let here = match &old.path {
+            None => old.shape,
+            Some(p) => {
+                let (d, r) = p.pose(now);
+                old.shape
+                    .moved(d, &nalgebra::Rotation3::from_scaled_axis(Vec3::from(r)))
+            }
+        };
+        let mut shapes = self.settings.shapes.to_vec();
+        shapes[k] = ShapeObstacle {
+            shape: here,
+            friction: old.friction,
+            path,
+        };
+        self.settings.shapes = shapes.into();
+        self.posed[k] = Posed::at_rest(here);
+        true
+    }
+
+    /// The shapes as the rod's settings have them now (a stiff scheme's copy of the settings
+    /// follows them with [`Self::follow_shapes`]).
+    pub(crate) fn shapes(&self) -> &Arc<[ShapeObstacle]> {
+        &self.settings.shapes
+    }
+
+    /// Takes `shapes` (the rod's, which a control call may have changed) as this copy's.
+    pub(crate) fn follow_shapes(&mut self, shapes: &Arc<[ShapeObstacle]>) {
+        if !Arc::ptr_eq(&self.settings.shapes, shapes) {
+            self.settings.shapes = Arc::clone(shapes);
+            self.posed = shapes.iter().map(|s| Posed::at_rest(s.shape)).collect();
+        }
+    }
+
     /// The friction of the surface point `i` touched at its last query (the mesh's own for a
     /// point that touched nothing).
     pub(crate) fn friction_at(&self, i: usize) -> Friction<f64> {

@@ -17,8 +17,8 @@ use cosserat_problem::stepper::{
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
-    Divergence, EndCondition, EndReaction, Par, PointLoad, Snapshot, SolverSettings, StateField,
-    StepError, StepStats, Stepper, StepperInfo, StiffSettings, StiffSummary,
+    Divergence, EndCondition, EndPath, EndReaction, Par, PointLoad, Snapshot, SolverSettings,
+    StateField, StepError, StepStats, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };
 
 use crate::coupling::{Coupling, step_coupled_batch};
@@ -677,6 +677,28 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
             self.clock,
             Box::new(CpuSnapshot::<T, S>::clone(self)),
         ))
+    }
+
+    fn set_obstacle_path(
+        &mut self,
+        shape: usize,
+        path: Option<EndPath>,
+    ) -> Result<(), ControlError> {
+        let now = self.clock.time();
+        let mut found = false;
+        for r in &mut self.rods {
+            if let Some(m) = r.mesh.as_mut() {
+                found |= m.set_shape_path(shape, path.clone(), now);
+            }
+        }
+        if found {
+            Ok(())
+        } else {
+            Err(ControlError::Unsupported {
+                stepper: S::NAME,
+                what: format!("move obstacle shape {shape}: no rod touches such a shape"),
+            })
+        }
     }
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), ControlError> {

@@ -137,6 +137,11 @@ impl EnergyWatch {
         }
     }
 
+    /// Stops watching for good (an obstacle set moving: its work is not measured).
+    pub(crate) fn disable(&mut self) {
+        self.enabled = false;
+    }
+
     /// Forgets the baseline: the next check starts watching anew.
     pub(crate) fn reset(&mut self) {
         self.baseline = None;

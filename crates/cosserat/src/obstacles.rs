@@ -117,6 +117,16 @@ impl Obstacle {
         Ok(self)
     }
 
+    /// A shape put where it is at time `now` and set to follow `path` from there (what
+    /// `Simulation::set_obstacle_path` does to it); a mesh unchanged.
+    pub(crate) fn rebased(mut self, now: f64, path: Option<EndPath>) -> Self {
+        if let Some(here) = self.shape_at(now) {
+            self.geometry = Geometry::Shape(here);
+            self.path = path;
+        }
+        self
+    }
+
     /// What the obstacle is made of.
     pub fn geometry(&self) -> &Geometry {
         &self.geometry

@@ -15,12 +15,12 @@ pub use cosserat_constraints::BindingVariant;
 use cosserat_model::energy::Energies;
 use cosserat_model::rod::{RestShape, RodSpec, build_rod_with_rest_lengths, straight_polyline};
 use cosserat_model::{Material, Quat, Real, RodBuildError, Vec3};
-use cosserat_problem::Snapshot;
 pub use cosserat_problem::{
     Capabilities, Capability, ContactSample, ControlError, CouplingStats, EndCondition, EndKind,
     EndReaction, Gpus, Integrator, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
     StateField, StepError, Stepper, StepperInfo, StiffScheme, StiffSettings, StiffSummary,
 };
+use cosserat_problem::{EndPath, Snapshot};
 
 /// Which backend steps the rods.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -1105,6 +1105,8 @@ pub struct SimulationSnapshot {
     inner: Snapshot,
     max_strain: f64,
     outside: (usize, f64),
+    /// The obstacles (their paths, which `Simulation::set_obstacle_path` changes).
+    obstacles: Vec<Obstacle>,
 }
 
 impl SimulationSnapshot {
@@ -1360,6 +1362,46 @@ impl Simulation {
         Ok(())
     }
 
+    /// Makes obstacle `obstacle` (its index in [`Simulation::obstacles`]: the environment, if
+    /// any, is 0) follow `path` from where it is now: the path's displacement and rotation (about
+    /// the shape's point) are taken from the obstacle's present pose, its times from
+    /// `path.start_time()`; `None` stops it where it is. Analytic shapes only (meshes do not
+    /// move), on the CPU schemes. The energy watch stops: nothing measures the obstacle's work.
+    pub fn set_obstacle_path(
+        &mut self,
+        obstacle: usize,
+        path: Option<EndPath>,
+    ) -> Result<(), ControlError> {
+        let info = self.stepper.info();
+        let Some(o) = self.obstacles.get(obstacle) else {
+            return Err(ControlError::Unsupported {
+                stepper: info.name,
+                what: format!(
+                    "move obstacle {obstacle}: there are {} obstacles",
+                    self.obstacles.len()
+                ),
+            });
+        };
+        if let crate::obstacles::Geometry::Mesh(_) = o.geometry() {
+            return Err(ControlError::Unsupported {
+                stepper: info.name,
+                what: format!(
+                    "move obstacle {obstacle}: it is a mesh, and meshes do not move (only half-spaces and cylinders do)"
+                ),
+            });
+        }
+        let shape = self.obstacles[..obstacle]
+            .iter()
+            .filter(|o| matches!(o.geometry(), crate::obstacles::Geometry::Shape(_)))
+            .count();
+        self.stepper.set_obstacle_path(shape, path.clone())?;
+        let now = self.time();
+        let o = &mut self.obstacles[obstacle];
+        *o = o.clone().rebased(now, path);
+        self.energy.disable();
+        Ok(())
+    }
+
     /// Drives a held end at a constant velocity [m/s] and angular velocity [rad/s] (world frame)
     /// from now until changed: a haptic hand's push or pull and twist at one tick.
     pub fn set_end_velocity(
@@ -1536,6 +1578,7 @@ impl Simulation {
             inner: self.stepper.snapshot()?,
             max_strain: self.max_strain,
             outside: self.outside,
+            obstacles: self.obstacles.clone(),
         })
     }
 
@@ -1546,6 +1589,7 @@ impl Simulation {
         self.energy.reset();
         self.max_strain = snapshot.max_strain;
         self.outside = snapshot.outside;
+        self.obstacles.clone_from(&snapshot.obstacles);
         Ok(())
     }
 

@@ -58,9 +58,12 @@ use super::lanes::V3s;
 use super::pin::Pinned;
 use super::work::Work;
 use crate::guide::Guide;
-use crate::mesh_contact::{CollisionStats, MeshContactSettings, Motion, RodMeshContact};
+use crate::mesh_contact::{
+    CollisionStats, MeshContactSettings, Motion, RodMeshContact, ShapeObstacle,
+};
 use cosserat_constraints::{Friction, PointContact};
 use cosserat_model::Vec3;
+use std::sync::Arc;
 
 /// Largest number of re-solves per step after the active set changed.
 pub(crate) const MAX_ROUNDS: usize = 4;
@@ -318,8 +321,18 @@ impl StiffContacts {
     /// Step 1 of the module docs, after the prediction: pins the points touching the mesh at
     /// the solve's starting guess.
     ///
-    /// Moving obstacles are put where they are at the step's end, `t + h`.
-    pub(crate) fn begin_step(&mut self, w: &mut Work, k: &Consts, t: f64, h: f64) {
+    /// Moving obstacles (the rod's `shapes`, which a control call may have set moving) are put
+    /// where they are at the step's end, `t + h`.
+    pub(crate) fn begin_step(
+        &mut self,
+        w: &mut Work,
+        k: &Consts,
+        (t, h): (f64, f64),
+        shapes: Option<&Arc<[ShapeObstacle]>>,
+    ) {
+        if let Some(shapes) = shapes {
+            self.mesh.follow_shapes(shapes);
+        }
         self.mesh.pose_shapes(t + h, t, h);
         self.h = h;
         let m = w.n + 1;
