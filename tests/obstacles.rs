@@ -19,6 +19,11 @@ fn material() -> Material {
     Material::new(3e5, 1e5, 1000.0, R)
 }
 
+/// A rope along x from `start`.
+fn rope(start: [f64; 3], length: f64, elements: usize) -> RodBuilder {
+    RodBuilder::straight(start, [1.0, 0.0, 0.0], length, elements, material())
+}
+
 /// Mass per length of the rope [kg/m].
 fn line_density() -> f64 {
     1000.0 * std::f64::consts::PI * R * R
@@ -82,8 +87,7 @@ fn a_rope_on_a_half_space_rests_one_radius_above_it_and_carries_its_weight() {
 #[test]
 fn a_rope_rests_on_an_infinite_cylinder_as_on_a_meshed_one() {
     let rest = |obstacle: Obstacle| {
-        let rod = RodBuilder::straight([-0.1, 0.0, 0.06], [1.0, 0.0, 0.0], 0.2, 40, material())
-            .damping(0.0, 0.0, 20.0);
+        let rod = rope([-0.1, 0.0, 0.06], 0.2, 40).damping(0.0, 0.0, 20.0);
         let mut sim = SimulationBuilder::new()
             .double_precision(true)
             .dt(5e-5)
@@ -146,13 +150,7 @@ fn incline(stiff: bool, seconds: f64) -> [f64; 2] {
         .gravity([G * theta.sin(), 0.0, -G * theta.cos()])
         .stiff_solver(stiff.then(StiffSettings::default));
     for [_, y] in [[0.0, -0.05], [0.0, 0.05]] {
-        b = b.with_rod(RodBuilder::straight(
-            [-0.05, y, R],
-            [1.0, 0.0, 0.0],
-            0.1,
-            10,
-            material(),
-        ));
+        b = b.with_rod(rope([-0.05, y, R], 0.1, 10));
     }
     for o in boxes {
         b = b.obstacle(o);
@@ -194,8 +192,7 @@ fn each_obstacle_has_its_own_friction_on_an_incline_with_the_stiff_scheme() {
 /// between them, no point inside either.
 #[test]
 fn a_rope_drapes_over_two_solids() {
-    let rod = RodBuilder::straight([-0.1, 0.0, R + 1e-3], [1.0, 0.0, 0.0], 0.2, 40, material())
-        .damping(0.0, 0.0, 20.0);
+    let rod = rope([-0.1, 0.0, R + 1e-3], 0.2, 40).damping(0.0, 0.0, 20.0);
     let mut sim = SimulationBuilder::new()
         .double_precision(true)
         .dt(5e-5)
@@ -244,13 +241,7 @@ fn on_moving_floor(path: EndPath, mu: f64, stiff: bool) -> (cosserat::Simulation
         .dt(dt)
         .stiff_solver(stiff.then(StiffSettings::default))
         .obstacle(floor)
-        .with_rod(RodBuilder::straight(
-            [-0.05, 0.0, R],
-            [1.0, 0.0, 0.0],
-            0.1,
-            10,
-            material(),
-        ))
+        .with_rod(rope([-0.05, 0.0, R], 0.1, 10))
         .build()
         .unwrap();
     (sim, dt)
@@ -320,13 +311,7 @@ fn the_gpu_refuses_shapes_by_name() {
         .backend(Backend::Gpu)
         .dt(5e-5)
         .obstacle(Obstacle::half_space([0.0; 3], [0.0, 0.0, 1.0]).unwrap())
-        .with_rod(RodBuilder::straight(
-            [0.0; 3],
-            [1.0, 0.0, 0.0],
-            0.1,
-            10,
-            material(),
-        ))
+        .with_rod(rope([0.0; 3], 0.1, 10))
         .build()
         .err()
         .expect("the GPU refused nothing");
@@ -408,7 +393,10 @@ fn timings_of_joined_trees_and_shapes() {
         .map(|i| {
             let t = i as f64 * 0.618_033_988_75;
             let k = (i % 8) as f64;
-            let (theta, phi) = (t.fract() * std::f64::consts::PI, (t * 7.0).fract() * 6.283);
+            let (theta, phi) = (
+                t.fract() * std::f64::consts::PI,
+                (t * 7.0).fract() * std::f64::consts::TAU,
+            );
             let r = 0.041 + 0.002 * (t * 13.0).fract();
             [
                 0.1 * k + r * theta.sin() * phi.cos(),
@@ -442,8 +430,7 @@ fn timings_of_joined_trees_and_shapes() {
         for o in obstacles {
             b = b.obstacle(o);
         }
-        let rod = RodBuilder::straight([-0.5, 0.5, R], [1.0, 0.0, 0.0], 1.0, 200, material())
-            .damping(0.0, 0.0, 2.0);
+        let rod = rope([-0.5, 0.5, R], 1.0, 200).damping(0.0, 0.0, 2.0);
         let mut sim = b.with_rod(rod).build().unwrap();
         sim.run(2_000).unwrap();
         let t0 = Instant::now();
@@ -542,13 +529,7 @@ fn a_floor_set_moving_by_a_control_call_lifts_the_rope() {
         .obstacle(Obstacle::mesh(
             Environment::sphere([0.0; 3], 0.05, 32).unwrap(),
         ))
-        .with_rod(RodBuilder::straight(
-            [0.0, 0.0, 0.1],
-            [1.0, 0.0, 0.0],
-            0.1,
-            10,
-            material(),
-        ))
+        .with_rod(rope([0.0, 0.0, 0.1], 0.1, 10))
         .build()
         .unwrap();
     let e = sim.set_obstacle_path(0, None).unwrap_err().to_string();

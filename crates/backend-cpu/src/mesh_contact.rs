@@ -128,6 +128,20 @@ impl Posed {
     }
 }
 
+/// An element nearest a wall between its points (see the module docs).
+#[derive(Clone, Copy, Debug)]
+struct Ridge {
+    element: u32,
+    /// The direction from the wall to the element.
+    normal: Vec3<f64>,
+    /// The wall's nearest point.
+    on_wall: Vec3<f64>,
+    /// The element's gap.
+    gap: f64,
+    /// The wall's source (see `RodMeshContact::surfaces`).
+    source: u32,
+}
+
 /// A contact found before the contacts of one point are merged (see
 /// [`RodMeshContact::merge_candidates`]).
 #[derive(Clone, Copy, Debug)]
@@ -190,10 +204,8 @@ pub(crate) struct RodMeshContact<T: Real> {
     found: Vec<Contact>,
     /// Scratch: the points whose motion crossed into the wall, and where.
     swept: Vec<(u32, Crossing)>,
-    /// Scratch: elements nearest a wall between their points: element, the direction from the
-    /// wall, the wall's nearest point, the element's gap and the wall's source (see
-    /// `surfaces`).
-    ridge: Vec<(u32, Vec3<f64>, Vec3<f64>, f64, u32)>,
+    /// Scratch: elements nearest a wall between their points.
+    ridge: Vec<Ridge>,
     /// Per element, the leaf-order slots of the triangles within `reach + skin` of it as it was
     /// at `seg_anchor` (its two ends), and whether that list exists: the elements' near lists,
     /// as the points' (see the module docs).
@@ -794,13 +806,13 @@ impl<T: Real> RodMeshContact<T> {
             let normal = Vec3::from(near.normal);
             let on_wall = Vec3::from(near.closest);
             let source = self.triangle_source(near.triangle);
-            self.ridge.push((
-                j as u32,
+            self.ridge.push(Ridge {
+                element: j as u32,
                 normal,
                 on_wall,
-                near.signed_distance - radius,
+                gap: near.signed_distance - radius,
                 source,
-            ));
+            });
         }
         if self.ridge.is_empty() {
             return;
@@ -832,7 +844,14 @@ impl<T: Real> RodMeshContact<T> {
                 }
             }
         };
-        for &(j, normal, on_wall, gap, source) in &self.ridge {
+        for &Ridge {
+            element: j,
+            normal,
+            on_wall,
+            gap,
+            source,
+        } in &self.ridge
+        {
             self.stats.max_penetration = self.stats.max_penetration.max(-gap);
             for i in [j, j + 1] {
                 let end_gap = normal.dot(&(at(i as usize) - on_wall)) - radius;

@@ -38,7 +38,7 @@ pub const DEFAULT_FRICTION: Friction<f64> = Friction {
 pub enum Geometry {
     /// A triangle mesh: a lumen or a solid ([`Environment::into_solid`] and the built-in
     /// solids), with its own friction ([`Environment::friction`]).
-    Mesh(Environment),
+    Mesh(Box<Environment>),
     /// An analytic shape.
     Shape(Shape),
 }
@@ -57,7 +57,7 @@ impl Obstacle {
     pub fn mesh(env: Environment) -> Self {
         let friction = env.friction;
         Self {
-            geometry: Geometry::Mesh(env),
+            geometry: Geometry::Mesh(Box::new(env)),
             friction,
             path: None,
         }
@@ -220,7 +220,7 @@ pub(crate) fn contact_settings(
     let meshes: Vec<(&Environment, Friction<f64>)> = obstacles
         .iter()
         .filter_map(|o| match &o.geometry {
-            Geometry::Mesh(env) => Some((env, o.friction)),
+            Geometry::Mesh(env) => Some((env.as_ref(), o.friction)),
             Geometry::Shape(_) => None,
         })
         .collect();

@@ -862,7 +862,7 @@ impl Checker<'_> {
         let axis = self.finite3(&format!("{prefix}.mesh.axis"), r.axis)?;
         if !(axis.iter().map(|x| x * x).sum::<f64>() > 0.0) {
             return Err(self.invalid(
-                &format!("{prefix}.mesh.axis"),
+                format!("{prefix}.mesh.axis"),
                 axis,
                 "expected a non-zero vector",
             ));
@@ -872,7 +872,7 @@ impl Checker<'_> {
         let segments = r.segments.unwrap_or(default);
         if !(8..=100_000).contains(&segments) {
             return Err(self.invalid(
-                &format!("{prefix}.mesh.segments"),
+                format!("{prefix}.mesh.segments"),
                 segments,
                 "expected 8 ..= 100 000",
             ));
@@ -1348,7 +1348,7 @@ impl Checker<'_> {
                 let t = triangles.unwrap_or(26_000);
                 if !(100..=5_000_000).contains(&t) {
                     return Err(self.invalid(
-                        &format!("{prefix}.mesh.triangles"),
+                        format!("{prefix}.mesh.triangles"),
                         t,
                         "expected 100 ..= 5 000 000",
                     ));
@@ -1369,7 +1369,7 @@ impl Checker<'_> {
                             self.finite3(&format!("{prefix}.mesh.entry.direction"), e.direction)?;
                         if !(d.iter().map(|x| x * x).sum::<f64>() > 0.0) {
                             return Err(self.invalid(
-                                &format!("{prefix}.mesh.entry.direction"),
+                                format!("{prefix}.mesh.entry.direction"),
                                 d,
                                 "expected a non-zero vector",
                             ));
@@ -1414,7 +1414,7 @@ impl Checker<'_> {
                 let segments = segments.unwrap_or(128);
                 if !(8..=4096).contains(&segments) {
                     return Err(self.invalid(
-                        &format!("{prefix}.mesh.segments"),
+                        format!("{prefix}.mesh.segments"),
                         segments,
                         "expected 8 ..= 4096",
                     ));
@@ -1431,7 +1431,7 @@ impl Checker<'_> {
                 let size = self.finite3(&format!("{prefix}.mesh.size"), *size)?;
                 if !size.iter().all(|x| *x > 0.0) {
                     return Err(self.invalid(
-                        &format!("{prefix}.mesh.size"),
+                        format!("{prefix}.mesh.size"),
                         size,
                         "expected three lengths > 0",
                     ));
@@ -1452,7 +1452,7 @@ impl Checker<'_> {
                 let normal = self.finite3(&format!("{prefix}.mesh.normal"), *normal)?;
                 if !(normal.iter().map(|x| x * x).sum::<f64>() > 0.0) {
                     return Err(self.invalid(
-                        &format!("{prefix}.mesh.normal"),
+                        format!("{prefix}.mesh.normal"),
                         normal,
                         "expected a non-zero vector",
                     ));
@@ -1478,7 +1478,7 @@ impl Checker<'_> {
             (Some("solid"), MeshSection::File { entry: None, .. }) => {
                 env = env
                     .into_solid()
-                    .map_err(|why| self.invalid(&format!("{prefix}.side"), "solid", &why))?;
+                    .map_err(|why| self.invalid(format!("{prefix}.side"), "solid", &why))?;
             }
             (Some(side @ ("lumen" | "solid")), mesh) => {
                 let kind = match mesh {
@@ -1492,11 +1492,11 @@ impl Checker<'_> {
                         "a floor has one side, the one its normal points to"
                     }
                 };
-                return Err(self.invalid(&format!("{prefix}.side"), side, kind));
+                return Err(self.invalid(format!("{prefix}.side"), side, kind));
             }
             (Some(other), _) => {
                 return Err(self.invalid(
-                    &format!("{prefix}.side"),
+                    format!("{prefix}.side"),
                     other,
                     "expected \"lumen\" or \"solid\"",
                 ));
