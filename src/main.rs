@@ -436,16 +436,28 @@ impl Recorder {
                 .add_rod(sim.rod_name(h), sim.rod_radius(h), n)
                 .map_err(|e| e.to_string())?;
         }
-        trajectory.environment = sim.environment().map(|env| {
-            let mesh = env.collider.mesh();
-            cosserat::output::EnvironmentMesh {
-                vertices: mesh.vertices().iter().map(|v| [v.x, v.y, v.z]).collect(),
-                triangles: mesh.triangles().to_vec(),
+        // Every mesh the rods collide with, as one (analytic shapes are infinite: not drawn).
+        let mut meshes = sim.obstacles().iter().filter_map(|o| match o.geometry() {
+            cosserat::obstacles::Geometry::Mesh(env) => Some(env.collider.mesh()),
+            cosserat::obstacles::Geometry::Shape(_) => None,
+        });
+        trajectory.environment = meshes.next().map(|first| {
+            let mut out = cosserat::output::EnvironmentMesh {
+                vertices: Vec::new(),
+                triangles: Vec::new(),
+            };
+            for mesh in std::iter::once(first).chain(meshes) {
+                let offset = out.vertices.len() as u32;
+                out.vertices
+                    .extend(mesh.vertices().iter().map(|v| [v.x, v.y, v.z]));
+                out.triangles
+                    .extend(mesh.triangles().iter().map(|t| t.map(|c| c + offset)));
             }
+            out
         });
         let mut probe = Vec::new();
         let contacts =
-            sim.environment().is_some() && sim.rods().all(|h| sim.contacts(h, &mut probe).is_ok());
+            !sim.obstacles().is_empty() && sim.rods().all(|h| sim.contacts(h, &mut probe).is_ok());
         Ok(Self {
             schedule: cosserat::output::frame_steps(steps, frames),
             recorded: 0,

@@ -450,7 +450,7 @@ struct Gatherer {
 impl Gatherer {
     fn new(sim: &Simulation, hand: Option<Hand>) -> Self {
         let mut samples = Vec::new();
-        let contacts = sim.environment().is_some()
+        let contacts = !sim.obstacles().is_empty()
             && sim.rods().all(|h| sim.contacts(h, &mut samples).is_ok());
         Self {
             hand,

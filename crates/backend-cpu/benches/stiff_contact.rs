@@ -45,14 +45,14 @@ fn pushed_wire() -> CpuRod<f64> {
     let pts = straight_polyline(vessel.entry_point, along.into(), 0.2, 80);
     let (state, params) = build_rod::<f64>(&pts, &spec).unwrap();
     let ends = [EndCondition::clamped().driven(push), EndCondition::free()];
-    CpuRod::new(state, params, ends, vec![]).with_mesh(MeshContactSettings {
+    CpuRod::new(state, params, ends, vec![]).with_mesh(MeshContactSettings::mesh(
         collider,
-        friction: Friction {
+        Friction {
             static_coefficient: 0.08,
             kinetic_coefficient: 0.05,
         },
-        margin: 1e-4,
-    })
+        1e-4,
+    ))
 }
 
 fn run(rod: &mut CpuRod<f64>, sc: &mut StiffScratch, stiff: &StiffSettings, from: u64, n: u64) {

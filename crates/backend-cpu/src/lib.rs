@@ -33,7 +33,7 @@ pub use cosserat_problem::{
 };
 pub use coupling::{BindingSpec, Coupling, RodContactSpec, step_coupled_batch};
 pub use guide::Guide;
-pub use mesh_contact::MeshContactSettings;
+pub use mesh_contact::{MeshContactSettings, ShapeObstacle, TriangleFriction};
 pub use stepper::{CpuRod, step_rod, step_rod_batch, step_rods, step_rods_batch};
 pub use steppers::{
     BoundStiff, BoundStiffStepper, Coupled, CoupledStepper, CpuStepper, Explicit, ExplicitStepper,

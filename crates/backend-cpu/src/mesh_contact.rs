@@ -35,23 +35,122 @@
 //! exactly those of the tree query. The skin is half the query radius: a wire sliding at
 //! 0.2 m/s with steps of a few microseconds remakes its lists every few hundred steps.
 
-use cosserat_collide::{Contact, Crossing, MeshCollider};
+use cosserat_collide::{Contact, Crossing, MeshCollider, Shape};
 use cosserat_constraints::{ContactSet, Friction, PointContact};
 use cosserat_model::{Real, Vec3};
+use cosserat_problem::EndPath;
 use std::sync::Arc;
 
 pub(crate) use cosserat_problem::CollisionStats;
 
-/// What a rod touches and how.
+/// What a rod touches and how: a mesh (one or several obstacles joined in one tree), analytic
+/// shapes, or both.
 #[derive(Clone, Debug)]
 pub struct MeshContactSettings {
-    /// The mesh, shared between rods.
-    pub collider: Arc<MeshCollider>,
-    /// Coulomb friction with the mesh.
+    /// The mesh, shared between rods; `None` when the rod touches analytic shapes only.
+    pub collider: Option<Arc<MeshCollider>>,
+    /// Coulomb friction with the mesh (with every triangle, unless `triangle_friction` says
+    /// otherwise).
     pub friction: Friction<f64>,
     /// Speculative margin [m]: points this close to the surface get a contact that stops them
     /// reaching it within the step.
     pub margin: f64,
+    /// The friction of each triangle, when the mesh joins obstacles of different friction.
+    pub triangle_friction: Option<Arc<TriangleFriction>>,
+    /// Analytic obstacles (see [`ShapeObstacle`]).
+    pub shapes: Arc<[ShapeObstacle]>,
+}
+
+impl MeshContactSettings {
+    /// Contact with one mesh of one friction.
+    pub fn mesh(collider: Arc<MeshCollider>, friction: Friction<f64>, margin: f64) -> Self {
+        Self {
+            collider: Some(collider),
+            friction,
+            margin,
+            triangle_friction: None,
+            shapes: Arc::new([]),
+        }
+    }
+
+    /// Whether any obstacle moves.
+    pub fn moves(&self) -> bool {
+        self.shapes.iter().any(|s| s.path.is_some())
+    }
+}
+
+/// The friction of each triangle of a mesh that joins several obstacles: triangle `t` (in the
+/// mesh's order) has `frictions[of_triangle[t]]`.
+#[derive(Clone, Debug)]
+pub struct TriangleFriction {
+    /// Per triangle, its obstacle's entry in `frictions`.
+    pub of_triangle: Vec<u16>,
+    /// The obstacles' frictions.
+    pub frictions: Vec<Friction<f64>>,
+}
+
+/// An analytic obstacle ([`Shape`]): a half-space or an infinite cylinder, static or moving
+/// rigidly along a keyframed path (displacement of its anchor and rotation about it,
+/// [`EndPath`]). Its contacts take its own friction, relative to its surface's velocity.
+#[derive(Clone, Debug)]
+pub struct ShapeObstacle {
+    /// The shape where its path starts.
+    pub shape: Shape,
+    /// Coulomb friction with it.
+    pub friction: Friction<f64>,
+    /// The path it follows; `None`: it stays put.
+    pub path: Option<EndPath>,
+}
+
+/// A shape where it is at the time of a detection, and how its surface moves over the step.
+#[derive(Clone, Copy, Debug)]
+struct Posed {
+    shape: Shape,
+    /// Velocity of its anchor [m/s] and its angular velocity [rad/s] over the step.
+    velocity: Vec3<f64>,
+    omega: Vec3<f64>,
+    anchor: Vec3<f64>,
+}
+
+impl Posed {
+    fn at_rest(shape: Shape) -> Self {
+        Self {
+            shape,
+            velocity: Vec3::zeros(),
+            omega: Vec3::zeros(),
+            anchor: Vec3::from(shape.anchor()),
+        }
+    }
+
+    /// The velocity of the shape's surface (moved with it rigidly) at `p` [m/s].
+    fn surface_velocity(&self, p: &Vec3<f64>) -> Vec3<f64> {
+        self.velocity + self.omega.cross(&(p - self.anchor))
+    }
+}
+
+/// An element nearest a wall between its points (see the module docs).
+#[derive(Clone, Copy, Debug)]
+struct Ridge {
+    element: u32,
+    /// The direction from the wall to the element.
+    normal: Vec3<f64>,
+    /// The wall's nearest point.
+    on_wall: Vec3<f64>,
+    /// The element's gap.
+    gap: f64,
+    /// The wall's source (see `RodMeshContact::surfaces`).
+    source: u32,
+}
+
+/// A contact found before the contacts of one point are merged (see
+/// [`RodMeshContact::merge_candidates`]).
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    point: u32,
+    normal: Vec3<f64>,
+    gap: f64,
+    /// Where its friction and velocity come from (see `RodMeshContact::surfaces`).
+    source: u32,
 }
 
 /// How far beyond the query radius the nearest wall is searched for a point's clearance [m].
@@ -105,9 +204,8 @@ pub(crate) struct RodMeshContact<T: Real> {
     found: Vec<Contact>,
     /// Scratch: the points whose motion crossed into the wall, and where.
     swept: Vec<(u32, Crossing)>,
-    /// Scratch: elements nearest a wall between their points: element, the direction from the
-    /// wall, the wall's nearest point and the element's gap.
-    ridge: Vec<(u32, Vec3<f64>, Vec3<f64>, f64)>,
+    /// Scratch: elements nearest a wall between their points.
+    ridge: Vec<Ridge>,
     /// Per element, the leaf-order slots of the triangles within `reach + skin` of it as it was
     /// at `seg_anchor` (its two ends), and whether that list exists: the elements' near lists,
     /// as the points' (see the module docs).
@@ -120,15 +218,42 @@ pub(crate) struct RodMeshContact<T: Real> {
     clearance: Vec<f64>,
     pub(crate) contacts: ContactSet<T>,
     pub(crate) stats: CollisionStats,
+    /// The frictions of the contacts' sources: 0 the settings' own, then those of
+    /// `triangle_friction`, then one per shape (from `first_shape`).
+    surfaces: Vec<Friction<f64>>,
+    first_shape: u32,
+    /// Whether contacts carry sources of their own (several frictions, or shapes): they are
+    /// then gathered as candidates and merged, one contact per point.
+    varied: bool,
+    /// The shapes where they are at the detection (see [`Self::pose_shapes`]).
+    posed: Vec<Posed>,
+    /// Per point, the source of its contact at its last query.
+    source: Vec<u32>,
+    candidates: Vec<Candidate>,
 }
 
 impl<T: Real> RodMeshContact<T> {
     pub(crate) fn new(settings: MeshContactSettings) -> Self {
-        let friction = Friction {
-            static_coefficient: T::lit(settings.friction.static_coefficient),
-            kinetic_coefficient: T::lit(settings.friction.kinetic_coefficient),
-        };
+        let friction = cast_friction(&settings.friction);
+        let mut surfaces = vec![settings.friction];
+        if let Some(tf) = &settings.triangle_friction {
+            surfaces.extend(&tf.frictions);
+        }
+        let first_shape = surfaces.len() as u32;
+        surfaces.extend(settings.shapes.iter().map(|s| s.friction));
+        let varied = surfaces.len() > 1;
+        let posed = settings
+            .shapes
+            .iter()
+            .map(|s| Posed::at_rest(s.shape))
+            .collect();
         Self {
+            surfaces,
+            first_shape,
+            varied,
+            posed,
+            source: Vec::new(),
+            candidates: Vec::new(),
             settings,
             friction,
             clear_at: [Vec::new(), Vec::new(), Vec::new()],
@@ -172,9 +297,6 @@ impl<T: Real> RodMeshContact<T> {
         motion: Motion<T>,
     ) {
         let t0 = std::time::Instant::now();
-        let margin = self.settings.margin;
-        let reach = radius + margin;
-        let skin = NEAR_SKIN * reach;
         let n = x.len().min(y.len()).min(z.len());
         if self.clear2.len() != n {
             self.clear2 = vec![-1.0; n];
@@ -182,7 +304,73 @@ impl<T: Real> RodMeshContact<T> {
             self.near = vec![Vec::new(); n];
             self.anchor = vec![[0.0; 3]; n];
             self.has_near = vec![false; n];
+            self.source = vec![0; n];
         }
+        self.found.clear();
+        self.contacts.clear();
+        self.candidates.clear();
+        let mut escaped = 0;
+        if let Some(collider) = self.settings.collider.clone() {
+            escaped += self.mesh_points(&collider, x, y, z, radius, skip, motion);
+        }
+        if !self.posed.is_empty() {
+            escaped += self.shape_points(x, y, z, radius, skip, motion);
+        }
+        if self.varied {
+            self.merge_candidates(x, y, z);
+        }
+        self.stats.escaped_points = self.stats.escaped_points.max(escaped);
+        self.stats.contacts = self.contacts.len();
+        self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
+        self.stats.steps += 1;
+        self.stats.detection_seconds += t0.elapsed().as_secs_f64();
+    }
+
+    /// A contact of point `i` from `source`: pushed as is when all contacts share one surface,
+    /// else kept as a candidate for [`Self::merge_candidates`].
+    fn emit(&mut self, i: u32, normal: Vec3<f64>, gap: f64, source: u32) {
+        if self.varied {
+            self.candidates.push(Candidate {
+                point: i,
+                normal,
+                gap,
+                source,
+            });
+        } else {
+            self.contacts.push(PointContact {
+                point: i,
+                normal: Vec3::new(T::lit(normal.x), T::lit(normal.y), T::lit(normal.z)),
+                gap: T::lit(gap),
+            });
+        }
+    }
+
+    /// The source (see `surfaces`) of mesh triangle `t`.
+    fn triangle_source(&self, t: u32) -> u32 {
+        self.settings
+            .triangle_friction
+            .as_ref()
+            .and_then(|tf| tf.of_triangle.get(t as usize))
+            .map_or(0, |&o| 1 + u32::from(o))
+    }
+
+    /// The mesh's contacts of the points not skipped (the clearance, near lists and swept test
+    /// of the module docs). Returns how many points it found behind the wall.
+    #[allow(clippy::too_many_arguments)]
+    fn mesh_points(
+        &mut self,
+        collider: &MeshCollider,
+        x: &[T],
+        y: &[T],
+        z: &[T],
+        radius: f64,
+        skip: &[bool],
+        motion: Motion<T>,
+    ) -> usize {
+        let margin = self.settings.margin;
+        let reach = radius + margin;
+        let skin = NEAR_SKIN * reach;
+        let n = x.len().min(y.len()).min(z.len());
         // Which points may touch the mesh: one squared distance each.
         self.due.clear();
         let [cx, cy, cz] = &self.clear_at;
@@ -195,10 +383,7 @@ impl<T: Real> RodMeshContact<T> {
                 self.due.push(i as u32);
             }
         }
-        self.found.clear();
-        self.contacts.clear();
-        self.sweep(x, y, z, reach, skip, motion);
-        let collider = &self.settings.collider;
+        self.sweep(collider, x, y, z, reach, skip, motion);
         let root = &collider.bvh().nodes()[0];
         let mut escaped = 0;
         let distance = |a: &[f64; 3], b: &[f64; 3]| {
@@ -218,6 +403,7 @@ impl<T: Real> RodMeshContact<T> {
                 from_anchor = 0.0;
             }
             self.stats.queries += 1;
+            let first = self.found.len();
             let (r, nearest) =
                 collider.query_sphere_among(&p, reach, i as u32, &self.near[i], &mut self.found);
             if r.count == 0 {
@@ -257,17 +443,23 @@ impl<T: Real> RodMeshContact<T> {
             // Depths are measured against the inflated sphere; remove the margin again.
             let penetration = r.max_depth - margin;
             self.stats.max_penetration = self.stats.max_penetration.max(penetration);
-            let dir = dir / len;
-            self.contacts.push(PointContact {
-                point: i as u32,
-                normal: Vec3::new(T::lit(dir.x), T::lit(dir.y), T::lit(dir.z)),
-                gap: T::lit(-penetration),
-            });
+            // The friction of the triangle it is deepest in.
+            let source = if self.varied {
+                let deepest = self.found[first..]
+                    .iter()
+                    .max_by(|a, b| a.depth.total_cmp(&b.depth))
+                    .map_or(0, |c| c.triangle);
+                self.triangle_source(deepest)
+            } else {
+                0
+            };
+            self.emit(i as u32, dir / len, -penetration, source);
         }
         // A point whose motion crossed into the wall is put back on the wall it crossed: its
         // gap is its distance in front of that triangle's plane less the radius, negative
         // when it ended behind it.
-        for &(i, c) in &self.swept {
+        for k in 0..self.swept.len() {
+            let (i, c) = self.swept[k];
             let i = i as usize;
             let p = [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
             let ahead: f64 = (0..3).map(|k| (p[k] - c.point[k]) * c.normal[k]).sum();
@@ -276,21 +468,209 @@ impl<T: Real> RodMeshContact<T> {
             self.clear2[i] = -1.0;
             self.stats.max_penetration = self.stats.max_penetration.max(-gap);
             self.stats.swept_catches += 1;
-            self.contacts.push(PointContact {
-                point: i as u32,
-                normal: Vec3::new(
-                    T::lit(c.normal[0]),
-                    T::lit(c.normal[1]),
-                    T::lit(c.normal[2]),
-                ),
-                gap: T::lit(gap),
-            });
+            let source = self.triangle_source(c.triangle);
+            self.emit(i as u32, Vec3::from(c.normal), gap, source);
         }
-        self.stats.escaped_points = self.stats.escaped_points.max(escaped);
-        self.stats.contacts = self.contacts.len();
-        self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
-        self.stats.steps += 1;
-        self.stats.detection_seconds += t0.elapsed().as_secs_f64();
+        escaped
+    }
+
+    /// The shapes' contacts of the points not skipped: every point against every shape, an
+    /// exact distance each (a few multiply–adds). A point within reach of a shape's surface,
+    /// or (with a predicted motion) one that would cross it within the step, gets a contact
+    /// on it; a shape's distance is exact at any depth, so a point behind its surface is
+    /// found however far it went. Returns how many points are behind a surface.
+    fn shape_points(
+        &mut self,
+        x: &[T],
+        y: &[T],
+        z: &[T],
+        radius: f64,
+        skip: &[bool],
+        motion: Motion<T>,
+    ) -> usize {
+        let margin = self.settings.margin;
+        let reach = radius + margin;
+        let n = x.len().min(y.len()).min(z.len());
+        let mut escaped = 0;
+        for i in 0..n {
+            if skip.get(i).is_some_and(|&s| s) {
+                continue;
+            }
+            let p = Vec3::new(x[i].to_f64(), y[i].to_f64(), z[i].to_f64());
+            let mut behind = false;
+            for k in 0..self.posed.len() {
+                let posed = self.posed[k];
+                let d = posed.shape.distance(&p.into());
+                let sd = d.signed_distance;
+                let mut within = sd < reach;
+                if let (false, Motion::Velocity([vx, vy, vz], h)) = (within, motion) {
+                    // Where the point would be, relative to the surface, at the step's end.
+                    let v = Vec3::new(vx[i].to_f64(), vy[i].to_f64(), vz[i].to_f64());
+                    let q = p + (v - posed.surface_velocity(&p)) * h;
+                    within = posed.shape.distance(&q.into()).signed_distance < reach;
+                }
+                if !within {
+                    continue;
+                }
+                let normal = Vec3::from(d.normal);
+                behind |= sd < 0.0;
+                self.stats.max_penetration = self.stats.max_penetration.max(radius - sd);
+                if sd < reach {
+                    // For the stiff scheme's walls (`Self::walls_of`).
+                    let closest = p - normal * sd;
+                    self.found.push(Contact {
+                        point: i as u32,
+                        triangle: u32::MAX,
+                        closest: closest.into(),
+                        distance: sd.abs(),
+                        signed_distance: sd,
+                        depth: reach - sd,
+                        normal: d.normal,
+                    });
+                }
+                self.emit(i as u32, normal, sd - radius, self.first_shape + k as u32);
+            }
+            escaped += usize::from(behind);
+        }
+        escaped
+    }
+
+    /// Makes one contact per point of the candidates (several when a point touches more than
+    /// one obstacle): the normal is the mean of theirs weighted by how far each reaches into
+    /// the point's inflated sphere (the paper's rule for the triangles a point touches), the
+    /// gap the least of theirs, and the friction and surface velocity those of the nearest.
+    fn merge_candidates(&mut self, x: &[T], y: &[T], z: &[T]) {
+        let margin = self.settings.margin;
+        self.candidates.sort_by_key(|c| c.point);
+        let mut k = 0;
+        while k < self.candidates.len() {
+            let first = self.candidates[k];
+            let mut end = k + 1;
+            let mut sum = first.normal * (margin - first.gap).max(0.0);
+            let mut nearest = first;
+            while end < self.candidates.len() && self.candidates[end].point == first.point {
+                let c = self.candidates[end];
+                sum += c.normal * (margin - c.gap).max(0.0);
+                if c.gap < nearest.gap {
+                    nearest = c;
+                }
+                end += 1;
+            }
+            let normal = if end - k > 1 {
+                sum.try_normalize(0.0).unwrap_or(nearest.normal)
+            } else {
+                first.normal
+            };
+            let i = first.point as usize;
+            self.source[i] = nearest.source;
+            let p = Vec3::new(x[i].to_f64(), y[i].to_f64(), z[i].to_f64());
+            let wall = self.wall_velocity(nearest.source, &p);
+            self.contacts.push_on(
+                PointContact {
+                    point: first.point,
+                    normal: Vec3::new(T::lit(normal.x), T::lit(normal.y), T::lit(normal.z)),
+                    gap: T::lit(nearest.gap),
+                },
+                cast_friction(&self.surfaces[nearest.source as usize]),
+                Vec3::new(T::lit(wall.x), T::lit(wall.y), T::lit(wall.z)),
+            );
+            k = end;
+        }
+    }
+
+    /// The velocity of the surface of `source` at `p`: zero but on a moving shape.
+    fn wall_velocity(&self, source: u32, p: &Vec3<f64>) -> Vec3<f64> {
+        source
+            .checked_sub(self.first_shape)
+            .and_then(|k| self.posed.get(k as usize))
+            .map_or_else(Vec3::zeros, |s| s.surface_velocity(p))
+    }
+
+    /// Puts the moving shapes where their paths have them at time `at` [s], with the surface
+    /// velocities that carry them from `t` to `t + h`. Static shapes stay as built.
+    pub(crate) fn pose_shapes(&mut self, at: f64, t: f64, h: f64) {
+        for (posed, s) in self.posed.iter_mut().zip(self.settings.shapes.iter()) {
+            let Some(path) = &s.path else { continue };
+            let (d, r) = path.pose(at);
+            let rot = nalgebra::Rotation3::from_scaled_axis(Vec3::from(r));
+            let (v, w) = path.velocities_over(t, h);
+            posed.shape = s.shape.moved(d, &rot);
+            posed.velocity = Vec3::from(v);
+            posed.omega = Vec3::from(w);
+            posed.anchor = Vec3::from(posed.shape.anchor());
+        }
+    }
+
+    /// Makes shape `k` follow `path` from where it is at time `now` [s] (see
+    /// `Stepper::set_obstacle_path`). Returns false when there is no shape `k`.
+    pub(crate) fn set_shape_path(&mut self, k: usize, path: Option<EndPath>, now: f64) -> bool {
+        let Some(old) = self.settings.shapes.get(k) else {
+            return false;
+        };
+        let here = match &old.path {
+            None => old.shape,
+            Some(p) => {
+                let (d, r) = p.pose(now);
+                old.shape
+                    .moved(d, &nalgebra::Rotation3::from_scaled_axis(Vec3::from(r)))
+            }
+        };
+        let mut shapes = self.settings.shapes.to_vec();
+        shapes[k] = ShapeObstacle {
+            shape: here,
+            friction: old.friction,
+            path,
+        };
+        self.settings.shapes = shapes.into();
+        self.posed[k] = Posed::at_rest(here);
+        true
+    }
+
+    /// The shapes as the rod's settings have them now (a stiff scheme's copy of the settings
+    /// follows them with [`Self::follow_shapes`]).
+    pub(crate) fn shapes(&self) -> &Arc<[ShapeObstacle]> {
+        &self.settings.shapes
+    }
+
+    /// Takes `shapes` (the rod's, which a control call may have changed) as this copy's.
+    pub(crate) fn follow_shapes(&mut self, shapes: &Arc<[ShapeObstacle]>) {
+        if !Arc::ptr_eq(&self.settings.shapes, shapes) {
+            self.settings.shapes = Arc::clone(shapes);
+            self.posed = shapes.iter().map(|s| Posed::at_rest(s.shape)).collect();
+        }
+    }
+
+    /// The friction of the surface point `i` touched at its last query (the mesh's own for a
+    /// point that touched nothing).
+    pub(crate) fn friction_at(&self, i: usize) -> Friction<f64> {
+        let s = self.source.get(i).copied().unwrap_or(0) as usize;
+        self.surfaces[s]
+    }
+
+    /// How far the surface point `i` touched at its last query moves over a step of `h` at
+    /// `p`: zero but on a moving shape.
+    pub(crate) fn wall_shift(&self, i: usize, p: &Vec3<f64>, h: f64) -> Vec3<f64> {
+        self.wall_velocity(self.source.get(i).copied().unwrap_or(0), p) * h
+    }
+
+    /// The shapes' deepest reach into a sphere of `radius` at `p` (its radius less its
+    /// distance from the surface, plus the distance behind it), and whether `p` is behind any
+    /// shape's surface; `None` without shapes or when no shape reaches the sphere.
+    pub(crate) fn shape_depth(&self, p: &Vec3<f64>, radius: f64) -> Option<(f64, bool)> {
+        self.posed
+            .iter()
+            .map(|s| s.shape.distance(&(*p).into()).signed_distance)
+            .filter(|&sd| sd < radius)
+            .map(|sd| (radius - sd, sd < 0.0))
+            .reduce(|a, b| (a.0.max(b.0), a.1 || b.1))
+    }
+}
+
+/// `f` in the precision `T`.
+fn cast_friction<T: Real>(f: &Friction<f64>) -> Friction<T> {
+    Friction {
+        static_coefficient: T::lit(f.static_coefficient),
+        kinetic_coefficient: T::lit(f.kinetic_coefficient),
     }
 }
 
@@ -343,6 +723,9 @@ impl<T: Real> RodMeshContact<T> {
     /// [`Self::segment_contacts`] less its timing.
     fn segment_queries(&mut self, x: &[T], y: &[T], z: &[T], radius: f64) {
         let n = x.len().min(y.len()).min(z.len()).min(self.clear2.len());
+        let Some(collider) = self.settings.collider.clone() else {
+            return;
+        };
         if n < 2 {
             return;
         }
@@ -399,7 +782,7 @@ impl<T: Real> RodMeshContact<T> {
                 || (a - Vec3::from(from)).norm() > skin
                 || (b - Vec3::from(to)).norm() > skin
             {
-                self.settings.collider.segment_near_slots(
+                collider.segment_near_slots(
                     &a.into(),
                     &b.into(),
                     reach + skin,
@@ -412,12 +795,9 @@ impl<T: Real> RodMeshContact<T> {
             if self.seg_near[j].is_empty() {
                 continue;
             }
-            let Some(near) = self.settings.collider.segment_nearest_among(
-                &a.into(),
-                &b.into(),
-                limit,
-                &self.seg_near[j],
-            ) else {
+            let Some(near) =
+                collider.segment_nearest_among(&a.into(), &b.into(), limit, &self.seg_near[j])
+            else {
                 continue;
             };
             if !(SEGMENT_END..=1.0 - SEGMENT_END).contains(&near.fraction) {
@@ -425,8 +805,14 @@ impl<T: Real> RodMeshContact<T> {
             }
             let normal = Vec3::from(near.normal);
             let on_wall = Vec3::from(near.closest);
-            self.ridge
-                .push((j as u32, normal, on_wall, near.signed_distance - radius));
+            let source = self.triangle_source(near.triangle);
+            self.ridge.push(Ridge {
+                element: j as u32,
+                normal,
+                on_wall,
+                gap: near.signed_distance - radius,
+                source,
+            });
         }
         if self.ridge.is_empty() {
             return;
@@ -437,18 +823,35 @@ impl<T: Real> RodMeshContact<T> {
         // along the wall that, over a convex solid (where every element is a ridge), lowers the
         // friction a wrapped rope can hold (a rope over a cylinder at 0.1 rad per element slid
         // from 0.87 of the capstan ratio instead of 1).
-        let mut pending: Option<(u32, Vec3<f64>, f64)> = None;
-        let flush = |p: Option<(u32, Vec3<f64>, f64)>, contacts: &mut ContactSet<T>| {
-            if let Some((i, n, gap)) = p {
+        let mut pending: Option<(u32, Vec3<f64>, f64, u32)> = None;
+        let (varied, surfaces) = (self.varied, &self.surfaces);
+        let flush = |p: Option<(u32, Vec3<f64>, f64, u32)>,
+                     contacts: &mut ContactSet<T>,
+                     sources: &mut [u32]| {
+            if let Some((i, n, gap, source)) = p {
                 let n = n.normalize();
-                contacts.set(PointContact {
+                let c = PointContact {
                     point: i,
                     normal: Vec3::new(T::lit(n.x), T::lit(n.y), T::lit(n.z)),
                     gap: T::lit(gap),
-                });
+                };
+                if varied {
+                    // The mesh is static: its surface does not move.
+                    contacts.set_on(c, cast_friction(&surfaces[source as usize]), Vec3::zeros());
+                    sources[i as usize] = source;
+                } else {
+                    contacts.set(c);
+                }
             }
         };
-        for &(j, normal, on_wall, gap) in &self.ridge {
+        for &Ridge {
+            element: j,
+            normal,
+            on_wall,
+            gap,
+            source,
+        } in &self.ridge
+        {
             self.stats.max_penetration = self.stats.max_penetration.max(-gap);
             for i in [j, j + 1] {
                 let end_gap = normal.dot(&(at(i as usize) - on_wall)) - radius;
@@ -456,18 +859,18 @@ impl<T: Real> RodMeshContact<T> {
                     continue;
                 }
                 match &mut pending {
-                    Some((p, n, g)) if *p == i => {
+                    Some((p, n, g, _)) if *p == i => {
                         *n += normal;
                         *g = g.min(end_gap);
                     }
                     _ => {
-                        flush(pending.take(), &mut self.contacts);
-                        pending = Some((i, normal, end_gap));
+                        flush(pending.take(), &mut self.contacts, &mut self.source);
+                        pending = Some((i, normal, end_gap, source));
                     }
                 }
             }
         }
-        flush(pending, &mut self.contacts);
+        flush(pending, &mut self.contacts, &mut self.source);
         self.stats.segment_contacts += self.ridge.len() as u64;
         self.stats.contacts = self.contacts.len();
         self.stats.max_contacts = self.stats.max_contacts.max(self.contacts.len());
@@ -477,10 +880,19 @@ impl<T: Real> RodMeshContact<T> {
     /// wall: those that move more than [`SWEEP_FRACTION`] of `reach`, segment by segment
     /// against the tree ([`MeshCollider::first_crossing`]). A point that moves less costs one
     /// squared distance.
-    fn sweep(&mut self, x: &[T], y: &[T], z: &[T], reach: f64, skip: &[bool], motion: Motion<T>) {
+    #[allow(clippy::too_many_arguments)]
+    fn sweep(
+        &mut self,
+        collider: &MeshCollider,
+        x: &[T],
+        y: &[T],
+        z: &[T],
+        reach: f64,
+        skip: &[bool],
+        motion: Motion<T>,
+    ) {
         self.swept.clear();
         let far2 = (SWEEP_FRACTION * reach).powi(2);
-        let collider = &self.settings.collider;
         let n = x.len().min(y.len()).min(z.len());
         let at = |i: usize| [x[i].to_f64(), y[i].to_f64(), z[i].to_f64()];
         for i in 0..n {
@@ -526,14 +938,14 @@ mod tests {
     fn clearance_and_near_lists_find_exactly_the_contacts_of_a_full_query() {
         let collider = floor();
         let (radius, margin) = (0.01, 0.002);
-        let mut rmc = RodMeshContact::<f64>::new(MeshContactSettings {
-            collider: Arc::clone(&collider),
-            friction: Friction {
+        let mut rmc = RodMeshContact::<f64>::new(MeshContactSettings::mesh(
+            Arc::clone(&collider),
+            Friction {
                 static_coefficient: 0.1,
                 kinetic_coefficient: 0.1,
             },
             margin,
-        });
+        ));
         let mut full = ContactBuffer::new();
         let mut skipped_some = false;
         let mut reused_list = false;
@@ -586,5 +998,73 @@ mod tests {
         }
         assert!(skipped_some, "no point was ever skipped");
         assert!(reused_list, "no point ever reused its near list");
+    }
+
+    #[test]
+    fn a_point_touching_two_shapes_gets_one_contact_with_the_nearest_ones_surface() {
+        let f = |mu: f64| Friction {
+            static_coefficient: mu,
+            kinetic_coefficient: mu,
+        };
+        // A floor z = 0 (μ 0.2) and a wall x = 0 (μ 0.6) moving along z at 1 m/s.
+        let path = EndPath::new(
+            0.0,
+            vec![0.0, 1.0],
+            vec![[0.0; 3], [0.0, 0.0, 1.0]],
+            vec![[0.0; 3]; 2],
+        )
+        .unwrap();
+        let shapes: Arc<[ShapeObstacle]> = Arc::new([
+            ShapeObstacle {
+                shape: Shape::half_space([0.0; 3], [0.0, 0.0, 1.0]).unwrap(),
+                friction: f(0.2),
+                path: None,
+            },
+            ShapeObstacle {
+                shape: Shape::half_space([0.0; 3], [1.0, 0.0, 0.0]).unwrap(),
+                friction: f(0.6),
+                path: Some(path),
+            },
+        ]);
+        let settings = MeshContactSettings {
+            collider: None,
+            friction: f(0.2),
+            margin: 1e-4,
+            triangle_friction: None,
+            shapes,
+        };
+        let mut rmc = RodMeshContact::<f64>::new(settings);
+        rmc.pose_shapes(0.5, 0.5, 1e-3);
+        let r = 0.01;
+        // Point 0 in the corner, nearer the wall; point 1 on the floor only; point 2 free.
+        let (x, y, z) = (
+            vec![0.009, 0.5, 0.5],
+            vec![0.0; 3],
+            vec![0.0095, 0.0099, 0.5],
+        );
+        rmc.detect(&x, &y, &z, r, Motion::From([&x, &y, &z]));
+        let got: Vec<PointContact<f64>> = rmc.contacts.contacts().collect();
+        assert_eq!(got.len(), 2, "{got:?}");
+        // The corner: the mean of both normals weighted by their reach into the inflated
+        // sphere (1.1e-3 and 6e-4), the wall's gap, and the wall's friction and speed.
+        let (dw, df) = (1e-4 + 1e-3, 1e-4 + 5e-4);
+        let n = Vec3::new(dw, 0.0, df).normalize();
+        assert!((got[0].normal - n).norm() < 1e-12, "{:?}", got[0]);
+        assert!((got[0].gap + 1e-3).abs() < 1e-12);
+        assert_eq!(rmc.friction_at(0).static_coefficient, 0.6);
+        assert_eq!(rmc.friction_at(1).static_coefficient, 0.2);
+        let shift = rmc.wall_shift(0, &Vec3::new(x[0], y[0], z[0]), 1e-3);
+        assert!(
+            (shift - Vec3::new(0.0, 0.0, 1e-3)).norm() < 1e-12,
+            "{shift:?}"
+        );
+        assert!(rmc.wall_shift(1, &Vec3::zeros(), 1e-3).norm() == 0.0);
+        assert_eq!(got[1].point, 1);
+        assert!((got[1].gap + 1e-4).abs() < 1e-12);
+        // A point behind a shape's surface is escaped, at any depth.
+        let (x, z) = (vec![0.5], vec![-0.3]);
+        rmc.detect(&x, &[0.0], &z, r, Motion::From([&x, &[0.0], &z]));
+        assert_eq!(rmc.stats.escaped_points, 1);
+        assert!((rmc.stats.max_penetration - 0.31).abs() < 1e-12);
     }
 }

@@ -492,6 +492,8 @@ pub(crate) fn before_constraints<T: Real>(
         guide.constrain(w);
     }
     if let Some(mesh) = rod.mesh.as_mut() {
+        // Moving obstacles where they are at the step's start, as the points are.
+        mesh.pose_shapes(t, t, h.to_f64());
         // Swept along the step's predicted motion: a wall the point would cross beyond its
         // sphere's reach becomes a speculative contact.
         mesh.detect(

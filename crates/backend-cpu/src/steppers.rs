@@ -17,8 +17,8 @@ use cosserat_problem::stepper::{
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
-    Divergence, EndCondition, EndReaction, Par, PointLoad, Snapshot, SolverSettings, StateField,
-    StepError, StepStats, Stepper, StepperInfo, StiffSettings, StiffSummary,
+    Divergence, EndCondition, EndPath, EndReaction, Par, PointLoad, Snapshot, SolverSettings,
+    StateField, StepError, StepStats, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };
 
 use crate::coupling::{Coupling, step_coupled_batch};
@@ -68,8 +68,8 @@ pub trait Scheme<T: Real>: Clone + Send + Sync + 'static {
     }
 }
 
-/// What every CPU scheme can do: mesh contact, the guide, reactions at held ends, `f64`, held
-/// ends along keyframed paths.
+/// What every CPU scheme can do: mesh contact, several obstacles (moving ones too), the guide,
+/// reactions at held ends, `f64`, held ends along keyframed paths.
 fn cpu_base() -> Capabilities {
     Capabilities::of(&[
         Capability::MeshContact,
@@ -78,6 +78,8 @@ fn cpu_base() -> Capabilities {
         Capability::DoublePrecision,
         Capability::EndPaths,
         Capability::VaryingLoads,
+        Capability::Obstacles,
+        Capability::MovingObstacles,
     ])
 }
 
@@ -677,6 +679,28 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
             self.clock,
             Box::new(CpuSnapshot::<T, S>::clone(self)),
         ))
+    }
+
+    fn set_obstacle_path(
+        &mut self,
+        shape: usize,
+        path: Option<EndPath>,
+    ) -> Result<(), ControlError> {
+        let now = self.clock.time();
+        let mut found = false;
+        for r in &mut self.rods {
+            if let Some(m) = r.mesh.as_mut() {
+                found |= m.set_shape_path(shape, path.clone(), now);
+            }
+        }
+        if found {
+            Ok(())
+        } else {
+            Err(ControlError::Unsupported {
+                stepper: S::NAME,
+                what: format!("move obstacle shape {shape}: no rod touches such a shape"),
+            })
+        }
     }
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), ControlError> {

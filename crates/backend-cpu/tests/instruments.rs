@@ -137,14 +137,14 @@ fn pushed_end_reaction_balances_contact_and_friction() {
         &spec,
         [EndCondition::clamped().driven(push), EndCondition::free()],
     )
-    .with_mesh(MeshContactSettings {
-        collider: wall(0.2),
-        friction: Friction {
+    .with_mesh(MeshContactSettings::mesh(
+        wall(0.2),
+        Friction {
             static_coefficient: 0.3,
             kinetic_coefficient: 0.2,
         },
-        margin: 1e-4,
-    })
+        1e-4,
+    ))
     .with_reaction_cutoff(20.0);
     let s = settings(2e-5, Vec3::zeros(), Ordering::RedBlack);
     let contact_force = |r: &CpuRod<f64>| -> Vec3<f64> {

@@ -19,6 +19,8 @@
 //!   on its way from one place to another, however far it moved.
 //! * [`rods`]: rod–rod and self-collision with bounding spheres over runs of points (the paper's
 //!   Fig. 6) and a segment–segment narrow phase ([`RodCollider`]).
+//! * [`shape`]: analytic obstacles ([`Shape`]): an infinite plane and an infinite cylinder
+//!   (a lumen or a solid), with exact signed distances, moved rigidly along a path.
 //! * [`vessel`]: a deterministic procedural vessel tree (~26 000 triangles by default, like the
 //!   paper's phantom) with an entry point for insertion scenes.
 //! * [`gpu`]: the flat arrays for GPU upload.
@@ -49,6 +51,7 @@ pub mod port;
 pub mod repair;
 pub mod rods;
 pub mod segment;
+pub mod shape;
 pub mod sweep;
 pub mod vessel;
 pub mod winding;
@@ -62,6 +65,7 @@ pub use port::{Port, PortError, open_port};
 pub use repair::OrientationRepair;
 pub use rods::{BroadPhase, Chain, RodCollider, RodCollisionConfig, RodContact};
 pub use segment::SegmentNearest;
+pub use shape::{Shape, ShapeDistance, Side};
 pub use sweep::Crossing;
 pub use vessel::{Bulge, Vessel, VesselParams};
 pub use winding::{WindingNumber, opening_caps};

@@ -77,6 +77,13 @@ pub struct ContactSet<T: Real> {
     /// Scratch of a sweep: the contact points' velocities and inverse masses.
     v: [Vec<T>; 3],
     inv_mass: Vec<T>,
+    /// Whether the contacts carry surfaces of their own ([`Self::push_on`]): then `mu_s`,
+    /// `mu_k` and `wall` hold one entry per contact (a NaN friction: the sweep's).
+    surfaces: bool,
+    mu_s: Vec<T>,
+    mu_k: Vec<T>,
+    /// The velocity of the surface under each contact, coordinate by coordinate [m/s].
+    wall: [Vec<T>; 3],
 }
 
 impl<T: Real> ContactSet<T> {
@@ -93,10 +100,15 @@ impl<T: Real> ContactSet<T> {
         for c in 0..3 {
             self.normal[c].clear();
             self.tangent_impulse[c].clear();
+            self.wall[c].clear();
         }
+        self.mu_s.clear();
+        self.mu_k.clear();
+        self.surfaces = false;
     }
 
-    /// Adds a contact with zero accumulated impulse.
+    /// Adds a contact with zero accumulated impulse, on a static surface with the sweep's
+    /// friction.
     pub fn push(&mut self, c: PointContact<T>) {
         self.point.push(c.point);
         self.gap.push(c.gap);
@@ -104,6 +116,58 @@ impl<T: Real> ContactSet<T> {
         for k in 0..3 {
             self.normal[k].push(c.normal[k]);
             self.tangent_impulse[k].push(T::zero());
+        }
+        if self.surfaces {
+            self.push_surface(None, Vec3::zeros());
+        }
+    }
+
+    /// Adds a contact with zero accumulated impulse on a surface of its own: its `friction`
+    /// (instead of the sweep's) and the surface's velocity `wall` at the contact [m/s]. The
+    /// contact then constrains the point's velocity relative to the surface: it may not
+    /// approach it faster than its gap allows, and friction acts against its sliding on it (a
+    /// moving floor drags a resting rod along).
+    pub fn push_on(&mut self, c: PointContact<T>, friction: Friction<T>, wall: Vec3<T>) {
+        self.enable_surfaces();
+        self.push(c);
+        self.put_surface(self.point.len() - 1, friction, wall);
+    }
+
+    /// [`Self::set`] on a surface of its own (as [`Self::push_on`]).
+    pub fn set_on(&mut self, c: PointContact<T>, friction: Friction<T>, wall: Vec3<T>) {
+        self.enable_surfaces();
+        self.set(c);
+        if let Some(k) = self.point.iter().position(|&p| p == c.point) {
+            self.put_surface(k, friction, wall);
+        }
+    }
+
+    /// Gives every contact so far the sweep's surface, and later ones a surface each.
+    fn enable_surfaces(&mut self) {
+        if !self.surfaces {
+            self.surfaces = true;
+            for _ in 0..self.point.len() {
+                self.push_surface(None, Vec3::zeros());
+            }
+        }
+    }
+
+    fn put_surface(&mut self, k: usize, friction: Friction<T>, wall: Vec3<T>) {
+        self.mu_s[k] = friction.static_coefficient;
+        self.mu_k[k] = friction.kinetic_coefficient;
+        for c in 0..3 {
+            self.wall[c][k] = wall[c];
+        }
+    }
+
+    fn push_surface(&mut self, friction: Option<Friction<T>>, wall: Vec3<T>) {
+        let nan = T::lit(f64::NAN);
+        self.mu_s
+            .push(friction.map_or(nan, |f| f.static_coefficient));
+        self.mu_k
+            .push(friction.map_or(nan, |f| f.kinetic_coefficient));
+        for c in 0..3 {
+            self.wall[c].push(wall[c]);
         }
     }
 
@@ -236,9 +300,20 @@ impl<T: Real> ContactSet<T> {
     /// tangential velocity is cancelled inside the static cone, else the impulse slides on the
     /// kinetic cone ([`Friction::clamp`], written here without branches). A kinematic point
     /// (zero inverse mass) keeps its velocity and its contact's impulses stay zero.
+    ///
+    /// Contacts on surfaces of their own ([`Self::push_on`]) are resolved on the velocities
+    /// relative to their surface, with their own friction.
     fn resolve_all(&mut self, h: T, friction: &Friction<T>) {
         let n = self.point.len();
-        let (mu_s, mu_k) = (friction.static_coefficient, friction.kinetic_coefficient);
+        let surfaces = self.surfaces;
+        if surfaces {
+            for c in 0..3 {
+                for (v, w) in self.v[c][..n].iter_mut().zip(&self.wall[c][..n]) {
+                    *v -= *w;
+                }
+            }
+        }
+        let (fs, fk) = (friction.static_coefficient, friction.kinetic_coefficient);
         let zero = T::zero();
         let one = T::one();
         let [nx, ny, nz] = &self.normal;
@@ -250,6 +325,11 @@ impl<T: Real> ContactSet<T> {
         let [vx, vy, vz] = &mut self.v;
         let (vx, vy, vz) = (&mut vx[..n], &mut vy[..n], &mut vz[..n]);
         for k in 0..n {
+            let (mu_s, mu_k) = if surfaces && self.mu_s[k] >= zero {
+                (self.mu_s[k], self.mu_k[k])
+            } else {
+                (fs, fk)
+            };
             let active = inv_mass[k] > zero;
             let (x, y, z) = (vx[k], vy[k], vz[k]);
             let (ax, ay, az) = (nx[k], ny[k], nz[k]);
@@ -281,6 +361,13 @@ impl<T: Real> ContactSet<T> {
             };
             (tx[k], ty[k], tz[k]) = (px, py, pz);
             (vx[k], vy[k], vz[k]) = (x + (px - ox), y + (py - oy), z + (pz - oz));
+        }
+        if surfaces {
+            for c in 0..3 {
+                for (v, w) in self.v[c][..n].iter_mut().zip(&self.wall[c][..n]) {
+                    *v += *w;
+                }
+            }
         }
     }
 }
@@ -453,5 +540,72 @@ mod tests {
         // Tangential 2.0 exceeds μs·1: slides, slowed by exactly μk · λn = 0.4.
         let (v, _) = one(0.0, Vec3::new(2.0, 0.0, -1.0), (0.5, 0.4), 5);
         assert!((v.x - 1.6).abs() < 1e-12, "{v:?}");
+    }
+
+    #[test]
+    fn a_contact_on_a_moving_surface_of_its_own_friction_acts_on_the_relative_velocity() {
+        let sweep_friction = Friction {
+            static_coefficient: 0.0,
+            kinetic_coefficient: 0.0,
+        };
+        let sticky = Friction {
+            static_coefficient: 1.0,
+            kinetic_coefficient: 1.0,
+        };
+        let h = 1e-3;
+        // A point at rest on a floor rising at 0.3 m/s and moving along x at 0.2 m/s, with a
+        // static contact beside it (the sweep's frictionless surface) on point 1 sliding at 1 m/s.
+        let mut set = ContactSet::new();
+        set.push(PointContact {
+            point: 1,
+            normal: Vec3::z(),
+            gap: 0.0,
+        });
+        set.push_on(
+            PointContact {
+                point: 0,
+                normal: Vec3::z(),
+                gap: 0.0,
+            },
+            sticky,
+            Vec3::new(0.2, 0.0, 0.3),
+        );
+        let (mut x, mut y, mut z) = (vec![0.0_f64, 1.0], vec![0.0, 0.0], vec![0.0_f64, -0.5]);
+        for _ in 0..3 {
+            set.sweep_soa(h, &sweep_friction, &[1.0, 1.0], [&mut x, &mut y, &mut z]);
+        }
+        // Lifted with the floor and carried along: static friction holds it (|Δv_t| = 0.2
+        // within μ_s times the normal push 0.3).
+        assert!(
+            (z[0] - 0.3).abs() < 1e-12 && (x[0] - 0.2).abs() < 1e-12,
+            "{x:?} {z:?}"
+        );
+        // The other contact keeps the sweep's (frictionless, static) surface.
+        assert!(
+            z[1].abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12,
+            "{x:?} {z:?}"
+        );
+        // Too little friction to carry it: it slides at the kinetic cone.
+        let slippery = Friction {
+            static_coefficient: 0.5,
+            kinetic_coefficient: 0.5,
+        };
+        set.clear();
+        set.push_on(
+            PointContact {
+                point: 0,
+                normal: Vec3::z(),
+                gap: 0.0,
+            },
+            slippery,
+            Vec3::new(0.2, 0.0, 0.3),
+        );
+        let (mut x, mut y, mut z) = (vec![0.0_f64], vec![0.0], vec![0.0_f64]);
+        set.sweep_soa(h, &sweep_friction, &[1.0], [&mut x, &mut y, &mut z]);
+        // (μ_k times the push 0.3 is 0.15 of the 0.2 it would need.)
+        assert!(
+            (z[0] - 0.3).abs() < 1e-12 && (x[0] - 0.15).abs() < 1e-12,
+            "{x:?} {z:?}"
+        );
     }
 }

@@ -417,11 +417,7 @@ impl Environment {
 
     /// What the CPU backend needs to make a rod collide with this environment.
     pub fn contact_settings(&self) -> MeshContactSettings {
-        MeshContactSettings {
-            collider: Arc::clone(&self.collider),
-            friction: self.friction,
-            margin: self.margin,
-        }
+        MeshContactSettings::mesh(Arc::clone(&self.collider), self.friction, self.margin)
     }
 
     /// Points of `points` whose centre lies outside the lumen (inside a solid), and how deep the
@@ -435,6 +431,19 @@ impl Environment {
     /// the rim of an open end: it left through the opening. `radius` is the rod's: a point's
     /// depth is its distance behind the wall plus its radius (the penetration of its sphere).
     pub fn outside(&self, points: &[[f64; 3]], radius: f64) -> Outside {
+        let mut out = Outside::default();
+        self.each_outside(points, radius, |i, depth| out.add(i, depth));
+        out
+    }
+
+    /// Calls `found(i, depth)` for every point `i` of `points` outside the lumen (inside a
+    /// solid), with its depth, as [`Self::outside`] counts them.
+    pub fn each_outside(
+        &self,
+        points: &[[f64; 3]],
+        radius: f64,
+        mut found: impl FnMut(usize, f64),
+    ) {
         // A point not yet past the entry, or in the port's channel before the lumen, is on its
         // way in.
         let inserted = |p: &[f64; 3]| {
@@ -453,7 +462,6 @@ impl Environment {
         let reach = 2.0 * (hi - lo).norm() + 1.0;
         // A sheet (a floor, a wall) encloses nothing: the side of its nearest feature decides.
         let lumen = self.collider.encloses_volume();
-        let mut out = Outside::default();
         for (i, p) in points.iter().enumerate() {
             if !inserted(p) {
                 continue;
@@ -473,14 +481,8 @@ impl Environment {
             if nearest.at_opening || (!lumen && nearest.signed_distance >= 0.0) {
                 continue;
             }
-            let depth = nearest.distance + radius;
-            out.count += 1;
-            if depth > out.deepest {
-                out.deepest = depth;
-                out.deepest_point = Some(i);
-            }
+            found(i, nearest.distance + radius);
         }
-        out
     }
 
     /// A warning about the entry (where a wire is pushed in), if it deserves one: its axis
@@ -523,6 +525,17 @@ pub struct Outside {
     pub deepest: f64,
     /// Index of the deepest point.
     pub deepest_point: Option<usize>,
+}
+
+impl Outside {
+    /// Counts point `i`, outside by `depth`.
+    pub(crate) fn add(&mut self, i: usize, depth: f64) {
+        self.count += 1;
+        if depth > self.deepest {
+            self.deepest = depth;
+            self.deepest_point = Some(i);
+        }
+    }
 }
 
 /// What loading (`report`) and repairing (`repair`) the mesh `name` changed or found, as

@@ -22,6 +22,7 @@
 pub mod convergence;
 pub mod energy_watch;
 pub mod environment;
+pub mod obstacles;
 pub mod output;
 pub mod report;
 pub mod scene;
@@ -35,6 +36,7 @@ pub use cosserat_collide;
 pub use cosserat_constraints;
 pub use cosserat_model::{self, Material};
 pub use environment::{Entry, Environment};
+pub use obstacles::Obstacle;
 pub use sim::{
     Backend, BuildError, Capabilities, Capability, ContactReport, ContactSample, ControlError,
     Gpus, RodBuilder, RodContactSpec, RodHandle, Simulation, SimulationBuilder, SimulationSnapshot,

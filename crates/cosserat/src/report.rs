@@ -262,7 +262,14 @@ impl RunReport {
             run_warnings: run_warnings(sim),
             step_us,
             contact: sim.contact_report().map(|c| ContactFigures {
-                triangles: sim.environment().map_or(0, |e| e.triangles()),
+                triangles: sim
+                    .obstacles()
+                    .iter()
+                    .map(|o| match o.geometry() {
+                        crate::obstacles::Geometry::Mesh(env) => env.triangles(),
+                        crate::obstacles::Geometry::Shape(_) => 0,
+                    })
+                    .sum(),
                 max_penetration: c.max_penetration,
                 escaped_points: c.escaped_points,
                 contacts: c.contacts,

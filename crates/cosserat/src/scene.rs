@@ -9,6 +9,7 @@
 //! which is how one scene file serves several resolutions.
 
 use crate::environment::{Entry, Environment};
+use crate::obstacles::{Obstacle, Side};
 use crate::sim::{
     BindingSpec, BindingVariant, Gpus, RodBuilder, RodContactSpec, SimulationBuilder,
 };
@@ -77,6 +78,9 @@ pub struct SceneFile {
     pub rods: Vec<RodSection>,
     /// The static mesh the rods collide with, if any.
     pub environment: Option<EnvironmentSection>,
+    /// More obstacles, each with its own friction and side: `[[obstacles]]`.
+    #[serde(default)]
+    pub obstacles: Vec<ObstacleSection>,
     /// Instruments bound inside each other (paper section 3.4): `[[binding]]`.
     #[serde(default, rename = "binding")]
     pub bindings: Vec<BindingSection>,
@@ -188,6 +192,47 @@ pub struct EnvironmentSection {
     /// Which side of a closed mesh the rods stay on: `"lumen"` (inside; the default for a file)
     /// or `"solid"` (outside; the default, and the only choice, for a cylinder).
     pub side: Option<String>,
+}
+
+/// `[[obstacles]]`: one obstacle besides the environment (`crate::obstacles`): a `mesh` of any
+/// kind `environment.mesh` takes, or an analytic `shape`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleSection {
+    /// A mesh, as `environment.mesh`.
+    pub mesh: Option<MeshSection>,
+    /// An analytic shape.
+    pub shape: Option<ObstacleShapeSection>,
+    /// Coulomb friction with it (default static 0.1, kinetic 0.08).
+    pub friction: Option<FrictionSection>,
+    /// Which side the rods stay on, as `environment.side`; for a cylinder shape `"solid"`
+    /// (outside, the default) or `"lumen"` (inside).
+    pub side: Option<String>,
+    /// A keyframed rigid motion of a shape (as `rod.end.path`: displacement of the shape's
+    /// point, rotation about it).
+    pub path: Option<PathSection>,
+}
+
+/// `obstacles.shape`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
+pub enum ObstacleShapeSection {
+    /// The half-space behind an infinite plane.
+    HalfSpace {
+        /// A point on the plane [m].
+        point: [f64; 3],
+        /// The side the rods are on.
+        normal: [f64; 3],
+    },
+    /// An infinite cylinder.
+    Cylinder {
+        /// A point on the axis [m].
+        point: [f64; 3],
+        /// Direction of the axis.
+        axis: [f64; 3],
+        /// Radius [m].
+        radius: f64,
+    },
 }
 
 /// `environment.mesh`.
@@ -810,18 +855,27 @@ impl Checker<'_> {
 
     /// A cylinder's or a capsule's centre, axis, radius, length and faces around (`default`
     /// when not given), checked.
-    fn round_solid(&self, r: &RoundSection, default: usize) -> Result<Round, SceneError> {
-        let center = self.finite3("environment.mesh.center", r.center)?;
-        let axis = self.finite3("environment.mesh.axis", r.axis)?;
+    fn round_solid(
+        &self,
+        prefix: &str,
+        r: &RoundSection,
+        default: usize,
+    ) -> Result<Round, SceneError> {
+        let center = self.finite3(&format!("{prefix}.mesh.center"), r.center)?;
+        let axis = self.finite3(&format!("{prefix}.mesh.axis"), r.axis)?;
         if !(axis.iter().map(|x| x * x).sum::<f64>() > 0.0) {
-            return Err(self.invalid("environment.mesh.axis", axis, "expected a non-zero vector"));
+            return Err(self.invalid(
+                format!("{prefix}.mesh.axis"),
+                axis,
+                "expected a non-zero vector",
+            ));
         }
-        let radius = self.positive("environment.mesh.radius", r.radius)?;
-        let length = self.positive("environment.mesh.length", r.length)?;
+        let radius = self.positive(&format!("{prefix}.mesh.radius"), r.radius)?;
+        let length = self.positive(&format!("{prefix}.mesh.length"), r.length)?;
         let segments = r.segments.unwrap_or(default);
         if !(8..=100_000).contains(&segments) {
             return Err(self.invalid(
-                "environment.mesh.segments",
+                format!("{prefix}.mesh.segments"),
                 segments,
                 "expected 8 ..= 100 000",
             ));
@@ -945,6 +999,9 @@ impl Checker<'_> {
         b = self.interactions(scene, b)?;
         if let Some(env) = environment {
             b = b.environment(env);
+        }
+        for (i, o) in scene.obstacles.iter().enumerate() {
+            b = b.obstacle(self.obstacle(i, o)?);
         }
         Ok((b, RunLength { steps }))
     }
@@ -1144,15 +1201,157 @@ impl Checker<'_> {
     }
 
     fn environment(&self, e: &EnvironmentSection) -> Result<Environment, SceneError> {
+        let mut env = self.mesh_obstacle(
+            "environment",
+            &e.mesh,
+            e.friction.as_ref(),
+            e.side.as_deref(),
+        )?;
+        if let Some(m) = e.margin {
+            env.margin = self.non_negative("environment.margin", m)?;
+        }
+        if let Some(stop) = e.stop_outside {
+            env.stop_outside = stop;
+        }
+        Ok(env)
+    }
+
+    /// `{prefix}.friction`, checked.
+    fn friction(
+        &self,
+        prefix: &str,
+        f: &FrictionSection,
+    ) -> Result<cosserat_constraints::Friction<f64>, SceneError> {
+        let mu_s = self.non_negative(&format!("{prefix}.friction.static"), f.static_coefficient)?;
+        let mu_k = self.non_negative(&format!("{prefix}.friction.kinetic"), f.kinetic)?;
+        if mu_k > mu_s {
+            return Err(self.invalid(
+                format!("{prefix}.friction.kinetic"),
+                mu_k,
+                "expected kinetic <= static",
+            ));
+        }
+        Ok(cosserat_constraints::Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+        })
+    }
+
+    /// `[[obstacles]]` entry `i`: a mesh or a shape, its friction, side and path, checked.
+    fn obstacle(&self, i: usize, o: &ObstacleSection) -> Result<Obstacle, SceneError> {
+        let prefix = format!("obstacles[{i}]");
+        let obstacle = match (&o.mesh, &o.shape) {
+            (Some(mesh), None) => Obstacle::mesh(self.mesh_obstacle(
+                &prefix,
+                mesh,
+                o.friction.as_ref(),
+                o.side.as_deref(),
+            )?),
+            (None, Some(shape)) => {
+                let mut obstacle = self.shape(&prefix, shape, o.side.as_deref())?;
+                if let Some(f) = &o.friction {
+                    let f = self.friction(&prefix, f)?;
+                    obstacle = obstacle.friction(f.static_coefficient, f.kinetic_coefficient);
+                }
+                obstacle
+            }
+            (Some(_), Some(_)) => {
+                return Err(self.invalid(
+                    prefix,
+                    "a mesh and a shape",
+                    "give either `mesh` or `shape`, not both",
+                ));
+            }
+            (None, None) => {
+                return Err(self.invalid(
+                    prefix,
+                    "neither a mesh nor a shape",
+                    "give `mesh = { kind = ... }` or `shape = { kind = \"half-space\" | \"cylinder\", ... }`",
+                ));
+            }
+        };
+        let Some(p) = &o.path else {
+            return Ok(obstacle);
+        };
+        let field = format!("{prefix}.path");
+        let n = p.times.len();
+        let path = EndPath::new(
+            p.start_time,
+            p.times.clone(),
+            p.displacement.clone().unwrap_or_else(|| vec![[0.0; 3]; n]),
+            p.rotation.clone().unwrap_or_else(|| vec![[0.0; 3]; n]),
+        )
+        .map_err(|why| self.invalid(&field, "the keyframes", &why))?;
+        obstacle
+            .following(path)
+            .map_err(|why| self.invalid(&field, "a path", &why))
+    }
+
+    /// `{prefix}.shape` on `side`, checked.
+    fn shape(
+        &self,
+        prefix: &str,
+        shape: &ObstacleShapeSection,
+        side: Option<&str>,
+    ) -> Result<Obstacle, SceneError> {
+        let field = |name: &str| format!("{prefix}.shape.{name}");
+        match shape {
+            ObstacleShapeSection::HalfSpace { point, normal } => {
+                if let Some(side) = side {
+                    return Err(self.invalid(
+                        format!("{prefix}.side"),
+                        side,
+                        "a half-space has one side, the one its normal points to",
+                    ));
+                }
+                let point = self.finite3(&field("point"), *point)?;
+                let normal = self.finite3(&field("normal"), *normal)?;
+                Obstacle::half_space(point, normal)
+                    .map_err(|why| self.invalid(field("normal"), normal, &why))
+            }
+            ObstacleShapeSection::Cylinder {
+                point,
+                axis,
+                radius,
+            } => {
+                let side = match side {
+                    None | Some("solid") => Side::Solid,
+                    Some("lumen") => Side::Lumen,
+                    Some(other) => {
+                        return Err(self.invalid(
+                            format!("{prefix}.side"),
+                            other,
+                            "expected \"lumen\" or \"solid\"",
+                        ));
+                    }
+                };
+                let point = self.finite3(&field("point"), *point)?;
+                let axis = self.finite3(&field("axis"), *axis)?;
+                let radius = self.positive(&field("radius"), *radius)?;
+                Obstacle::cylinder(point, axis, radius, side)
+                    .map_err(|why| self.invalid(field("axis"), axis, &why))
+            }
+        }
+    }
+
+    /// A mesh (`{prefix}.mesh`) with its friction and side, checked; errors name the fields
+    /// under `prefix` (`environment`, `obstacles[2]`).
+    fn mesh_obstacle(
+        &self,
+        prefix: &str,
+        mesh: &MeshSection,
+        friction: Option<&FrictionSection>,
+        side: Option<&str>,
+    ) -> Result<Environment, SceneError> {
         let mesh_err = |field: &str, err: cosserat_collide::MeshError| {
             self.invalid(field, err.to_string(), "a readable, valid triangle mesh")
         };
-        let mut env = match &e.mesh {
+        let mut env = match mesh {
             MeshSection::Vessel { triangles, seed } => {
                 let t = triangles.unwrap_or(26_000);
                 if !(100..=5_000_000).contains(&t) {
                     return Err(self.invalid(
-                        "environment.mesh.triangles",
+                        format!("{prefix}.mesh.triangles"),
                         t,
                         "expected 100 ..= 5 000 000",
                     ));
@@ -1161,27 +1360,28 @@ impl Checker<'_> {
                     None => Environment::vessel(t),
                     Some(seed) => Environment::random_vessel(*seed, t),
                 }
-                .map_err(|err| mesh_err("environment.mesh", err))?
+                .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
             MeshSection::File { path, scale, entry } => {
-                let scale = self.positive("environment.mesh.scale", *scale)?;
+                let scale = self.positive(&format!("{prefix}.mesh.scale"), *scale)?;
                 let entry = match entry {
                     None => None,
                     Some(e) => {
-                        let p = self.finite3("environment.mesh.entry.point", e.point)?;
-                        let d = self.finite3("environment.mesh.entry.direction", e.direction)?;
+                        let p = self.finite3(&format!("{prefix}.mesh.entry.point"), e.point)?;
+                        let d =
+                            self.finite3(&format!("{prefix}.mesh.entry.direction"), e.direction)?;
                         if !(d.iter().map(|x| x * x).sum::<f64>() > 0.0) {
                             return Err(self.invalid(
-                                "environment.mesh.entry.direction",
+                                format!("{prefix}.mesh.entry.direction"),
                                 d,
                                 "expected a non-zero vector",
                             ));
                         }
                         let radius = match e.radius {
                             None => None,
-                            Some(r) => {
-                                Some(self.positive("environment.mesh.entry.radius", r)? * scale)
-                            }
+                            Some(r) => Some(
+                                self.positive(&format!("{prefix}.mesh.entry.radius"), r)? * scale,
+                            ),
                         };
                         Some(Entry {
                             point: [p[0] * scale, p[1] * scale, p[2] * scale],
@@ -1195,96 +1395,80 @@ impl Checker<'_> {
                     .parent()
                     .map_or_else(|| path.clone(), |dir| dir.join(path));
                 Environment::from_file(&full, scale, entry)
-                    .map_err(|err| mesh_err("environment.mesh.path", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh.path"), err))?
             }
             MeshSection::Cylinder(r) => {
-                let r = self.round_solid(r, 256)?;
+                let r = self.round_solid(prefix, r, 256)?;
                 Environment::cylinder(r.center, r.axis, r.radius, r.length, r.segments)
-                    .map_err(|err| mesh_err("environment.mesh", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
             MeshSection::Capsule(r) => {
-                let r = self.round_solid(r, 128)?;
+                let r = self.round_solid(prefix, r, 128)?;
                 Environment::capsule(r.center, r.axis, r.radius, r.length, r.segments)
-                    .map_err(|err| mesh_err("environment.mesh", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
             MeshSection::Sphere {
                 center,
                 radius,
                 segments,
             } => {
-                let center = self.finite3("environment.mesh.center", *center)?;
-                let radius = self.positive("environment.mesh.radius", *radius)?;
+                let center = self.finite3(&format!("{prefix}.mesh.center"), *center)?;
+                let radius = self.positive(&format!("{prefix}.mesh.radius"), *radius)?;
                 let segments = segments.unwrap_or(128);
                 if !(8..=4096).contains(&segments) {
                     return Err(self.invalid(
-                        "environment.mesh.segments",
+                        format!("{prefix}.mesh.segments"),
                         segments,
                         "expected 8 ..= 4096",
                     ));
                 }
                 Environment::sphere(center, radius, segments)
-                    .map_err(|err| mesh_err("environment.mesh", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
             MeshSection::Box {
                 center,
                 size,
                 rotation,
             } => {
-                let center = self.finite3("environment.mesh.center", *center)?;
-                let size = self.finite3("environment.mesh.size", *size)?;
+                let center = self.finite3(&format!("{prefix}.mesh.center"), *center)?;
+                let size = self.finite3(&format!("{prefix}.mesh.size"), *size)?;
                 if !size.iter().all(|x| *x > 0.0) {
                     return Err(self.invalid(
-                        "environment.mesh.size",
+                        format!("{prefix}.mesh.size"),
                         size,
                         "expected three lengths > 0",
                     ));
                 }
-                let rotation =
-                    self.finite3("environment.mesh.rotation", rotation.unwrap_or([0.0; 3]))?;
+                let rotation = self.finite3(
+                    &format!("{prefix}.mesh.rotation"),
+                    rotation.unwrap_or([0.0; 3]),
+                )?;
                 Environment::cuboid(center, size, rotation)
-                    .map_err(|err| mesh_err("environment.mesh", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
             MeshSection::Plane {
                 point,
                 normal,
                 size,
             } => {
-                let point = self.finite3("environment.mesh.point", *point)?;
-                let normal = self.finite3("environment.mesh.normal", *normal)?;
+                let point = self.finite3(&format!("{prefix}.mesh.point"), *point)?;
+                let normal = self.finite3(&format!("{prefix}.mesh.normal"), *normal)?;
                 if !(normal.iter().map(|x| x * x).sum::<f64>() > 0.0) {
                     return Err(self.invalid(
-                        "environment.mesh.normal",
+                        format!("{prefix}.mesh.normal"),
                         normal,
                         "expected a non-zero vector",
                     ));
                 }
-                let size = self.positive("environment.mesh.size", *size)?;
+                let size = self.positive(&format!("{prefix}.mesh.size"), *size)?;
                 Environment::plane(point, normal, size)
-                    .map_err(|err| mesh_err("environment.mesh", err))?
+                    .map_err(|err| mesh_err(&format!("{prefix}.mesh"), err))?
             }
         };
-        if let Some(f) = &e.friction {
-            let mu_s = self.non_negative("environment.friction.static", f.static_coefficient)?;
-            let mu_k = self.non_negative("environment.friction.kinetic", f.kinetic)?;
-            if mu_k > mu_s {
-                return Err(self.invalid(
-                    "environment.friction.kinetic",
-                    mu_k,
-                    "expected kinetic <= static",
-                ));
-            }
-            env.friction = cosserat_constraints::Friction {
-                static_coefficient: mu_s,
-                kinetic_coefficient: mu_k,
-            };
+        if let Some(f) = friction {
+            env.friction = self.friction(prefix, f)?;
         }
-        if let Some(m) = e.margin {
-            env.margin = self.non_negative("environment.margin", m)?;
-        }
-        if let Some(stop) = e.stop_outside {
-            env.stop_outside = stop;
-        }
-        match (e.side.as_deref(), &e.mesh) {
+        match (side, mesh) {
             (None, _)
             | (
                 Some("solid"),
@@ -1297,7 +1481,7 @@ impl Checker<'_> {
             (Some("solid"), MeshSection::File { entry: None, .. }) => {
                 env = env
                     .into_solid()
-                    .map_err(|why| self.invalid("environment.side", "solid", &why))?;
+                    .map_err(|why| self.invalid(format!("{prefix}.side"), "solid", &why))?;
             }
             (Some(side @ ("lumen" | "solid")), mesh) => {
                 let kind = match mesh {
@@ -1311,11 +1495,11 @@ impl Checker<'_> {
                         "a floor has one side, the one its normal points to"
                     }
                 };
-                return Err(self.invalid("environment.side", side, kind));
+                return Err(self.invalid(format!("{prefix}.side"), side, kind));
             }
             (Some(other), _) => {
                 return Err(self.invalid(
-                    "environment.side",
+                    format!("{prefix}.side"),
                     other,
                     "expected \"lumen\" or \"solid\"",
                 ));

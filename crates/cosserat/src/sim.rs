@@ -7,18 +7,20 @@
 
 use crate::energy_watch::EnergyWatch;
 use crate::environment::{Environment, Outside};
+use crate::obstacles::Obstacle;
+use cosserat_backend_cpu::MeshContactSettings;
 pub use cosserat_backend_cpu::{BindingSpec, RodContactSpec};
 use cosserat_backend_cpu::{CpuRod, CpuStepper, Guide};
 pub use cosserat_constraints::BindingVariant;
 use cosserat_model::energy::Energies;
 use cosserat_model::rod::{RestShape, RodSpec, build_rod_with_rest_lengths, straight_polyline};
 use cosserat_model::{Material, Quat, Real, RodBuildError, Vec3};
-use cosserat_problem::Snapshot;
 pub use cosserat_problem::{
     Capabilities, Capability, ContactSample, ControlError, CouplingStats, EndCondition, EndKind,
     EndReaction, Gpus, Integrator, Ordering, Par, PointLoad, PrescribedMotion, SolverSettings,
     StateField, StepError, Stepper, StepperInfo, StiffScheme, StiffSettings, StiffSummary,
 };
+use cosserat_problem::{EndPath, Snapshot};
 
 /// Which backend steps the rods.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -286,7 +288,7 @@ impl RodBuilder {
 
     fn build<T: Real>(
         &self,
-        environment: Option<&Environment>,
+        contact: Option<&MeshContactSettings>,
     ) -> Result<CpuRod<T>, RodBuildError> {
         let (state, params) = build_rod_with_rest_lengths::<T>(
             &self.points,
@@ -302,8 +304,8 @@ impl RodBuilder {
                 rod = rod.with_guide(g);
             }
         }
-        Ok(match environment {
-            Some(env) if self.collides => rod.with_mesh(env.contact_settings()),
+        Ok(match contact {
+            Some(c) if self.collides => rod.with_mesh(c.clone()),
             _ => rod,
         })
     }
@@ -344,6 +346,8 @@ pub struct SimulationBuilder {
     double_precision: bool,
     backend: Backend,
     environment: Option<Environment>,
+    /// Obstacles besides the environment ([`SimulationBuilder::obstacle`]).
+    obstacles: Vec<Obstacle>,
     /// Instruments bound inside each other (paper section 3.4).
     bindings: Vec<BindingSpec>,
     /// Rod–rod and self-contact, if on.
@@ -386,6 +390,7 @@ impl SimulationBuilder {
             double_precision: false,
             backend: Backend::Cpu,
             environment: None,
+            obstacles: Vec::new(),
             bindings: Vec::new(),
             rod_contact: None,
             reaction_cutoff_hz: None,
@@ -494,6 +499,42 @@ impl SimulationBuilder {
     /// The environment, if one was set.
     pub fn environment_ref(&self) -> Option<&Environment> {
         self.environment.as_ref()
+    }
+
+    /// One more obstacle the rods collide with, besides the environment and the obstacles
+    /// added before: a mesh, a half-space or an infinite cylinder, each with its own friction
+    /// and side, a shape possibly moving along a path (`crate::obstacles`).
+    pub fn obstacle(mut self, obstacle: Obstacle) -> Self {
+        self.obstacles.push(obstacle);
+        self
+    }
+
+    /// The obstacles added with [`Self::obstacle`].
+    pub fn obstacles_ref(&self) -> &[Obstacle] {
+        &self.obstacles
+    }
+
+    /// Everything the rods collide with: the environment first, then the obstacles.
+    fn all_obstacles(&self) -> Vec<Obstacle> {
+        self.environment
+            .iter()
+            .cloned()
+            .map(Obstacle::mesh)
+            .chain(self.obstacles.iter().cloned())
+            .collect()
+    }
+
+    /// What every colliding rod touches: the environment's own settings when it is alone (so
+    /// a scene of one mesh steps as it always did), else all obstacles joined
+    /// (`crate::obstacles`); `None` without any.
+    fn contact_settings(&self) -> Result<Option<MeshContactSettings>, BuildError> {
+        if self.obstacles.is_empty() {
+            return Ok(self.environment.as_ref().map(Environment::contact_settings));
+        }
+        let margin = self.environment.as_ref().map_or(1e-4, |e| e.margin);
+        let all = self.all_obstacles();
+        crate::obstacles::contact_settings(&all.iter().collect::<Vec<_>>(), margin)
+            .map_err(BuildError::Setting)
     }
 
     /// Time step [s].
@@ -727,7 +768,9 @@ impl SimulationBuilder {
                 ));
             }
             if st.scheme == StiffScheme::GaussSeidel
-                && (env.is_some() || self.rods.iter().any(|r| r.guide.is_some()))
+                && (env.is_some()
+                    || !self.obstacles.is_empty()
+                    || self.rods.iter().any(|r| r.guide.is_some()))
             {
                 return Err(BuildError::Setting(
                     "the stiff solver's Gauss–Seidel variant handles neither mesh contact nor guides: use the direct solver".into(),
@@ -763,15 +806,20 @@ impl SimulationBuilder {
             backend: self.backend,
             max_strain: 0.0,
             extensible: s.extensible,
+            obstacles: self.all_obstacles(),
+            stop_outside: self.environment.as_ref().is_none_or(|e| e.stop_outside),
             environment: self.environment,
             divergence_speed: self.divergence_speed,
             warnings,
             scratch: Vec::new(),
             collides: self.rods.iter().map(|r| r.collides).collect(),
             loads: self.rods.iter().map(RodBuilder::point_loads).collect(),
-            // The stiff scheme is not watched (`crate::energy_watch` says why).
+            // The stiff scheme is not watched, nor a scene with moving obstacles
+            // (`crate::energy_watch` says why).
             energy: EnergyWatch::new(
-                self.energy_check && self.stiff.is_none(),
+                self.energy_check
+                    && self.stiff.is_none()
+                    && self.obstacles.iter().all(|o| o.path().is_none()),
                 self.rods
                     .iter()
                     .map(|r| {
@@ -812,6 +860,16 @@ impl SimulationBuilder {
         (elements * (explicit + stiff)) * 5 / 4 + (16 << 20)
     }
 
+    /// Whether the obstacles are more than one mesh of one friction (what every backend with
+    /// mesh contact runs).
+    fn needs_obstacles(&self) -> bool {
+        let all = self.all_obstacles();
+        let shapes = all
+            .iter()
+            .any(|o| matches!(o.geometry(), crate::obstacles::Geometry::Shape(_)));
+        shapes || all.len() > 1
+    }
+
     /// What the scene asks of its stepper.
     fn needs(&self) -> Capabilities {
         // Reactions are not a need: a stepper without them runs held ends and reports no force
@@ -819,7 +877,13 @@ impl SimulationBuilder {
         Capabilities::NONE
             .with_if(
                 Capability::MeshContact,
-                self.environment.is_some() && self.rods.iter().any(|r| r.collides),
+                (self.environment.is_some() || !self.obstacles.is_empty())
+                    && self.rods.iter().any(|r| r.collides),
+            )
+            .with_if(Capability::Obstacles, self.needs_obstacles())
+            .with_if(
+                Capability::MovingObstacles,
+                self.obstacles.iter().any(|o| o.path().is_some()),
             )
             .with_if(
                 Capability::Guide,
@@ -868,12 +932,13 @@ fn require(
 /// The rods of the builder in precision `T`, with their guides, meshes, reaction filters and
 /// constraint solvers.
 fn cpu_rods<T: Real>(b: &SimulationBuilder) -> Result<Vec<CpuRod<T>>, BuildError> {
+    let contact = b.contact_settings()?;
     b.rods
         .iter()
         .enumerate()
         .map(|(i, r)| {
             let mut rod = r
-                .build::<T>(b.environment.as_ref())
+                .build::<T>(contact.as_ref())
                 .map_err(|source| BuildError::Rod { rod: i, source })?;
             if let Some(hz) = b.reaction_cutoff_hz {
                 rod = rod.with_reaction_cutoff(hz);
@@ -990,11 +1055,14 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
         .into_iter()
         .zip(bound)
         .map(|(r, binding)| {
-            let wall = r.mesh_settings().map(|m| cosserat_backend_gpu::GpuWall {
-                collider: m.collider.clone(),
-                static_friction: m.friction.static_coefficient as f32,
-                kinetic_friction: m.friction.kinetic_coefficient as f32,
-                margin: m.margin as f32,
+            // Obstacles beyond one mesh of one friction were refused by `require`.
+            let wall = r.mesh_settings().and_then(|m| {
+                Some(cosserat_backend_gpu::GpuWall {
+                    collider: m.collider.clone()?,
+                    static_friction: m.friction.static_coefficient as f32,
+                    kinetic_friction: m.friction.kinetic_coefficient as f32,
+                    margin: m.margin as f32,
+                })
             });
             let guide = r.guide().map(|g| cosserat_backend_gpu::GpuGuide {
                 origin: g.origin().into(),
@@ -1037,6 +1105,8 @@ pub struct SimulationSnapshot {
     inner: Snapshot,
     max_strain: f64,
     outside: (usize, f64),
+    /// The obstacles (their paths, which `Simulation::set_obstacle_path` changes).
+    obstacles: Vec<Obstacle>,
 }
 
 impl SimulationSnapshot {
@@ -1055,6 +1125,10 @@ pub struct Simulation {
     max_strain: f64,
     extensible: bool,
     environment: Option<Environment>,
+    /// Everything the rods collide with: the environment (as an obstacle) and the obstacles.
+    obstacles: Vec<Obstacle>,
+    /// Whether a point found outside stops the run ([`Simulation::check_lumen`]).
+    stop_outside: bool,
     divergence_speed: f64,
     warnings: Vec<String>,
     /// Reused by the allocating getters ([`Simulation::positions`] and friends).
@@ -1196,9 +1270,11 @@ impl Simulation {
     /// more than a haptic tick can spare for every point. The `cosserat` command runs it every
     /// few thousand steps and after the last; a program calls it as often as it can afford.
     pub fn check_lumen(&mut self) -> Result<Outside, StepError> {
-        let Some(env) = self.environment.as_ref() else {
+        if self.obstacles.is_empty() {
             return Ok(Outside::default());
-        };
+        }
+        let t = self.time();
+        let obstacles: Vec<&Obstacle> = self.obstacles.iter().collect();
         let mut first = None;
         let mut count = 0;
         let mut deepest: f64 = 0.0;
@@ -1215,7 +1291,10 @@ impl Simulation {
             {
                 continue;
             }
-            let out = env.outside(&self.scratch, self.radii[rod]);
+            let out = match obstacles.as_slice() {
+                [one] => one.each_outside_count(&self.scratch, self.radii[rod], t),
+                all => crate::obstacles::outside_any(all, &self.scratch, self.radii[rod], t),
+            };
             count += out.count;
             deepest = deepest.max(out.deepest);
             self.outside.1 = self.outside.1.max(out.deepest);
@@ -1225,7 +1304,7 @@ impl Simulation {
         }
         self.outside.0 = self.outside.0.max(count);
         match first {
-            Some((rod, element, depth)) if env.stop_outside => {
+            Some((rod, element, depth)) if self.stop_outside => {
                 Err(StepError::Diverged(cosserat_problem::Divergence {
                     rod,
                     element,
@@ -1280,6 +1359,46 @@ impl Simulation {
         if changed {
             self.energy.reset();
         }
+        Ok(())
+    }
+
+    /// Makes obstacle `obstacle` (its index in [`Simulation::obstacles`]: the environment, if
+    /// any, is 0) follow `path` from where it is now: the path's displacement and rotation (about
+    /// the shape's point) are taken from the obstacle's present pose, its times from
+    /// `path.start_time()`; `None` stops it where it is. Analytic shapes only (meshes do not
+    /// move), on the CPU schemes. The energy watch stops: nothing measures the obstacle's work.
+    pub fn set_obstacle_path(
+        &mut self,
+        obstacle: usize,
+        path: Option<EndPath>,
+    ) -> Result<(), ControlError> {
+        let info = self.stepper.info();
+        let Some(o) = self.obstacles.get(obstacle) else {
+            return Err(ControlError::Unsupported {
+                stepper: info.name,
+                what: format!(
+                    "move obstacle {obstacle}: there are {} obstacles",
+                    self.obstacles.len()
+                ),
+            });
+        };
+        if let crate::obstacles::Geometry::Mesh(_) = o.geometry() {
+            return Err(ControlError::Unsupported {
+                stepper: info.name,
+                what: format!(
+                    "move obstacle {obstacle}: it is a mesh, and meshes do not move (only half-spaces and cylinders do)"
+                ),
+            });
+        }
+        let shape = self.obstacles[..obstacle]
+            .iter()
+            .filter(|o| matches!(o.geometry(), crate::obstacles::Geometry::Shape(_)))
+            .count();
+        self.stepper.set_obstacle_path(shape, path.clone())?;
+        let now = self.time();
+        let o = &mut self.obstacles[obstacle];
+        *o = o.clone().rebased(now, path);
+        self.energy.disable();
         Ok(())
     }
 
@@ -1459,6 +1578,7 @@ impl Simulation {
             inner: self.stepper.snapshot()?,
             max_strain: self.max_strain,
             outside: self.outside,
+            obstacles: self.obstacles.clone(),
         })
     }
 
@@ -1469,6 +1589,7 @@ impl Simulation {
         self.energy.reset();
         self.max_strain = snapshot.max_strain;
         self.outside = snapshot.outside;
+        self.obstacles.clone_from(&snapshot.obstacles);
         Ok(())
     }
 
@@ -1606,9 +1727,17 @@ impl Simulation {
         self.environment.as_ref()
     }
 
-    /// Contact measurements since the start, or `None` without an environment.
+    /// Everything the rods collide with: the environment (first, as an obstacle) and the
+    /// obstacles ([`SimulationBuilder::obstacle`]).
+    pub fn obstacles(&self) -> &[Obstacle] {
+        &self.obstacles
+    }
+
+    /// Contact measurements since the start, or `None` without an environment or obstacles.
     pub fn contact_report(&self) -> Option<ContactReport> {
-        self.environment.as_ref()?;
+        if self.obstacles.is_empty() {
+            return None;
+        }
         let mut report = ContactReport::default();
         let mut seconds = 0.0;
         let mut steps = 0;

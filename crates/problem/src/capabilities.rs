@@ -31,11 +31,16 @@ pub enum Capability {
     VaryingLoads,
     /// Point moments.
     Moments,
+    /// Several obstacles, obstacles of different friction, or analytic shapes (half-spaces,
+    /// infinite cylinders).
+    Obstacles,
+    /// Obstacles moving along keyframed paths.
+    MovingObstacles,
 }
 
 impl Capability {
     /// Every capability, in a fixed order.
-    pub const ALL: [Capability; 13] = [
+    pub const ALL: [Capability; 15] = [
         Capability::MeshContact,
         Capability::Guide,
         Capability::Bindings,
@@ -49,6 +54,8 @@ impl Capability {
         Capability::HingedEnds,
         Capability::VaryingLoads,
         Capability::Moments,
+        Capability::Obstacles,
+        Capability::MovingObstacles,
     ];
 
     fn bit(self) -> u32 {
@@ -73,6 +80,10 @@ impl Capability {
             Capability::HingedEnds => "hinged clamps (rod.start.hinge / rod.end.hinge)",
             Capability::VaryingLoads => "time-varying loads ([[rod.load]] profile)",
             Capability::Moments => "point moments ([[rod.load]] moment)",
+            Capability::Obstacles => {
+                "several obstacles or analytic shapes ([[obstacles]]: half-spaces, infinite cylinders, meshes of their own friction)"
+            }
+            Capability::MovingObstacles => "moving obstacles ([[obstacles]] path)",
         }
     }
 }

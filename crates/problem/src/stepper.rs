@@ -20,7 +20,7 @@ use cosserat_model::energy::Energies;
 use crate::capabilities::{Capabilities, Capability};
 use crate::clock::Clock;
 use crate::divergence::Divergence;
-use crate::ends::EndCondition;
+use crate::ends::{EndCondition, EndPath};
 use crate::report::{CollisionStats, CouplingStats, EndReaction, StiffSummary};
 use crate::settings::PointLoad;
 
@@ -343,6 +343,22 @@ pub trait Stepper: Send {
 
     /// Returns to a snapshot this stepper took.
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), ControlError>;
+
+    /// Makes analytic obstacle `shape` (the `shape`-th of the rods' shapes, in the order they
+    /// were given) follow `path` from where it is now, the path's displacement and rotation
+    /// taken from that pose; `None` holds it where it is now. A stepper without moving
+    /// obstacles refuses.
+    fn set_obstacle_path(
+        &mut self,
+        shape: usize,
+        path: Option<EndPath>,
+    ) -> Result<(), ControlError> {
+        let _ = (shape, path);
+        Err(ControlError::Unsupported {
+            stepper: self.info().name,
+            what: "move obstacles".into(),
+        })
+    }
 }
 
 /// Checks a rod index against a count.

@@ -11,7 +11,9 @@
 //! the system banded and costs nothing where no point touches.
 //!
 //! Which points are pinned, and how, is an active set found per step (Coulomb friction with
-//! the static and kinetic coefficients of [`MeshContactSettings`]):
+//! the static and kinetic coefficients of [`MeshContactSettings`], each point with those of
+//! the obstacle it touches; on a moving obstacle, sticking and slipping are relative to its
+//! surface):
 //! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
 //!    spheres against the mesh; those touching or penetrating are put on the wall and pinned,
 //!    except points that were free at the end of the last step, are moving off the wall and
@@ -56,9 +58,12 @@ use super::lanes::V3s;
 use super::pin::Pinned;
 use super::work::Work;
 use crate::guide::Guide;
-use crate::mesh_contact::{CollisionStats, MeshContactSettings, Motion, RodMeshContact};
+use crate::mesh_contact::{
+    CollisionStats, MeshContactSettings, Motion, RodMeshContact, ShapeObstacle,
+};
 use cosserat_constraints::{Friction, PointContact};
 use cosserat_model::Vec3;
+use std::sync::Arc;
 
 /// Largest number of re-solves per step after the active set changed.
 pub(crate) const MAX_ROUNDS: usize = 4;
@@ -127,8 +132,9 @@ enum Touch {
 #[derive(Clone, Debug)]
 pub(crate) struct StiffContacts {
     mesh: RodMeshContact<f64>,
-    friction: Friction<f64>,
     radius: f64,
+    /// The step being taken [s] (a moving wall's shift over it, [`Self::wall_shift`]).
+    h: f64,
     /// Per point: how it touched at the end of the last step.
     last: Vec<Touch>,
     /// Per point: its entry in `Work::pinned`, or `usize::MAX`.
@@ -151,11 +157,10 @@ pub(crate) struct StiffContacts {
 
 impl StiffContacts {
     pub(crate) fn new(settings: MeshContactSettings, radius: f64) -> Self {
-        let friction = settings.friction;
         Self {
             mesh: RodMeshContact::new(settings),
-            friction,
             radius,
+            h: 0.0,
             last: Vec::new(),
             slot: Vec::new(),
             found: Vec::new(),
@@ -218,6 +223,12 @@ impl StiffContacts {
 
     fn tolerance(&self) -> f64 {
         DEPTH_TOLERANCE * self.radius
+    }
+
+    /// How far the wall point `i` touches moves over the step, at the point's start: zero but
+    /// on a moving obstacle, where friction acts on the motion relative to it.
+    fn wall_shift(&self, i: usize, w: &Work) -> Vec3<f64> {
+        self.mesh.wall_shift(i, &w.x_old.get(i), self.h)
     }
 
     /// Rebuilds `slot` from `w.pinned`.
@@ -309,7 +320,21 @@ impl StiffContacts {
 
     /// Step 1 of the module docs, after the prediction: pins the points touching the mesh at
     /// the solve's starting guess.
-    pub(crate) fn begin_step(&mut self, w: &mut Work, k: &Consts) {
+    ///
+    /// Moving obstacles (the rod's `shapes`, which a control call may have set moving) are put
+    /// where they are at the step's end, `t + h`.
+    pub(crate) fn begin_step(
+        &mut self,
+        w: &mut Work,
+        k: &Consts,
+        (t, h): (f64, f64),
+        shapes: Option<&Arc<[ShapeObstacle]>>,
+    ) {
+        if let Some(shapes) = shapes {
+            self.mesh.follow_shapes(shapes);
+        }
+        self.mesh.pose_shapes(t + h, t, h);
+        self.h = h;
         let m = w.n + 1;
         if self.last.len() != m {
             self.last = vec![Touch::Free; m];
@@ -317,15 +342,15 @@ impl StiffContacts {
         self.reindex(w);
         self.detect(w, k, false);
         let tol = self.tolerance();
-        let mu_k = self.friction.kinetic_coefficient;
         let found = std::mem::take(&mut self.mesh.contacts);
         for c in found.contacts() {
             let (i, normal, gap) = (c.point as usize, c.normal, c.gap);
             if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
-            // The motion of the prediction over the step.
-            let v = w.x_pred.get(i) - w.x_old.get(i);
+            let mu_k = self.mesh.friction_at(i).kinetic_coefficient;
+            // The motion of the prediction over the step, relative to the wall.
+            let v = w.x_pred.get(i) - w.x_old.get(i) - self.wall_shift(i, w);
             let towards = normal.dot(&v);
             // A point that was free at the end of the last step and is moving off the wall
             // stays free while it is within the tolerance of it; the iterations pin it if they
@@ -390,7 +415,11 @@ impl StiffContacts {
         let x = w.x.get(i);
         // A point of the plane on which the sphere touches the wall.
         let on_wall = x - normal * gap;
-        let from = if stick { w.x_old.get(i) } else { x };
+        let from = if stick {
+            w.x_old.get(i) + self.wall_shift(i, w)
+        } else {
+            x
+        };
         let placed = from - normal * normal.dot(&(from - on_wall));
         w.x.set(i, &placed);
         self.slot[i] = w.pinned.len();
@@ -416,10 +445,6 @@ impl StiffContacts {
         converged: bool,
         reuse: bool,
     ) -> Update {
-        let Friction {
-            static_coefficient: mu_s,
-            kinetic_coefficient: mu_k,
-        } = self.friction;
         let mut changed = false;
         let mut released = false;
         let mut stick_changed = false;
@@ -429,8 +454,14 @@ impl StiffContacts {
                 continue;
             }
             let i = p.point;
+            let Friction {
+                static_coefficient: mu_s,
+                kinetic_coefficient: mu_k,
+            } = self.mesh.friction_at(i);
             let mass = 1.0 / k.inv_mass[i];
             let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
+            // Where the step began, carried with the wall (a moving obstacle's).
+            let start = w.x_old.get(i) + self.wall_shift(i, w);
             let g = pin_impulse(w, k, &w.lambda[0], i);
             let mut pn = p.normal.dot(&g);
             if let Some(m) = p.crease {
@@ -477,7 +508,7 @@ impl StiffContacts {
                     changed = true;
                 }
             } else {
-                let slip = p.sliding_part(&(x - w.x_old.get(i)));
+                let slip = p.sliding_part(&(x - start));
                 // The tangential impulse that would have held the point where it was at the
                 // current multipliers: its own momentum and its neighbours' push, but not how
                 // much harder they would push if it were held.
@@ -497,7 +528,7 @@ impl StiffContacts {
                     p.stick = true;
                     stick_changed = true;
                     if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
-                        w.x.set(i, &(x + p.sliding_part(&(w.x_old.get(i) - x))));
+                        w.x.set(i, &(x + p.sliding_part(&(start - x))));
                         changed = true;
                     }
                 } else if mu_k > 0.0 && slip.norm() > 0.0 {
@@ -598,7 +629,7 @@ impl StiffContacts {
     /// the penetration tolerance (2 % of the radius) where the inside test found 0.01 µm
     /// (`docs/benchmarks/torture.md`).
     fn penetration(&self, w: &Work, k: &Consts) -> (f64, usize) {
-        let collider = &self.mesh.settings.collider;
+        let collider = self.mesh.settings.collider.as_deref();
         let radius = self.radius;
         let mut deepest = self.stats.max_penetration.max(0.0);
         let mut outside = 0;
@@ -615,16 +646,18 @@ impl StiffContacts {
             let p = [x.x, x.y, x.z];
             // Behind the wall by its bound: the inside test says whether it is. One distance
             // query either way.
-            let (near, out) = if bound < -radius {
-                let near = collider.nearest(&p, f64::INFINITY);
-                let out = if collider.encloses_volume() {
-                    collider.lumen_winding(&p) < 0.5
-                } else {
-                    near.is_some_and(|n| n.signed_distance < 0.0)
-                };
-                (near, out)
-            } else {
-                (collider.nearest(&p, radius - deepest), false)
+            let (near, mut out) = match collider {
+                Some(collider) if bound < -radius => {
+                    let near = collider.nearest(&p, f64::INFINITY);
+                    let out = if collider.encloses_volume() {
+                        collider.lumen_winding(&p) < 0.5
+                    } else {
+                        near.is_some_and(|n| n.signed_distance < 0.0)
+                    };
+                    (near, out)
+                }
+                Some(collider) => (collider.nearest(&p, radius - deepest), false),
+                None => (None, false),
             };
             if let Some(near) = near {
                 let depth = if out {
@@ -633,6 +666,11 @@ impl StiffContacts {
                     radius - near.distance
                 };
                 deepest = deepest.max(depth);
+            }
+            // Analytic shapes: exact at any depth.
+            if let Some((depth, behind)) = self.mesh.shape_depth(&x, radius) {
+                deepest = deepest.max(depth);
+                out |= behind;
             }
             outside += usize::from(out);
         }

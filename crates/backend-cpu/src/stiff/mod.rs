@@ -1088,7 +1088,7 @@ fn solve_step<T: Real>(
         binding::pin_on_lines(w, k, ctx.lines);
     }
     if let Some(c) = contacts.as_deref_mut() {
-        c.begin_step(w, k);
+        c.begin_step(w, k, (t, h), rod.mesh.as_ref().map(|m| m.shapes()));
     }
     // 2. Constraint solve.
     for c in &mut w.lambda {

@@ -26,14 +26,14 @@ pub fn square(centre: Vec3<f64>, u: Vec3<f64>, v: Vec3<f64>, half: f64) -> Arc<M
 
 /// Contact with `collider`: Coulomb friction `mu_s`, `mu_k`, margin 0.1 mm.
 pub fn contact(collider: Arc<MeshCollider>, mu_s: f64, mu_k: f64) -> MeshContactSettings {
-    MeshContactSettings {
+    MeshContactSettings::mesh(
         collider,
-        friction: Friction {
+        Friction {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
         },
-        margin: 1e-4,
-    }
+        1e-4,
+    )
 }
 
 /// The soft test material (E 1 MPa, ρ 1100 kg/m³) of radius `r`.
