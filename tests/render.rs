@@ -205,7 +205,7 @@ fn render_writes_an_mp4_through_ffmpeg() {
         ])
         .arg(&mp4)
         .output();
-    if let Ok(probe) = probe.filter(|p| p.status.success()) {
+    if let Some(probe) = probe.ok().filter(|p| p.status.success()) {
         let info = String::from_utf8_lossy(&probe.stdout);
         for line in [
             "codec_name=h264",
