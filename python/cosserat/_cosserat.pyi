@@ -120,6 +120,14 @@ class Simulation:
         [rad] at each time [s from now], zero at the first (0), linear between, held after."""
     def slide_end(self, end: int, axis: Optional[Sequence[float]], rod: int = 0) -> None:
         """Lets a held end slide freely along ``axis`` (world), or holds it again with ``None``."""
+    def set_obstacle_path(
+        self,
+        obstacle: int,
+        times: Optional[Sequence[float]] = None,
+        displacement: Optional[Sequence[Sequence[float]]] = None,
+        rotation: Optional[Sequence[Sequence[float]]] = None,
+    ) -> None:
+        """Moves a half-space or cylinder obstacle along keyframes from now on, or stops it with ``None``."""
     def hinge_end(self, end: int, axis: Optional[Sequence[float]], rod: int = 0) -> None:
         """Lets a clamp turn freely about ``axis`` (world), or holds its frame again with ``None``."""
     def end_reaction(

@@ -124,6 +124,27 @@ fn rows<const N: usize>(slice: &mut [f64]) -> &mut [[f64; N]] {
     unsafe { std::slice::from_raw_parts_mut(slice.as_mut_ptr().cast::<[f64; N]>(), len) }
 }
 
+/// A path's displacement and rotation at each keyframe.
+type Keyframes = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+/// The displacement and rotation keyframes of a path of `n` keyframes (zero where not given).
+fn keyframes(
+    n: usize,
+    displacement: Option<Vec<Vec<f64>>>,
+    rotation: Option<Vec<Vec<f64>>>,
+) -> PyResult<Keyframes> {
+    let rows = |name: &str, v: Option<Vec<Vec<f64>>>| -> PyResult<Vec<[f64; 3]>> {
+        match v {
+            None => Ok(vec![[0.0; 3]; n]),
+            Some(rows) => rows.iter().map(|r| vec3(name, r)).collect(),
+        }
+    };
+    Ok((
+        rows("displacement", displacement)?,
+        rows("rotation", rotation)?,
+    ))
+}
+
 fn vec3(name: &str, v: &[f64]) -> PyResult<[f64; 3]> {
     <[f64; 3]>::try_from(v)
         .map_err(|_| ControlError::new_err(format!("{name}: expected 3 numbers, got {}", v.len())))
@@ -665,17 +686,7 @@ impl PySimulation {
         rotation: Option<Vec<Vec<f64>>>,
         rod: usize,
     ) -> PyResult<()> {
-        let n = times.len();
-        let rows = |name: &str, v: Option<Vec<Vec<f64>>>| -> PyResult<Vec<[f64; 3]>> {
-            match v {
-                None => Ok(vec![[0.0; 3]; n]),
-                Some(rows) => rows.iter().map(|r| vec3(name, r)).collect(),
-            }
-        };
-        let (d, r) = (
-            rows("displacement", displacement)?,
-            rows("rotation", rotation)?,
-        );
+        let (d, r) = keyframes(times.len(), displacement, rotation)?;
         let mut sim = self.lock();
         let h = Self::handle(&sim, rod)?;
         let path = EndPath::new(sim.time(), times, d, r)
@@ -683,6 +694,33 @@ impl PySimulation {
         let condition = sim.end_condition(h, end).map_err(control_err)?;
         sim.set_end_condition(h, end, condition.following(path))
             .map_err(control_err)
+    }
+
+    /// Moves obstacle `obstacle` (its index among the scene's obstacles, the `[environment]`
+    /// first when there is one) along a keyframed path from now on, as `set_end_path` moves an
+    /// end: at each of `times` [s from now] it has moved by `displacement` [m] and turned by
+    /// `rotation` (rotation vectors about its own point) from where it is now; `times=None`
+    /// stops it where it is. Half-spaces and cylinders only (meshes do not move), CPU backends.
+    #[pyo3(signature = (obstacle, times=None, displacement=None, rotation=None))]
+    fn set_obstacle_path(
+        &self,
+        obstacle: usize,
+        times: Option<Vec<f64>>,
+        displacement: Option<Vec<Vec<f64>>>,
+        rotation: Option<Vec<Vec<f64>>>,
+    ) -> PyResult<()> {
+        let mut sim = self.lock();
+        let path = match times {
+            None => None,
+            Some(times) => {
+                let (d, r) = keyframes(times.len(), displacement, rotation)?;
+                Some(
+                    EndPath::new(sim.time(), times, d, r)
+                        .map_err(|why| ControlError::new_err(format!("obstacle path: {why}")))?,
+                )
+            }
+        };
+        sim.set_obstacle_path(obstacle, path).map_err(control_err)
     }
 
     /// Lets held end `end` of rod `rod` slide freely along `axis` (world axes; the rod and the

@@ -164,6 +164,39 @@ def test_a_hinged_clamp_swings_like_a_pin():
         pinned.hinge_end(0, [0.0, 1.0, 0.0])
 
 
+FLOOR = """
+[solver]
+dt = 5e-5
+iterations = 10
+precision = "f64"
+gravity = [0.0, 0.0, -9.81]
+
+[[rod]]
+name = "rope"
+elements = 20
+shape = { kind = "straight", start = [0.0, 0.0, 0.001], direction = [1.0, 0.0, 0.0], length = 0.1 }
+material = { young_modulus = 3e5, poisson_ratio = 0.5, density = 1000.0, radius = 1e-3 }
+damping = { drag = 2.0 }
+
+[[obstacles]]
+shape = { kind = "half-space", point = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 1.0] }
+"""
+
+
+def test_an_obstacle_set_moving_carries_the_rope():
+    sim = cosserat.Simulation.from_toml(FLOOR, name="floor.toml")
+    sim.run(2000)
+    resting = sim.positions()[:, 2].mean()
+    assert resting == pytest.approx(1e-3, abs=2e-4)
+    # The floor rises 1 cm over 0.1 s and stops; the rope rides on it.
+    sim.set_obstacle_path(0, [0.0, 0.1], displacement=[[0, 0, 0], [0, 0, 0.01]])
+    sim.run(4000)
+    assert sim.positions()[:, 2].mean() == pytest.approx(resting + 0.01, abs=5e-4)
+    sim.set_obstacle_path(0, None)
+    with pytest.raises(cosserat.ControlError):
+        sim.set_obstacle_path(3, [0.0, 0.1])
+
+
 def test_a_moment_turns_the_end_it_acts_on():
     sim = cosserat.Simulation.from_toml(
         CANTILEVER.replace('scheme = "stiff"', 'scheme = "explicit"').replace(
