@@ -223,9 +223,11 @@ pub struct BoundStiff<T: Real> {
 impl<T: Real> Scheme<T> for BoundStiff<T> {
     const NAME: &'static str = "cpu stiff bound";
 
-    /// The stiff scheme's, and bindings.
+    /// The stiff scheme's, bindings, and rod–rod and self-contact.
     fn capabilities() -> Capabilities {
-        <Stiff as Scheme<T>>::capabilities().with(Capability::Bindings)
+        <Stiff as Scheme<T>>::capabilities()
+            .with(Capability::Bindings)
+            .with(Capability::RodContact)
     }
 
     fn advance(

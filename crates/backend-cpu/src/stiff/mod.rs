@@ -60,6 +60,7 @@ mod contact;
 mod direct;
 mod lanes;
 mod pin;
+mod rod_contact;
 mod work;
 mod xpbd;
 
@@ -72,6 +73,7 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::ends::EndKind;
 use direct::{Assembled, BlockTridiagonal};
 use lanes::{V3s, padded};
+use rod_contact::RodPlanes;
 use work::Work;
 
 pub(crate) use cosserat_problem::{Integrator, Refactor, StiffReport, StiffScheme, StiffSettings};
@@ -161,6 +163,9 @@ pub struct StiffScratch {
     contacts: Option<StiffContacts>,
     /// What a coupling (`binding.rs`) asks of the next step, and what it gets back.
     coupled: Coupled,
+    /// The rod's rod-contact planes for the next step (`rod_contact.rs`); none without rod
+    /// contacts.
+    planes: RodPlanes,
 }
 
 /// A point held on a line for a step's solve: a guidewire point on the centreline of the
@@ -670,6 +675,7 @@ fn step_fixed<T: Real>(
         report,
         contacts,
         coupled,
+        planes,
     } = scratch;
     // Only a rod with a mesh (and the direct solver) pays for contacts.
     let mut contacts = contacts
@@ -753,6 +759,7 @@ fn step_fixed<T: Real>(
             factor_valid,
             report,
             contacts.as_deref_mut(),
+            planes,
         );
         let unconverged = stiff.tolerance > 0.0 && !(residual <= tolerance);
         if unconverged
@@ -777,6 +784,7 @@ fn step_fixed<T: Real>(
                 factor_valid,
                 report,
                 contacts.as_deref_mut(),
+                planes,
             );
             *factor_valid = false;
             kept.axial_steps += 1;
@@ -824,6 +832,9 @@ fn step_fixed<T: Real>(
         }
         if let Some(c) = contacts.as_deref_mut() {
             c.record_forces(w, k, &w.lambda_prev[0], hs);
+        }
+        if planes.is_active() {
+            planes.record_forces(w, k, &w.lambda_prev[0], hs);
         }
         if !coupled.lines.is_empty() {
             binding::line_forces(w, k, hs, coupled);
@@ -1034,6 +1045,7 @@ fn solve_step<T: Real>(
     factor_valid: &mut bool,
     report: &mut StiffReport,
     mut contacts: Option<&mut StiffContacts>,
+    planes: &mut RodPlanes,
 ) -> (f64, f64) {
     let StepContext {
         rod,
@@ -1090,6 +1102,10 @@ fn solve_step<T: Real>(
     if let Some(c) = contacts.as_deref_mut() {
         c.begin_step(w, k);
     }
+    let planes_active = planes.is_active() && direct;
+    if planes_active {
+        planes.begin_step(w, k);
+    }
     // 2. Constraint solve.
     for c in &mut w.lambda {
         c.fill_zero();
@@ -1113,14 +1129,26 @@ fn solve_step<T: Real>(
                     tolerance,
                     round == 0,
                     contacts.as_deref_mut(),
+                    planes_active.then_some(&mut *planes),
                 );
                 residual = r;
                 used += u;
-                let Some(c) = contacts.as_deref_mut() else {
+                if contacts.is_none() && !planes_active {
                     break;
+                }
+                let mut update = contact::Update {
+                    resolve: false,
+                    matrix_changed: false,
                 };
-                let reuse = stiff.reuse_contact_queries;
-                let update = c.update(w, k, r <= tolerance, reuse);
+                if let Some(c) = contacts.as_deref_mut() {
+                    let reuse = stiff.reuse_contact_queries;
+                    update = c.update(w, k, r <= tolerance, reuse);
+                }
+                if planes_active {
+                    let u = planes.update(w, k);
+                    update.resolve |= u.resolve;
+                    update.matrix_changed |= u.matrix_changed;
+                }
                 if !update.resolve || round == contact::MAX_ROUNDS {
                     break;
                 }
@@ -1162,6 +1190,7 @@ fn direct_solve(
     tolerance: f64,
     first: bool,
     mut contacts: Option<&mut StiffContacts>,
+    mut planes: Option<&mut RodPlanes>,
 ) -> (f64, usize) {
     let mut used = 0;
     let mut residual = f64::NAN;
@@ -1215,13 +1244,21 @@ fn direct_solve(
         factor.solve(&mut w.rhs);
         let max_move = contacts
             .as_deref()
-            .map_or(f64::INFINITY, |c| c.max_iteration_move());
+            .map_or(f64::INFINITY, |c| c.max_iteration_move())
+            .min(
+                planes
+                    .as_deref()
+                    .map_or(f64::INFINITY, |p| p.max_iteration_move()),
+            );
         w.apply(k, max_move);
         used += 1;
         pins_changed = contacts.as_deref_mut().is_some_and(|c| {
             c.catch_penetrations(w, k, stiff.reuse_contact_queries)
                 .matrix_changed
         });
+        if let Some(p) = planes.as_deref_mut() {
+            pins_changed |= p.catch_penetrations(w, k).matrix_changed;
+        }
     }
     (residual, used)
 }

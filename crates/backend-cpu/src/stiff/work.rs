@@ -1267,6 +1267,7 @@ mod tests {
             stick,
             crease: None,
             line,
+            rod: false,
             push: Vec3::zeros(),
             pn: 0.0,
             came_loose: false,
