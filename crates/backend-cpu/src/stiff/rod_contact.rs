@@ -44,10 +44,9 @@
 //!    reaction ([`RELAXATION`]). At rest the slave sits on the master's surface and the load is
 //!    its force: a rod lying on another is carried by it, two rods pressed together feel the
 //!    same force. What the backstop holds is not passed on; at rest the master never reaches
-//!    it. A symmetric split (both sides held on the middle plane, each passing the difference
-//!    of their forces on) was tried first: with both sides pressed the passed-on loads grew
-//!    without bound (the plane absorbed the difference), and integrating the difference made a
-//!    cantilever pushed onto another oscillate by ±50 % of the force.
+//!    it. Both sides held on the middle plane, each passing on the difference of their forces
+//!    (accumulated), was tried first: a cantilever pushed onto another oscillated by ±25 % of
+//!    the force (`docs/stiff-solver.md`).
 //!
 //! The transfer of step 4 is partitioned and first order in `h`, like the bindings'; it is
 //! exact at rest (a fixed point of the loads) and stable while the side that is loaded answers
@@ -285,9 +284,10 @@ impl RodPlanes {
     /// on the plane it is deepest behind instead (moved out along that plane's normal, which
     /// takes it off a plane facing it). Returns (changed, matrix changed). Unlike the mesh's
     /// walls, two planes do not make a crease the point slides along: a strand wrapped around
-    /// another has a plane per neighbouring pair, a few degrees apart, and a chain of points
-    /// each held on the crease of two of them (a line) had no inextensible solution in the
-    /// knot of `scenes/fishermans-knot-stiff.toml` (the solve stalled at strains of 1e-2).
+    /// another has a plane per neighbouring pair, a few degrees apart, and each point of a
+    /// chain held on a line fixes the chain's length between them; with creases the knot of
+    /// `scenes/fishermans-knot-stiff.toml` stalled at strains of 1e-2 where it did not blow up
+    /// (`docs/stiff-solver.md`). With one plane per point it still breaks down there.
     fn second_plane(&mut self, w: &mut Work, i: usize) -> (bool, bool) {
         let s = self.slot[i];
         let x = w.x.get(i);
