@@ -166,7 +166,9 @@ impl<T: Real> Scheme<T> for Stiff {
     const NAME: &'static str = "cpu stiff";
 
     fn capabilities() -> Capabilities {
-        cpu_base().with(Capability::StiffScheme)
+        cpu_base()
+            .with(Capability::StiffScheme)
+            .with(Capability::Moments)
     }
 
     fn advance(

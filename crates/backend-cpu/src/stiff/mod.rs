@@ -1074,8 +1074,14 @@ fn solve_step<T: Real>(
     // Also without clamps: a clamp released since the last step leaves none behind.
     let omega = [0, 1].map(|e| v64(&ends[e].velocities_over(t, h).1));
     w.clamp_begin(k, h, ctx.advance, omega);
-    // Point moments are the explicit schemes' (`Capability::Moments`): kicked into a frame's
-    // tiny inertia at a haptic step they would turn it by radians before the solve.
+    // Point moments enter the frames' implicit equations (`Work::rhs`), not their velocities.
+    w.torques.clear();
+    for l in rod.loads.iter().filter(|l| l.turns()) {
+        let m = v64(&l.moment) * (l.profile.factor(mid) * h * h);
+        for (frame, share) in crate::stepper::moment_shares(l.point, n) {
+            w.torques.push((frame, m * share));
+        }
+    }
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
