@@ -169,6 +169,7 @@ impl<T: Real> Scheme<T> for Stiff {
         cpu_base()
             .with(Capability::StiffScheme)
             .with(Capability::Moments)
+            .with(Capability::SlidingEnds)
     }
 
     fn advance(

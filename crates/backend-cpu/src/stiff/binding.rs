@@ -354,17 +354,7 @@ pub(super) fn pin_on_lines(w: &mut Work, k: &Consts, lines: &[LinePin]) {
         let rel = x - line.origin;
         let lateral = rel - line.direction * line.direction.dot(&rel);
         w.x.set(i, &(x - lateral));
-        w.pinned.push(Pinned {
-            point: i,
-            normal: line.direction,
-            stick: false,
-            crease: None,
-            line: true,
-            rod: false,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
-        });
+        w.pinned.push(Pinned::on_line(i, line.direction));
     }
 }
 

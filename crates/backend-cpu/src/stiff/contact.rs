@@ -773,17 +773,7 @@ pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
             continue;
         }
         w.x.set(i, &(x - lateral));
-        w.pinned.push(Pinned {
-            point: i,
-            normal: axis,
-            stick: false,
-            crease: None,
-            line: true,
-            rod: false,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
-        });
+        w.pinned.push(Pinned::on_line(i, axis));
     }
 }
 

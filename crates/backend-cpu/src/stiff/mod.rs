@@ -104,8 +104,12 @@ pub(crate) struct Consts {
     damped: bool,
     /// The constants of the element-wise passes as padded columns (`lanes.rs`).
     pub(crate) cols: ConstCols,
-    key: Option<(usize, u64, bool, [EndKind; 2])>,
+    key: Option<ConstsKey>,
 }
+
+/// What [`Consts`] were built for: elements, step (and inertia floor), extensible mode, the kinds
+/// of end, and which end points slide.
+type ConstsKey = (usize, u64, bool, [EndKind; 2], [bool; 2]);
 
 /// [`Consts`] as the element-wise passes read them: padded columns (`lanes.rs`) whose padding
 /// keeps the extra lanes finite (unit lengths and inertias, zero inverse masses).
@@ -339,6 +343,8 @@ impl Consts {
             h.to_bits() ^ floor.to_bits().rotate_left(17),
             extensible,
             [rod.ends[0].kind, rod.ends[1].kind],
+            // A sliding end point keeps its mass (`CpuRod::new`).
+            [0, 1].map(|e| rod.ends[e].slide_axis().is_some()),
         );
         if self.key == Some(key) {
             return;
@@ -970,8 +976,31 @@ fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, h: f64, lead:
     for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
         if end.holds_point() {
             let v = v64(&end.velocities_over(t, h).0);
-            w.x.set(i, &(w.x_prev.get(i) + v * lead));
+            let mut x = w.x_prev.get(i) + v * lead;
+            // A sliding end keeps its extrapolated motion along its axis.
+            if let Some(a) = end.slide_axis() {
+                let a = v64(&a);
+                x += a * a.dot(&(w.x.get(i) - x));
+            }
+            w.x.set(i, &x);
         }
+    }
+}
+
+/// Holds each sliding end point (`EndCondition::slide`) on the line along its axis through its
+/// starting guess for the step's solve, as a guided point is held on the guide's axis: its
+/// inverse mass in the updates and the banded matrix becomes `w a aᵀ` (`Work::pin_blocks`), so
+/// the rod and its loads move it along the axis and the prescribed motion across it. What holds
+/// it there is the holder's reaction (`record_reactions`: the point's momentum balance, which
+/// along a free axis is zero). A point another pin already holds is left to it.
+fn pin_sliding_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>) {
+    let n = w.n;
+    for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
+        let Some(a) = end.slide_axis() else { continue };
+        if w.pinned.iter().any(|p| p.point == i) {
+            continue;
+        }
+        w.pinned.push(pin::Pinned::on_line(i, v64(&a).normalize()));
     }
 }
 
@@ -1085,7 +1114,13 @@ fn solve_step<T: Real>(
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
-                let v = v64(&end.velocities_over(t, h).0);
+                let mut v = v64(&end.velocities_over(t, h).0);
+                // A sliding end keeps along its axis what gravity and its loads gave it; the
+                // solve moves it along the axis only (`pin_sliding_ends`).
+                if let Some(a) = end.slide_axis() {
+                    let a = v64(&a);
+                    v += a * a.dot(&w.v.get(i));
+                }
                 w.v.set(i, &v);
                 // The direct solver starts where the velocities alone lead (the full
                 // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`
@@ -1105,6 +1140,7 @@ fn solve_step<T: Real>(
     if !ctx.lines.is_empty() {
         binding::pin_on_lines(w, k, ctx.lines);
     }
+    pin_sliding_ends(w, rod);
     if let Some(c) = contacts.as_deref_mut() {
         c.begin_step(w, k);
     }

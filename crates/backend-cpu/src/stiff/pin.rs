@@ -39,6 +39,22 @@ pub(crate) struct Pinned {
 }
 
 impl Pinned {
+    /// Point `point` held on a line along the unit vector `direction` (a guide's axis, a
+    /// binding's line, a sliding end's axis), free along it.
+    pub(crate) fn on_line(point: usize, direction: Vec3<f64>) -> Self {
+        Self {
+            point,
+            normal: direction,
+            stick: false,
+            crease: None,
+            line: true,
+            rod: false,
+            push: Vec3::zeros(),
+            pn: 0.0,
+            came_loose: false,
+        }
+    }
+
     /// Whether the mesh holds it (`contact.rs`): neither a line (guide, binding) nor a rod
     /// contact's plane.
     #[inline]
