@@ -375,10 +375,12 @@ fn a_scene_that_needs_what_the_stepper_lacks_is_refused_with_everything_missing(
         assert!(msg.contains("f64"), "{msg}");
         assert!(!msg.contains("introducer guide"), "{msg}");
     }
-    // The stiff scheme lacks rod contact.
+    // The stiff scheme (with rod contact: its bound stepper) lacks the explicit scheme's direct
+    // distance constraints.
     let err = SimulationBuilder::new()
         .dt(STIFF_DT)
         .stiff_solver(Some(StiffSettings::default()))
+        .direct_constraints(true)
         .with_rod(wire(0.0))
         .with_rod(wire(0.015))
         .rod_contacts(RodContactSpec::default())
@@ -387,7 +389,8 @@ fn a_scene_that_needs_what_the_stepper_lacks_is_refused_with_everything_missing(
         .expect("refused");
     let msg = err.to_string();
     assert!(msg.contains("cpu stiff bound"), "{msg}");
-    assert!(msg.contains("rod–rod"), "{msg}");
+    assert!(msg.contains("direct distance constraints"), "{msg}");
+    assert!(!msg.contains("rod–rod"), "{msg}");
     assert!(msg.contains("solver.scheme = \"explicit\""), "{msg}");
     // The explicit scheme's capabilities as reported.
     let sim = SimulationBuilder::new()

@@ -280,10 +280,11 @@ fn a_missing_file_is_an_error_not_a_panic() {
     assert!(err.to_string().contains("does/not/exist.toml"), "{err}");
 }
 
-/// The stiff scheme steps bindings (`scenes/catheter-guidewire.toml`) and refuses rod–rod
-/// contact with a message that names the setting to change.
+/// The stiff scheme steps bindings (`scenes/catheter-guidewire.toml`) and rod–rod and
+/// self-contact (`scenes/fishermans-knot.toml`, whose loose knot has parts within the margin of
+/// each other).
 #[test]
-fn the_stiff_scheme_takes_bindings_and_refuses_rod_contact() {
+fn the_stiff_scheme_takes_bindings_and_rod_contact() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     let stiff = [("solver.scheme".to_string(), "\"stiff\"".to_string())];
     let (builder, _, _) = load_scene(&dir.join("catheter-guidewire.toml"), &stiff).unwrap();
@@ -291,15 +292,11 @@ fn the_stiff_scheme_takes_bindings_and_refuses_rod_contact() {
     sim.run(3).unwrap();
     assert!(sim.coupling_stats().unwrap().bound_points > 0);
     let (builder, _, _) = load_scene(&dir.join("fishermans-knot.toml"), &stiff).unwrap();
-    let err = builder
-        .build()
-        .err()
-        .expect("rod contact with the stiff scheme")
-        .to_string();
-    assert!(
-        err.contains("rod–rod contact") && err.contains("solver.scheme = \"explicit\""),
-        "{err}"
-    );
+    let mut sim = builder.build().unwrap();
+    sim.run(2).unwrap();
+    let stats = sim.coupling_stats().unwrap();
+    assert_eq!(stats.steps, 2, "{stats:?}");
+    assert!(stats.min_separation_ratio >= 0.99, "{stats:?}");
 }
 
 /// `solver.stability_safety` sets the fraction of the estimated critical step below which the

@@ -170,7 +170,10 @@ impl<T: Real> Scheme<T> for Stiff {
     const NAME: &'static str = "cpu stiff";
 
     fn capabilities() -> Capabilities {
-        cpu_base().with(Capability::StiffScheme)
+        cpu_base()
+            .with(Capability::StiffScheme)
+            .with(Capability::Moments)
+            .with(Capability::SlidingEnds)
     }
 
     fn advance(
@@ -227,9 +230,11 @@ pub struct BoundStiff<T: Real> {
 impl<T: Real> Scheme<T> for BoundStiff<T> {
     const NAME: &'static str = "cpu stiff bound";
 
-    /// The stiff scheme's, and bindings.
+    /// The stiff scheme's, bindings, and rod–rod and self-contact.
     fn capabilities() -> Capabilities {
-        <Stiff as Scheme<T>>::capabilities().with(Capability::Bindings)
+        <Stiff as Scheme<T>>::capabilities()
+            .with(Capability::Bindings)
+            .with(Capability::RodContact)
     }
 
     fn advance(

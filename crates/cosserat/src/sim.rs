@@ -978,7 +978,8 @@ fn cpu_stepper<T: Real>(
                 to_explicit,
             )?;
             let bindings = cosserat_backend_cpu::StiffBindings::new(&rods, &b.bindings)
-                .map_err(BuildError::Setting)?;
+                .map_err(BuildError::Setting)?
+                .with_rod_contacts(&rods, b.rod_contact);
             Box::new(CpuStepper::bound_stiff(rods, settings, st, bindings))
         }
         (Some(st), false) => {

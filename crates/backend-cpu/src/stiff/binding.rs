@@ -34,13 +34,16 @@
 //! measurements.
 //!
 //! A rod may be the inner rod of one binding only (two lines on one point would fight), and
-//! bindings may not form a cycle. Rod–rod contact is not handled in the stiff scheme.
+//! bindings may not form a cycle. Rod–rod and self-contact (`rod_contact.rs`) are stepped by the
+//! same loop: detected at the start of each step, held inside each rod's solve, their reactions
+//! passed on with the same lag.
 
 use super::contact::pin_impulse;
 use super::pin::Pinned;
+use super::rod_contact::StiffRodContacts;
 use super::work::Work;
 use super::{Consts, Coupled, LinePin, StiffScratch, StiffSettings, step_rod_stiff};
-use crate::coupling::{BindingSpec, CouplingStats};
+use crate::coupling::{BindingSpec, CouplingStats, RodContactSpec};
 use crate::stepper::{CpuRod, Divergence, SolverSettings, StepStats};
 use cosserat_constraints::{BindingSet, BindingVariant};
 use cosserat_model::{Real, Vec3};
@@ -77,6 +80,8 @@ pub struct StiffBindings<T: Real> {
     /// Per rod: its force on the points of its outer rod, accumulated (scratch).
     sums: Vec<Vec3<f64>>,
     stats: CouplingStats,
+    /// Rod–rod and self-contact, if on.
+    contacts: Option<StiffRodContacts>,
 }
 
 impl<T: Real> StiffBindings<T> {
@@ -126,12 +131,40 @@ impl<T: Real> StiffBindings<T> {
             order,
             sums: Vec::new(),
             stats: CouplingStats::default(),
+            contacts: None,
         })
     }
 
-    /// Measurements since the start (bound points of the last step, steps, the search's time).
+    /// Adds rod–rod and self-contact among `rods` (`rod_contact.rs`); rods bound to each other
+    /// do not touch.
+    #[must_use]
+    pub fn with_rod_contacts(mut self, rods: &[CpuRod<T>], spec: Option<RodContactSpec>) -> Self {
+        self.contacts = spec.map(|spec| {
+            let excluded = self
+                .bindings
+                .iter()
+                .map(|b| (b.inner.min(b.outer), b.inner.max(b.outer)))
+                .collect();
+            StiffRodContacts::new(rods, &spec, excluded)
+        });
+        self
+    }
+
+    /// Measurements since the start: bound points of the last step, steps, the search's time,
+    /// and the rod contacts' counts and smallest separation.
     pub fn stats(&self) -> CouplingStats {
-        self.stats
+        let mut s = self.stats;
+        if let Some(c) = &self.contacts {
+            let r = &c.stats;
+            s.contacts = r.contacts;
+            s.max_contacts = r.max_contacts;
+            s.min_separation = r.min_separation;
+            s.min_separation_radii = r.min_separation_radii;
+            s.min_separation_ratio = r.min_separation_ratio;
+            s.detection_seconds += r.detection_seconds;
+            s.steps = s.steps.max(r.steps);
+        }
+        s
     }
 
     /// Number of points bound by the `k`-th binding that is not of variant `None`, at the last
@@ -183,6 +216,9 @@ pub fn step_bound_stiff<T: Real>(
         bindings.stats.held_ends_inside += u64::from(held_inside);
         bindings.stats.detection_seconds += t0.elapsed().as_secs_f64();
         bindings.stats.bound_points = bound;
+        if let Some(c) = bindings.contacts.as_mut() {
+            c.detect(&*rods, scratches, t, h);
+        }
         // 2. Outer rods first.
         for oi in 0..bindings.order.len() {
             let r = bindings.order[oi];
@@ -201,6 +237,9 @@ pub fn step_bound_stiff<T: Real>(
                         .map(|(i, f)| (i, *f)),
                 );
             }
+            if let Some(c) = bindings.contacts.as_ref() {
+                c.add_loads(r, &mut coupled.loads);
+            }
             let s = step_rod_stiff(
                 &mut rods[r],
                 settings,
@@ -212,6 +251,9 @@ pub fn step_bound_stiff<T: Real>(
                 1,
             )?;
             stats[r] = stats[r].merged(s);
+            if let Some(c) = bindings.contacts.as_mut() {
+                c.collect(&scratches[r].planes);
+            }
             // 4. Two-way: the lines' forces, reversed, load the outer rod's next step.
             if let Some(b) = bindings
                 .bindings
@@ -229,6 +271,9 @@ pub fn step_bound_stiff<T: Real>(
                     *f += (new - *f) * RELAXATION;
                 }
             }
+        }
+        if let Some(c) = bindings.contacts.as_mut() {
+            c.relax();
         }
         bindings.stats.steps += 1;
     }
@@ -309,16 +354,7 @@ pub(super) fn pin_on_lines(w: &mut Work, k: &Consts, lines: &[LinePin]) {
         let rel = x - line.origin;
         let lateral = rel - line.direction * line.direction.dot(&rel);
         w.x.set(i, &(x - lateral));
-        w.pinned.push(Pinned {
-            point: i,
-            normal: line.direction,
-            stick: false,
-            crease: None,
-            line: true,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
-        });
+        w.pinned.push(Pinned::on_line(i, line.direction));
     }
 }
 

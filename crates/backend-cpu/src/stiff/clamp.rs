@@ -203,6 +203,12 @@ impl Work {
                     r += self.clamp_torque(k, j) * (st.h * st.h);
                 }
             }
+            // External moments on the end frame (`Work::rhs`).
+            for &(j, t) in &self.torques {
+                if j == f {
+                    r += cosserat_model::quat::rotate_inv(&self.q.get(f), &t);
+                }
+            }
             self.u_th.set(f, &(st.w * r));
         }
     }

@@ -180,7 +180,7 @@ impl StiffContacts {
     pub(crate) fn record_forces(&mut self, w: &Work, k: &Consts, lambda: &V3s, h: f64) {
         self.forces.clear();
         for p in &w.pinned {
-            if p.line || p.point == usize::MAX {
+            if !p.on_mesh() || p.point == usize::MAX {
                 continue;
             }
             let g = pin_impulse(w, k, lambda, p.point);
@@ -271,7 +271,7 @@ impl StiffContacts {
                 && self.cached[i].is_some_and(|(_, gap)| {
                     let held = k.inv_mass[i] == 0.0;
                     let stays = match self.slot[i] {
-                        s if s != usize::MAX && w.pinned[s].line => true,
+                        s if s != usize::MAX && !w.pinned[s].on_mesh() => true,
                         _ => gap - reach >= -tol,
                     };
                     gap + reach < margin
@@ -429,6 +429,7 @@ impl StiffContacts {
             stick,
             crease: None,
             line: false,
+            rod: false,
             push: Vec3::zeros(),
             pn: 0.0,
             came_loose: false,
@@ -450,7 +451,7 @@ impl StiffContacts {
         let mut stick_changed = false;
         for s in 0..w.pinned.len() {
             let mut p = w.pinned[s];
-            if p.line {
+            if !p.on_mesh() {
                 continue;
             }
             let i = p.point;
@@ -508,40 +509,16 @@ impl StiffContacts {
                     changed = true;
                 }
             } else {
+                // Against the slip relative to where the step began, carried with the wall, with
+                // the friction of the obstacle the point touches.
                 let slip = p.sliding_part(&(x - start));
-                // The tangential impulse that would have held the point where it was at the
-                // current multipliers: its own momentum and its neighbours' push, but not how
-                // much harder they would push if it were held.
-                let hold = (p.push - slip).norm() * mass;
-                // Still slipping against its kinetic friction: what drives it is more than that
-                // friction, however small the point's own share. In a chain pushed along a wall
-                // every point's net push is its kinetic friction; holding one makes its
-                // neighbours push harder, so the test above alone would lock the chain.
-                let driven = p.push != Vec3::zeros() && slip.dot(&p.push) < 0.0;
-                if mu_s > 0.0 && hold <= mu_s * pn && !driven && !p.came_loose {
-                    // Static friction can hold it, and kinetic friction has stopped it or turned
-                    // it around (or acts on it for the first time). A point that barely slipped
-                    // sticks where the step began and the step is solved again; one that slipped
-                    // further sticks where it is, which needs no new solve (see `STICK_JUMP`).
-                    w.x_pred.set(i, &(x_pred - p.push));
-                    p.push = Vec3::zeros();
-                    p.stick = true;
-                    stick_changed = true;
-                    if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
-                        w.x.set(i, &(x + p.sliding_part(&(start - x))));
-                        changed = true;
-                    }
-                } else if mu_k > 0.0 && slip.norm() > 0.0 {
-                    // Kinetic friction against the slip, from this solve's normal impulse; a
-                    // change of more than a tenth is solved again (see `docs/stiff-solver.md`
-                    // for what a friction one step behind cost).
-                    let push = -slip.normalize() * (mu_k * pn / mass);
-                    if (push - p.push).norm() > 0.1 * push.norm() {
-                        changed = true;
-                    }
-                    w.x_pred.set(i, &(x_pred + push - p.push));
-                    p.push = push;
-                }
+                let friction = Friction {
+                    static_coefficient: mu_s,
+                    kinetic_coefficient: mu_k,
+                };
+                let (moved, stuck) = sliding_friction(w, k, &mut p, slip, pn, &friction);
+                changed |= moved;
+                stick_changed |= stuck;
             }
             w.pinned[s] = p;
         }
@@ -584,7 +561,7 @@ impl StiffContacts {
             }
             let s = self.slot[i];
             if s != usize::MAX {
-                if w.pinned[s].line {
+                if !w.pinned[s].on_mesh() {
                     continue;
                 }
                 if gap < -tol {
@@ -604,7 +581,7 @@ impl StiffContacts {
         // Pinned points the detection no longer sees have left the wall.
         let before = w.pinned.len();
         let found = &self.found;
-        w.pinned.retain(|p| p.line || found[p.point]);
+        w.pinned.retain(|p| !p.on_mesh() || found[p.point]);
         if w.pinned.len() != before {
             self.reindex(w);
             changed = true;
@@ -635,7 +612,9 @@ impl StiffContacts {
         let mut outside = 0;
         for (i, cached) in self.cached.iter().enumerate() {
             let Some((_, gap)) = *cached else { continue };
-            if k.inv_mass[i] == 0.0 || (self.slot[i] != usize::MAX && w.pinned[self.slot[i]].line) {
+            if k.inv_mass[i] == 0.0
+                || (self.slot[i] != usize::MAX && !w.pinned[self.slot[i]].on_mesh())
+            {
                 continue;
             }
             let x = w.x.get(i);
@@ -681,7 +660,7 @@ impl StiffContacts {
     /// for the statistics.
     pub(crate) fn end_step(&mut self, w: &Work, k: &Consts) {
         self.last.iter_mut().for_each(|t| *t = Touch::Free);
-        for p in w.pinned.iter().filter(|p| !p.line) {
+        for p in w.pinned.iter().filter(|p| p.on_mesh()) {
             self.last[p.point] = if p.stick {
                 Touch::Stick
             } else {
@@ -691,7 +670,7 @@ impl StiffContacts {
         let (deepest, outside) = self.penetration(w, k);
         let s = &mut self.stats;
         s.max_penetration = s.max_penetration.max(deepest);
-        s.contacts = w.pinned.iter().filter(|p| !p.line).count();
+        s.contacts = w.pinned.iter().filter(|p| p.on_mesh()).count();
         s.max_contacts = s.max_contacts.max(s.contacts);
         s.steps += 1;
         s.escaped_points = s.escaped_points.max(outside);
@@ -765,6 +744,63 @@ fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64, radius: f6
     turned
 }
 
+/// Step 3 of the module docs for a sliding point `p` that slipped by `slip` (its motion in
+/// the step along what it slides, relative to the wall or, for a rod contact, to the other
+/// side), with normal impulse `pn` (times the step): it sticks if static friction could have
+/// held it and it is not still driven against its kinetic friction, else it carries the
+/// kinetic friction against its slip as a shift of its inertial target. Returns whether the
+/// step must be solved again, and whether the point stuck (which changes the matrix).
+pub(super) fn sliding_friction(
+    w: &mut Work,
+    k: &Consts,
+    p: &mut Pinned,
+    slip: Vec3<f64>,
+    pn: f64,
+    friction: &Friction<f64>,
+) -> (bool, bool) {
+    let Friction {
+        static_coefficient: mu_s,
+        kinetic_coefficient: mu_k,
+    } = *friction;
+    let i = p.point;
+    let mass = 1.0 / k.inv_mass[i];
+    let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
+    // The tangential impulse that would have held the point where it was at the current
+    // multipliers: its own momentum and its neighbours' push, but not how much harder they
+    // would push if it were held.
+    let hold = (p.push - slip).norm() * mass;
+    // Still slipping against its kinetic friction: what drives it is more than that friction,
+    // however small the point's own share. In a chain pushed along a wall every point's net
+    // push is its kinetic friction; holding one makes its neighbours push harder, so the test
+    // above alone would lock the chain.
+    let driven = p.push != Vec3::zeros() && slip.dot(&p.push) < 0.0;
+    if mu_s > 0.0 && hold <= mu_s * pn && !driven && !p.came_loose {
+        // Static friction can hold it, and kinetic friction has stopped it or turned it around
+        // (or acts on it for the first time). A point that barely slipped sticks where the step
+        // began and the step is solved again; one that slipped further sticks where it is,
+        // which needs no new solve (see `STICK_JUMP`).
+        w.x_pred.set(i, &(x_pred - p.push));
+        p.push = Vec3::zeros();
+        p.stick = true;
+        if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
+            w.x.set(i, &(x - slip));
+            return (true, true);
+        }
+        return (false, true);
+    }
+    if mu_k > 0.0 && slip.norm() > 0.0 {
+        // Kinetic friction against the slip, from this solve's normal impulse; a change of
+        // more than a tenth is solved again (see `docs/stiff-solver.md` for what a friction
+        // one step behind cost).
+        let push = -slip.normalize() * (mu_k * pn / mass);
+        let changed = (push - p.push).norm() > 0.1 * push.norm();
+        w.x_pred.set(i, &(x_pred + push - p.push));
+        p.push = push;
+        return (changed, false);
+    }
+    (false, false)
+}
+
 /// Pins the run of points a guide holds (from index 1 on, the first point being held by the
 /// hand; see [`crate::guide`]) to its axis for the step's solve, starting from the solve's
 /// starting guess: each is put on the axis and may move only along it. Replaces every pin of
@@ -781,16 +817,7 @@ pub(crate) fn pin_guided(w: &mut Work, k: &Consts, guide: &Guide) {
             continue;
         }
         w.x.set(i, &(x - lateral));
-        w.pinned.push(Pinned {
-            point: i,
-            normal: axis,
-            stick: false,
-            crease: None,
-            line: true,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
-        });
+        w.pinned.push(Pinned::on_line(i, axis));
     }
 }
 

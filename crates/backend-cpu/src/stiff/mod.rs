@@ -60,6 +60,7 @@ mod contact;
 mod direct;
 mod lanes;
 mod pin;
+mod rod_contact;
 mod work;
 mod xpbd;
 
@@ -72,6 +73,7 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::ends::EndKind;
 use direct::{Assembled, BlockTridiagonal};
 use lanes::{V3s, padded};
+use rod_contact::RodPlanes;
 use work::Work;
 
 pub(crate) use cosserat_problem::{Integrator, Refactor, StiffReport, StiffScheme, StiffSettings};
@@ -102,8 +104,12 @@ pub(crate) struct Consts {
     damped: bool,
     /// The constants of the element-wise passes as padded columns (`lanes.rs`).
     pub(crate) cols: ConstCols,
-    key: Option<(usize, u64, bool, [EndKind; 2])>,
+    key: Option<ConstsKey>,
 }
+
+/// What [`Consts`] were built for: elements, step (and inertia floor), extensible mode, the kinds
+/// of end, and which end points slide.
+type ConstsKey = (usize, u64, bool, [EndKind; 2], [bool; 2]);
 
 /// [`Consts`] as the element-wise passes read them: padded columns (`lanes.rs`) whose padding
 /// keeps the extra lanes finite (unit lengths and inertias, zero inverse masses).
@@ -161,6 +167,9 @@ pub struct StiffScratch {
     contacts: Option<StiffContacts>,
     /// What a coupling (`binding.rs`) asks of the next step, and what it gets back.
     coupled: Coupled,
+    /// The rod's rod-contact planes for the next step (`rod_contact.rs`); none without rod
+    /// contacts.
+    planes: RodPlanes,
 }
 
 /// A point held on a line for a step's solve: a guidewire point on the centreline of the
@@ -334,6 +343,8 @@ impl Consts {
             h.to_bits() ^ floor.to_bits().rotate_left(17),
             extensible,
             [rod.ends[0].kind, rod.ends[1].kind],
+            // A sliding end point keeps its mass (`CpuRod::new`).
+            [0, 1].map(|e| rod.ends[e].slide_axis().is_some()),
         );
         if self.key == Some(key) {
             return;
@@ -670,6 +681,7 @@ fn step_fixed<T: Real>(
         report,
         contacts,
         coupled,
+        planes,
     } = scratch;
     // Only a rod with a mesh (and the direct solver) pays for contacts.
     let mut contacts = contacts
@@ -753,6 +765,7 @@ fn step_fixed<T: Real>(
             factor_valid,
             report,
             contacts.as_deref_mut(),
+            planes,
         );
         let unconverged = stiff.tolerance > 0.0 && !(residual <= tolerance);
         if unconverged
@@ -777,6 +790,7 @@ fn step_fixed<T: Real>(
                 factor_valid,
                 report,
                 contacts.as_deref_mut(),
+                planes,
             );
             *factor_valid = false;
             kept.axial_steps += 1;
@@ -824,6 +838,9 @@ fn step_fixed<T: Real>(
         }
         if let Some(c) = contacts.as_deref_mut() {
             c.record_forces(w, k, &w.lambda_prev[0], hs);
+        }
+        if planes.is_active() {
+            planes.record_forces(w, k, &w.lambda_prev[0], hs);
         }
         if !coupled.lines.is_empty() {
             binding::line_forces(w, k, hs, coupled);
@@ -959,8 +976,31 @@ fn place_held_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>, t: f64, h: f64, lead:
     for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
         if end.holds_point() {
             let v = v64(&end.velocities_over(t, h).0);
-            w.x.set(i, &(w.x_prev.get(i) + v * lead));
+            let mut x = w.x_prev.get(i) + v * lead;
+            // A sliding end keeps its extrapolated motion along its axis.
+            if let Some(a) = end.slide_axis() {
+                let a = v64(&a);
+                x += a * a.dot(&(w.x.get(i) - x));
+            }
+            w.x.set(i, &x);
         }
+    }
+}
+
+/// Holds each sliding end point (`EndCondition::slide`) on the line along its axis through its
+/// starting guess for the step's solve, as a guided point is held on the guide's axis: its
+/// inverse mass in the updates and the banded matrix becomes `w a aᵀ` (`Work::pin_blocks`), so
+/// the rod and its loads move it along the axis and the prescribed motion across it. What holds
+/// it there is the holder's reaction (`record_reactions`: the point's momentum balance, which
+/// along a free axis is zero). A point another pin already holds is left to it.
+fn pin_sliding_ends<T: Real>(w: &mut Work, rod: &CpuRod<T>) {
+    let n = w.n;
+    for (i, end) in [(0, &rod.ends[0]), (n, &rod.ends[1])] {
+        let Some(a) = end.slide_axis() else { continue };
+        if w.pinned.iter().any(|p| p.point == i) {
+            continue;
+        }
+        w.pinned.push(pin::Pinned::on_line(i, v64(&a).normalize()));
     }
 }
 
@@ -1034,6 +1074,7 @@ fn solve_step<T: Real>(
     factor_valid: &mut bool,
     report: &mut StiffReport,
     mut contacts: Option<&mut StiffContacts>,
+    planes: &mut RodPlanes,
 ) -> (f64, f64) {
     let StepContext {
         rod,
@@ -1062,12 +1103,24 @@ fn solve_step<T: Real>(
     // Also without clamps: a clamp released since the last step leaves none behind.
     let omega = [0, 1].map(|e| v64(&ends[e].velocities_over(t, h).1));
     w.clamp_begin(k, h, ctx.advance, omega);
-    // Point moments are the explicit schemes' (`Capability::Moments`): kicked into a frame's
-    // tiny inertia at a haptic step they would turn it by radians before the solve.
+    // Point moments enter the frames' implicit equations (`Work::rhs`), not their velocities.
+    w.torques.clear();
+    for l in rod.loads.iter().filter(|l| l.turns()) {
+        let m = v64(&l.moment) * (l.profile.factor(mid) * h * h);
+        for (frame, share) in crate::stepper::moment_shares(l.point, n) {
+            w.torques.push((frame, m * share));
+        }
+    }
     w.predict(k, h, gravity, loads, direct, |w| {
         for (i, end) in [(0, &ends[0]), (n, &ends[1])] {
             if end.holds_point() {
-                let v = v64(&end.velocities_over(t, h).0);
+                let mut v = v64(&end.velocities_over(t, h).0);
+                // A sliding end keeps along its axis what gravity and its loads gave it; the
+                // solve moves it along the axis only (`pin_sliding_ends`).
+                if let Some(a) = end.slide_axis() {
+                    let a = v64(&a);
+                    v += a * a.dot(&w.v.get(i));
+                }
                 w.v.set(i, &v);
                 // The direct solver starts where the velocities alone lead (the full
                 // Newton system pulls it to the target); Gauss–Seidel XPBD has no `g`
@@ -1087,8 +1140,13 @@ fn solve_step<T: Real>(
     if !ctx.lines.is_empty() {
         binding::pin_on_lines(w, k, ctx.lines);
     }
+    pin_sliding_ends(w, rod);
     if let Some(c) = contacts.as_deref_mut() {
         c.begin_step(w, k, (t, h), rod.mesh.as_ref().map(|m| m.shapes()));
+    }
+    let planes_active = planes.is_active() && direct;
+    if planes_active {
+        planes.begin_step(w, k);
     }
     // 2. Constraint solve.
     for c in &mut w.lambda {
@@ -1113,14 +1171,26 @@ fn solve_step<T: Real>(
                     tolerance,
                     round == 0,
                     contacts.as_deref_mut(),
+                    planes_active.then_some(&mut *planes),
                 );
                 residual = r;
                 used += u;
-                let Some(c) = contacts.as_deref_mut() else {
+                if contacts.is_none() && !planes_active {
                     break;
+                }
+                let mut update = contact::Update {
+                    resolve: false,
+                    matrix_changed: false,
                 };
-                let reuse = stiff.reuse_contact_queries;
-                let update = c.update(w, k, r <= tolerance, reuse);
+                if let Some(c) = contacts.as_deref_mut() {
+                    let reuse = stiff.reuse_contact_queries;
+                    update = c.update(w, k, r <= tolerance, reuse);
+                }
+                if planes_active {
+                    let u = planes.update(w, k);
+                    update.resolve |= u.resolve;
+                    update.matrix_changed |= u.matrix_changed;
+                }
                 if !update.resolve || round == contact::MAX_ROUNDS {
                     break;
                 }
@@ -1162,6 +1232,7 @@ fn direct_solve(
     tolerance: f64,
     first: bool,
     mut contacts: Option<&mut StiffContacts>,
+    mut planes: Option<&mut RodPlanes>,
 ) -> (f64, usize) {
     let mut used = 0;
     let mut residual = f64::NAN;
@@ -1215,13 +1286,21 @@ fn direct_solve(
         factor.solve(&mut w.rhs);
         let max_move = contacts
             .as_deref()
-            .map_or(f64::INFINITY, |c| c.max_iteration_move());
+            .map_or(f64::INFINITY, |c| c.max_iteration_move())
+            .min(
+                planes
+                    .as_deref()
+                    .map_or(f64::INFINITY, |p| p.max_iteration_move()),
+            );
         w.apply(k, max_move);
         used += 1;
         pins_changed = contacts.as_deref_mut().is_some_and(|c| {
             c.catch_penetrations(w, k, stiff.reuse_contact_queries)
                 .matrix_changed
         });
+        if let Some(p) = planes.as_deref_mut() {
+            pins_changed |= p.catch_penetrations(w, k).matrix_changed;
+        }
     }
     (residual, used)
 }

@@ -22,6 +22,10 @@ pub(crate) struct Pinned {
     /// Held on a line along `normal` (a guide, [`pin_guided`](super::contact::pin_guided)) instead of a plane across it;
     /// the contact updates leave such points alone.
     pub(crate) line: bool,
+    /// Held on its side of a rod contact's separating plane (`rod_contact.rs`) rather than on
+    /// the mesh: the mesh's updates leave such points alone, and the rod contacts' leave the
+    /// mesh's.
+    pub(crate) rod: bool,
     /// Kinetic friction of a sliding point as the shift it gives the inertial target `x̃`
     /// (`μ_k p_n t / m` for a unit direction `t` against the slip), already added to `x_pred`.
     pub(crate) push: Vec3<f64>,
@@ -35,6 +39,29 @@ pub(crate) struct Pinned {
 }
 
 impl Pinned {
+    /// Point `point` held on a line along the unit vector `direction` (a guide's axis, a
+    /// binding's line, a sliding end's axis), free along it.
+    pub(crate) fn on_line(point: usize, direction: Vec3<f64>) -> Self {
+        Self {
+            point,
+            normal: direction,
+            stick: false,
+            crease: None,
+            line: true,
+            rod: false,
+            push: Vec3::zeros(),
+            pn: 0.0,
+            came_loose: false,
+        }
+    }
+
+    /// Whether the mesh holds it (`contact.rs`): neither a line (guide, binding) nor a rod
+    /// contact's plane.
+    #[inline]
+    pub(crate) fn on_mesh(&self) -> bool {
+        !self.line && !self.rod
+    }
+
     /// The direction of the crease a sliding point moves along, if it is in one.
     #[inline]
     pub(crate) fn crease_direction(&self) -> Option<Vec3<f64>> {

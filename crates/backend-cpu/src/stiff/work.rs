@@ -74,6 +74,10 @@ pub(crate) struct Work {
     /// each clamp carries through the step (`clamp.rs`; empty without clamps).
     pub(crate) clamp_frames: [cosserat_model::Quat<f64>; 2],
     pub(crate) clamps: Vec<super::clamp::ClampStep>,
+    /// External moments of the step on frames, as (frame, `h² τ`) with `τ` [N m] in the world
+    /// frame: generalised forces of the frames' implicit equations (see [`rhs`](Self::rhs)).
+    /// Empty without point moments.
+    pub(crate) torques: Vec<(usize, Vec3<f64>)>,
 }
 
 /// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
@@ -394,6 +398,17 @@ impl Work {
                 }
                 self.u_th.set(e, &u);
             });
+        }
+        // External moments: `I (θ − θ̃) = J_θᵀ λ + h² τ` (body components of `τ` at the current
+        // iterate), the moment a term of the frame's own implicit equation rather than a kick of
+        // its velocity before the solve: kicked into a frame's tiny inertia at a haptic step, it
+        // turned the frame by radians before the solve saw it.
+        for &(j, t) in &self.torques {
+            if k.cols.free[j] != 0.0 {
+                let body = cosserat_model::quat::rotate_inv(&self.q.get(j), &t);
+                let u = self.u_th.get(j) + body.component_mul(&self.inv_k.get(j));
+                self.u_th.set(j, &u);
+            }
         }
         if !self.clamps.is_empty() {
             self.clamp_rhs(k);
@@ -1267,6 +1282,7 @@ mod tests {
             stick,
             crease: None,
             line,
+            rod: false,
             push: Vec3::zeros(),
             pn: 0.0,
             came_loose: false,
