@@ -1757,11 +1757,12 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                         vx[{e+1}] += imp * wi;
 //#if REACT
                         // A held point does not move; the binding's push on it is part of its
-                        // reaction, as on the CPU (`KinematicImpulses`).
-                        if (react0 && it.w0 + b0 + {e} == 0u) {
+                        // reaction, as on the CPU (`KinematicImpulses`). The first end's point is
+                        // its thread's first, the last end's is `rj1`.
+                        if u32({e}) == 0u && react0 {
                             jr0 -= imp;
                         }
-                        if (react1 && it.w0 + b0 + {e} == it.n) {
+                        if u32({e}) == rj1 {
                             jr1 -= imp;
                         }
 //#endif
@@ -1791,10 +1792,10 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                         vx[{e+1}] += jv * wm[{e+1}];
 //#if REACT
                         // A held point's share goes into its reaction.
-                        if (react0 && gp == 0u) {
+                        if u32({e}) == 0u && react0 {
                             jr0 -= jv;
                         }
-                        if (react1 && gp == it.n) {
+                        if u32({e}) == rj1 {
                             jr1 -= jv;
                         }
 //#endif
