@@ -119,7 +119,6 @@ impl BandedBatch {
         };
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let rows = buffer("banded rows", rods * count * BLOCK_ROW, storage);
-        let piv = buffer("banded factor", rods * count * BLOCK_ROW, storage);
         let x = buffer(
             "banded rhs",
             rods * count * 3,
@@ -170,10 +169,15 @@ impl BandedBatch {
             (p, group)
         };
         let (factor, solve) = match strategy {
-            Strategy::Chain => (
-                pipeline("factor", &[(0, &shape), (1, &rows), (2, &piv)]),
-                pipeline("solve", &[(0, &shape), (2, &piv), (3, &x)]),
-            ),
+            Strategy::Chain => {
+                // The chain's factor: P⁻¹, Y and Z of every block row (the cyclic reduction
+                // keeps its own in its scratch).
+                let piv = buffer("banded factor", rods * count * BLOCK_ROW, storage);
+                (
+                    pipeline("factor", &[(0, &shape), (1, &rows), (2, &piv)]),
+                    pipeline("solve", &[(0, &shape), (2, &piv), (3, &x)]),
+                )
+            }
             Strategy::CyclicReduction => {
                 let cr = buffer(
                     "banded cyclic reduction",
