@@ -15,6 +15,7 @@
 
 use super::reference as refs;
 use cosserat::convergence::grid_convergence;
+use cosserat::cosserat_backend_cpu::stiff::STICK_SPEED;
 use cosserat::cosserat_constraints::BindingVariant;
 use cosserat::cosserat_model::energy::bend_twist_node;
 use cosserat::cosserat_model::quat::frame_from_tangent;
@@ -1481,7 +1482,7 @@ pub fn incline_friction(size: Size) -> Result<Vec<Row>, String> {
                         0.5 * a * t * t
                     ),
                 });
-            } else {
+            } else if let Scheme::Explicit = scheme {
                 rows.push(Row {
                     case,
                     quantity: format!("|distance slid| in {t} s [m]"),
@@ -1490,6 +1491,22 @@ pub fn incline_friction(size: Size) -> Result<Vec<Row>, String> {
                     tolerance: 1e-6 * r,
                     check: Check::Bound,
                     note: "tan θ < μs: static friction holds it".into(),
+                });
+            } else {
+                // The stiff scheme's static friction is a stiff spring that lets a held point
+                // creep at `STICK_SPEED` times what drives it over what can hold it.
+                let creep = STICK_SPEED * t * theta.tan() / mu_s;
+                rows.push(Row {
+                    case,
+                    quantity: format!("|distance slid| in {t} s [m]"),
+                    measured: travelled.abs(),
+                    reference: 0.0,
+                    tolerance: 1.01 * creep,
+                    check: Check::Bound,
+                    note: format!(
+                        "tan θ < μs: static friction holds it, creeping at most {:.1e} m/s",
+                        creep / t
+                    ),
                 });
             }
         }

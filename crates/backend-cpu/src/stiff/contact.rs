@@ -6,56 +6,53 @@
 //! stiff wire moves its points by millimetres: a wire pressed against a wall would be pushed
 //! through it by the solve and pulled back by a projection afterwards, every step. So here the
 //! wall is part of the implicit step: a point in contact is **pinned** to the wall's tangent
-//! plane for the solve (its inverse mass becomes `w (I − n nᵀ)` when it slides, zero when it
-//! sticks; `Work::pin_blocks` and the projections in `Work::rhs`, `Work::apply`), which keeps
-//! the system banded and costs nothing where no point touches.
+//! plane for the solve (its inverse mass loses the normal direction, `Work::pin_blocks` and
+//! `Work::rhs`, `Work::apply`), which keeps the system banded and costs nothing where no point
+//! touches.
 //!
-//! Which points are pinned, and how, is an active set found per step (Coulomb friction with
-//! the static and kinetic coefficients of [`MeshContactSettings`], each point with those of
-//! the obstacle it touches; on a moving obstacle, sticking and slipping are relative to its
-//! surface):
+//! Which points are pinned is an active set found per step; **friction is not part of it**. A
+//! pinned point carries Coulomb friction as a force of the step's own equations
+//! ([`PinFriction`]): against its slip over the step (relative to its obstacle's surface), a
+//! stiff tangential spring `μ_s p_n / δ` up to a slip `δ` of [`STICK_SPEED`](super::pin::STICK_SPEED)
+//! times the step (static friction: the point holds, creeping at most that fast), kinetic
+//! friction `μ_k p_n` beyond, evaluated at every iterate of the solve, its derivative in the
+//! Newton matrix. Earlier versions switched each point between sticking (pinned still) and
+//! sliding (kinetic friction as a shift of its inertial target) between rounds of the solve;
+//! a stiff wire pressed on the vessel at 1 ms then had no stable active set (a point's own
+//! share of the impulse that held it said nothing of its neighbours' push), its steps ended
+//! unconverged with residuals of 1e1–1e4 and strains of 20–50 % (`docs/stiff-solver.md`).
 //! 1. before the solve, the points at the solve's starting guess (`x + h v`) are tested as
 //!    spheres against the mesh; those touching or penetrating are put on the wall and pinned,
 //!    except points that were free at the end of the last step, are moving off the wall and
 //!    are within the tolerance of it (left to step 2, which pins them if the solve pushes them
-//!    in: pinned first, most of them were let go after the first solve): sticking (at their
-//!    start-of-step place, projected onto the wall) if they stuck at the end of the last step,
-//!    else sliding, with the kinetic friction of their last normal impulse. A point touching
-//!    two walls at an angle (a groove, the crease of two facets) is put on both and pinned to
-//!    their crease, each wall with its own normal force: pinned to one plane under the mean
-//!    normal, a rod in a right-angled groove felt `μ m g cos α` of friction instead of the
-//!    wedge's `√2 μ m g cos α` and slid where it should stick;
+//!    in: pinned first, most of them were let go after the first solve). A point friction held
+//!    at the end of the last step starts at its start-of-step place, projected onto the wall;
+//!    each starts with the normal impulse of its last step (none for a new contact). A point
+//!    touching two walls at an angle (a groove, the crease of two facets) is put on both and
+//!    pinned to their crease, each wall with its own normal force: pinned to one plane under
+//!    the mean normal, a rod in a right-angled groove felt `μ m g cos α` of friction instead of
+//!    the wedge's `√2 μ m g cos α` and slid where it should stick;
 //! 2. after every iteration of the solve, points the iterate pushed into the mesh are put back
-//!    on the wall and pinned (sliding), so that no iterate travels far into a wall before the
-//!    rest of the rod learns of it (a wire snapping sideways moves millimetres in one step). A
-//!    pinned point that slid into a second wall turned towards the lumen (every edge of a
-//!    faceted vessel, seen from inside) is put on both and slides along their crease
+//!    on the wall and pinned, so that no iterate travels far into a wall before the rest of
+//!    the rod learns of it (a wire snapping sideways moves millimetres in one step). A pinned
+//!    point that slid into a second wall turned towards the lumen (every edge of a faceted
+//!    vessel, seen from inside) is put on both and slides along their crease
 //!    ([`back_on_walls`]): put back on the second wall alone, it slid into the first again at
 //!    the next iteration, a new factorisation each time (the phantom's steel wire took 41
 //!    iterations and 36 factorisations a step, most steps unconverged). One that slid off a wall
 //!    turned away stays on its plane, in the lumen;
-//! 3. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` is read: a
-//!    point the wall would have to pull (`n·g ≤ 0`) is released; a sticking point that needs
-//!    more than `μ_s n·g` of tangential impulse starts sliding (and so does every sticking
-//!    point of a solve that did not converge: an inextensible wire pushed against sticking
-//!    points may have no solution), and slides for the rest of the step (allowed to stick
-//!    again, points stuck and slipped in turn at every round); a sliding point sticks when
-//!    static friction could have held it where the step began and it is not still slipping against its kinetic friction, and
-//!    otherwise carries the kinetic friction `μ_k n·g` against its slip as a shift of its
-//!    inertial target `x̃`. A point that sticks after slipping more than [`STICK_JUMP`] of an
-//!    element sticks where it is rather than where the step began;
-//! 4. if anything changed, the solve continues from its current multipliers, for at most
+//! 3. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` (normal and
+//!    friction) is read: a point the wall would have to pull (`n·g ≤ 0`) is released; the
+//!    others take their new normal impulse `p_n = n·g` for their friction;
+//! 4. if a point was released or caught, or a normal impulse changed by more than
+//!    [`NORMAL_CHANGE`], the solve continues from its current multipliers, for at most
 //!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
-//!    changed (a change of kinetic friction only moves the targets `x̃`); positions a last
-//!    change moves onto the wall are not solved again (the next step does).
-//!
-//! New contacts start sliding rather than sticking: sticking first made the pushed guidewire
-//! of `scenes/guidewire-insertion.toml` end steps unconverged and compressed (largest strain
-//! 0.2–0.35 with the axial retry) where sliding first converged (largest strain 1e-6).
+//!    changed; positions a last change moves onto the wall are not solved again (the next
+//!    step does).
 
 use super::Consts;
 use super::lanes::V3s;
-use super::pin::Pinned;
+use super::pin::{PinFriction, Pinned, STICK_SPEED};
 use super::work::Work;
 use crate::guide::Guide;
 use crate::mesh_contact::{
@@ -82,12 +79,9 @@ const ITERATION_MOVE: f64 = 1.0;
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
 const REUSE_DISTANCE: f64 = 0.5;
 
-/// The largest slip, as a fraction of the shorter rest length of a point's two elements, by
-/// which a sliding point that static friction can hold is put back where the step began (and
-/// the step solved again). A point that slipped further sticks where it is: moving it back
-/// strains its two elements by that fraction, and from such a start the solve of a stiff chain
-/// pressed on the wall did not converge (`docs/stiff-solver.md`, "Sticking without a jump").
-const STICK_JUMP: f64 = 1e-3;
+/// The relative change of a pinned point's normal impulse between two rounds of a step above
+/// which the step is solved again with the new one (its friction is proportional to it).
+const NORMAL_CHANGE: f64 = 0.1;
 
 /// The largest turn [rad] of a pinned point's wall normal that keeps the step's factorisation:
 /// a chord iteration with the old normal's projection still converges, and one that does not
@@ -98,15 +92,6 @@ const NORMAL_TURN: f64 = 0.1;
 /// normals is at most this in magnitude: nearer to parallel (or to facing each other), the
 /// crease is far from the point (a point moved onto both walls moves `|gap| / sin θ`).
 const CREASE_COS: f64 = 0.95;
-
-/// The shorter rest length of the elements that point `i` ends.
-fn shortest_element(k: &Consts, i: usize) -> f64 {
-    [i.checked_sub(1), Some(i)]
-        .into_iter()
-        .flatten()
-        .filter_map(|j| k.l0.get(j))
-        .fold(f64::INFINITY, |a, &b| a.min(b))
-}
 
 /// What [`StiffContacts::update`] changed.
 #[derive(Clone, Copy, Debug)]
@@ -123,8 +108,10 @@ pub(crate) struct Update {
 enum Touch {
     #[default]
     Free,
-    Stick,
-    /// Sliding, with its normal impulse times the step `p_n` [kg m].
+    /// Held by friction (it slipped less than `PinFriction::stick_slip`), with its normal
+    /// impulse times the step `p_n` [kg m].
+    Stick(f64),
+    /// Sliding, with its normal impulse times the step.
     Slide(f64),
 }
 
@@ -348,7 +335,6 @@ impl StiffContacts {
             if k.inv_mass[i] == 0.0 || gap > tol || self.slot[i] != usize::MAX {
                 continue;
             }
-            let mu_k = self.mesh.friction_at(i).kinetic_coefficient;
             // The motion of the prediction over the step, relative to the wall.
             let v = w.x_pred.get(i) - w.x_old.get(i) - self.wall_shift(i, w);
             let towards = normal.dot(&v);
@@ -359,36 +345,37 @@ impl StiffContacts {
             if self.last[i] == Touch::Free && gap >= -tol && towards > 0.0 {
                 continue;
             }
-            let mass = 1.0 / k.inv_mass[i];
             // Touching two walls that meet at an angle (a groove, the crease of two facets):
             // on both, sliding along their crease, each wall's normal force its own.
             let crease = self.two_walls(i, tol);
             let (normal, gap) = crease.map_or((normal, gap), |[a, _]| a);
-            let stick = self.last[i] == Touch::Stick;
             let before = w.x.get(i);
-            self.pin(w, i, normal, gap, stick);
+            // Its friction acts from the start, with the normal impulse of the last step. A
+            // new contact that comes to the wall without sliding along it (a rope laid on a
+            // slope) starts held, with the normal impulse that stops its own approach: from
+            // sliding, Newton stays on the law's sliding branch wherever both exist
+            // (`PinFriction`).
+            let (stick, pn) = match self.last[i] {
+                Touch::Stick(pn) => (true, Some(pn)),
+                Touch::Slide(pn) => (false, Some(pn)),
+                Touch::Free => {
+                    let along = w.v_start.get(i) * self.h - self.wall_shift(i, w);
+                    let tangential = along - normal * normal.dot(&along);
+                    (tangential.norm() <= STICK_SPEED * self.h, None)
+                }
+            };
+            self.pin(w, i, normal, gap, stick, pn.unwrap_or(0.0));
             let s = self.slot[i];
             if let Some([_, (other, other_gap)]) = crease {
                 // Its gap to the second wall from where the first put it.
                 let moved = w.x.get(i) - before;
                 back_on_walls(w, s, other, other_gap + other.dot(&moved), self.radius);
             }
-            if stick {
-                continue;
+            if pn.is_none() {
+                let stops = (w.x.get(i) - w.x_pred.get(i)) / k.inv_mass[i];
+                let p = &mut w.pinned[s];
+                p.pn = walls_impulse(p, &stops).0.max(0.0);
             }
-            // Along what it slides.
-            let slip = w.pinned[s].sliding_part(&v);
-            let (push, pn) = match self.last[i] {
-                Touch::Slide(pn) if slip.norm() > 0.0 => {
-                    (-slip.normalize() * (mu_k * pn / mass), pn)
-                }
-                Touch::Slide(pn) => (Vec3::zeros(), pn),
-                _ => (Vec3::zeros(), 0.0),
-            };
-            let p = &mut w.pinned[s];
-            p.push = push;
-            p.pn = pn;
-            w.x_pred.set(i, &(w.x_pred.get(i) + push));
         }
         self.mesh.contacts = found;
     }
@@ -409,116 +396,66 @@ impl StiffContacts {
     }
 
     /// Pins point `i` on the plane through its wall point (normal `normal`, the sphere `gap`
-    /// away from it): sliding from where it is, projected; sticking at its place at the start
-    /// of the step, projected.
-    fn pin(&mut self, w: &mut Work, i: usize, normal: Vec3<f64>, gap: f64, stick: bool) {
+    /// away from it), with the friction of the obstacle it touches under the normal impulse
+    /// `pn`: from where it is, projected, or (`stick`: friction held it at the end of the last
+    /// step) from its place at the start of the step, projected.
+    fn pin(&mut self, w: &mut Work, i: usize, normal: Vec3<f64>, gap: f64, stick: bool, pn: f64) {
         let x = w.x.get(i);
         // A point of the plane on which the sphere touches the wall.
         let on_wall = x - normal * gap;
-        let from = if stick {
-            w.x_old.get(i) + self.wall_shift(i, w)
-        } else {
-            x
-        };
+        let start = w.x_old.get(i) + self.wall_shift(i, w);
+        let from = if stick { start } else { x };
         let placed = from - normal * normal.dot(&(from - on_wall));
         w.x.set(i, &placed);
         self.slot[i] = w.pinned.len();
-        w.pinned.push(Pinned {
-            point: i,
-            normal,
-            stick,
-            crease: None,
-            line: false,
-            rod: false,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
-        });
+        let Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+        } = self.mesh.friction_at(i);
+        let friction = PinFriction::new(start, mu_s, mu_k, self.h);
+        w.pinned
+            .push(Pinned::on_wall(i, normal, false, pn, friction));
     }
 
-    /// Steps 2 and 3 of the module docs after a solve: updates the active set and moves newly
-    /// pinned points onto the wall (`reuse` as in [`detect`](Self::detect)). Returns what
-    /// changed that the solve should take into account.
-    pub(crate) fn update(
-        &mut self,
-        w: &mut Work,
-        k: &Consts,
-        converged: bool,
-        reuse: bool,
-    ) -> Update {
+    /// Steps 2 and 3 of the module docs after a solve: lets go of the points the wall would
+    /// have to pull, gives the others the normal impulse of this solve for their friction,
+    /// and moves newly pinned points onto the wall (`reuse` as in [`detect`](Self::detect)).
+    /// Returns what changed that the solve should take into account.
+    pub(crate) fn update(&mut self, w: &mut Work, k: &Consts, reuse: bool) -> Update {
         let mut changed = false;
         let mut released = false;
-        let mut stick_changed = false;
+        let mut matrix_changed = false;
         for s in 0..w.pinned.len() {
             let mut p = w.pinned[s];
             if !p.on_mesh() {
                 continue;
             }
             let i = p.point;
-            let Friction {
-                static_coefficient: mu_s,
-                kinetic_coefficient: mu_k,
-            } = self.mesh.friction_at(i);
-            let mass = 1.0 / k.inv_mass[i];
-            let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
-            // Where the step began, carried with the wall (a moving obstacle's).
-            let start = w.x_old.get(i) + self.wall_shift(i, w);
             let g = pin_impulse(w, k, &w.lambda[0], i);
-            let mut pn = p.normal.dot(&g);
-            if let Some(m) = p.crease {
-                // The impulses of the two walls, `g = a n + b m + (along the crease)`.
-                let (gm, c) = (m.dot(&g), p.normal.dot(&m));
-                let det = 1.0 - c * c;
-                let (a, b) = ((pn - c * gm) / det, (gm - c * pn) / det);
-                if a > 0.0 && b > 0.0 {
-                    pn = a + b;
-                } else if a > 0.0 || b > 0.0 {
-                    // One wall would have to pull: the point slides on the other.
-                    if b > 0.0 {
-                        p.normal = m;
-                    }
-                    p.crease = None;
-                    pn = a.max(b);
-                    stick_changed = true;
-                    changed = true;
-                } else {
-                    pn = 0.0;
-                }
+            let (pn, off_crease) = walls_impulse(&p, &g);
+            if let Some(normal) = off_crease {
+                // One wall would have to pull: the point slides on the other.
+                p.normal = normal;
+                p.crease = None;
+                matrix_changed = true;
+                changed = true;
             }
-            p.pn = pn;
             if !(pn > 0.0) {
                 // The wall would have to pull: let go.
-                w.x_pred.set(i, &(x_pred - p.push));
-                p.push = Vec3::zeros();
                 p.point = usize::MAX;
                 released = true;
                 w.pinned[s] = p;
                 continue;
             }
-            if p.stick {
-                let gt = p.sliding_part(&g);
-                let need = gt.norm();
-                // A solve that did not converge with sticking points may have no solution
-                // with them all sticking (an inextensible wire pushed against them): they slide.
-                if need > mu_s * pn || (!converged && need > 0.0) {
-                    p.stick = false;
-                    p.came_loose = true;
-                    p.push = gt * (mu_k * pn / (need * mass));
-                    w.x_pred.set(i, &(x_pred + p.push));
-                    stick_changed = true;
-                    changed = true;
-                }
-            } else {
-                // Against the slip relative to where the step began, carried with the wall, with
-                // the friction of the obstacle the point touches.
-                let slip = p.sliding_part(&(x - start));
-                let friction = Friction {
-                    static_coefficient: mu_s,
-                    kinetic_coefficient: mu_k,
-                };
-                let (moved, stuck) = sliding_friction(w, k, &mut p, slip, pn, &friction);
-                changed |= moved;
-                stick_changed |= stuck;
+            // Friction in proportion to this solve's normal impulse: a change of more than
+            // [`NORMAL_CHANGE`] is solved again.
+            if p.friction.is_some() && (pn - p.pn).abs() > NORMAL_CHANGE * pn {
+                changed = true;
+            }
+            p.pn = pn;
+            if p.friction_stale(&w.x.get(i), k.inv_mass[i]) {
+                changed = true;
+                matrix_changed = true;
             }
             w.pinned[s] = p;
         }
@@ -530,9 +467,10 @@ impl StiffContacts {
         let caught = self.catch_penetrations(w, k, reuse);
         Update {
             resolve: caught.resolve || changed,
-            // Only the kinetic friction's shift of the inertial targets, and points put back
-            // on a wall whose normal barely turned, leave the matrix as it was.
-            matrix_changed: released || stick_changed || caught.matrix_changed,
+            // A new normal impulse changes the friction's stiffness in the matrix, which the
+            // iterations refactorise for if they stall; points let go or moved off a crease
+            // change the matrix itself.
+            matrix_changed: released || matrix_changed || caught.matrix_changed,
         }
     }
 
@@ -572,7 +510,11 @@ impl StiffContacts {
                 // keeps it in the lumen, and the update lets it go if the plane would have to
                 // pull it.
             } else if gap < -tol {
-                self.pin(w, i, normal, gap, false);
+                let pn = match self.last[i] {
+                    Touch::Stick(pn) | Touch::Slide(pn) => pn,
+                    Touch::Free => 0.0,
+                };
+                self.pin(w, i, normal, gap, false, pn);
                 changed = true;
                 matrix_changed = true;
             }
@@ -661,8 +603,12 @@ impl StiffContacts {
     pub(crate) fn end_step(&mut self, w: &Work, k: &Consts) {
         self.last.iter_mut().for_each(|t| *t = Touch::Free);
         for p in w.pinned.iter().filter(|p| p.on_mesh()) {
-            self.last[p.point] = if p.stick {
-                Touch::Stick
+            let holds = p
+                .friction
+                .zip(p.slip(&w.x.get(p.point)))
+                .is_some_and(|(f, slip)| f.holds(&slip));
+            self.last[p.point] = if holds {
+                Touch::Stick(p.pn)
             } else {
                 Touch::Slide(p.pn)
             };
@@ -677,6 +623,29 @@ impl StiffContacts {
         s.swept_catches = self.mesh.stats.swept_catches;
         s.segment_contacts = self.mesh.stats.segment_contacts;
         s.detection_seconds = self.mesh.stats.detection_seconds;
+    }
+}
+
+/// The normal impulse the walls of pin `p` exert within its impulse `g` (times the step): on
+/// one wall `n · g`; in a crease the sum of the two walls' shares of `g = a n + b m + (along
+/// the crease)`, or, when one of them would have to pull, the other's share and the normal of
+/// the wall the point stays on (it leaves the crease).
+fn walls_impulse(p: &Pinned, g: &Vec3<f64>) -> (f64, Option<Vec3<f64>>) {
+    let pn = p.normal.dot(g);
+    let Some(m) = p.crease else {
+        return (pn, None);
+    };
+    let (gm, c) = (m.dot(g), p.normal.dot(&m));
+    let det = 1.0 - c * c;
+    let (a, b) = ((pn - c * gm) / det, (gm - c * pn) / det);
+    if a > 0.0 && b > 0.0 {
+        (a + b, None)
+    } else if a > 0.0 {
+        (a, Some(p.normal))
+    } else if b > 0.0 {
+        (b, Some(m))
+    } else {
+        (0.0, None)
     }
 }
 
@@ -742,63 +711,6 @@ fn back_on_walls(w: &mut Work, s: usize, normal: Vec3<f64>, gap: f64, radius: f6
     };
     w.x.set(p.point, &(x + moved));
     turned
-}
-
-/// Step 3 of the module docs for a sliding point `p` that slipped by `slip` (its motion in
-/// the step along what it slides, relative to the wall or, for a rod contact, to the other
-/// side), with normal impulse `pn` (times the step): it sticks if static friction could have
-/// held it and it is not still driven against its kinetic friction, else it carries the
-/// kinetic friction against its slip as a shift of its inertial target. Returns whether the
-/// step must be solved again, and whether the point stuck (which changes the matrix).
-pub(super) fn sliding_friction(
-    w: &mut Work,
-    k: &Consts,
-    p: &mut Pinned,
-    slip: Vec3<f64>,
-    pn: f64,
-    friction: &Friction<f64>,
-) -> (bool, bool) {
-    let Friction {
-        static_coefficient: mu_s,
-        kinetic_coefficient: mu_k,
-    } = *friction;
-    let i = p.point;
-    let mass = 1.0 / k.inv_mass[i];
-    let (x, x_pred) = (w.x.get(i), w.x_pred.get(i));
-    // The tangential impulse that would have held the point where it was at the current
-    // multipliers: its own momentum and its neighbours' push, but not how much harder they
-    // would push if it were held.
-    let hold = (p.push - slip).norm() * mass;
-    // Still slipping against its kinetic friction: what drives it is more than that friction,
-    // however small the point's own share. In a chain pushed along a wall every point's net
-    // push is its kinetic friction; holding one makes its neighbours push harder, so the test
-    // above alone would lock the chain.
-    let driven = p.push != Vec3::zeros() && slip.dot(&p.push) < 0.0;
-    if mu_s > 0.0 && hold <= mu_s * pn && !driven && !p.came_loose {
-        // Static friction can hold it, and kinetic friction has stopped it or turned it around
-        // (or acts on it for the first time). A point that barely slipped sticks where the step
-        // began and the step is solved again; one that slipped further sticks where it is,
-        // which needs no new solve (see `STICK_JUMP`).
-        w.x_pred.set(i, &(x_pred - p.push));
-        p.push = Vec3::zeros();
-        p.stick = true;
-        if slip.norm() <= STICK_JUMP * shortest_element(k, i) {
-            w.x.set(i, &(x - slip));
-            return (true, true);
-        }
-        return (false, true);
-    }
-    if mu_k > 0.0 && slip.norm() > 0.0 {
-        // Kinetic friction against the slip, from this solve's normal impulse; a change of
-        // more than a tenth is solved again (see `docs/stiff-solver.md` for what a friction
-        // one step behind cost).
-        let push = -slip.normalize() * (mu_k * pn / mass);
-        let changed = (push - p.push).norm() > 0.1 * push.norm();
-        w.x_pred.set(i, &(x_pred + push - p.push));
-        p.push = push;
-        return (changed, false);
-    }
-    (false, false)
 }
 
 /// Pins the run of points a guide holds (from index 1 on, the first point being held by the

@@ -77,6 +77,7 @@ use rod_contact::RodPlanes;
 use work::Work;
 
 pub(crate) use cosserat_problem::{Integrator, Refactor, StiffReport, StiffScheme, StiffSettings};
+pub use pin::STICK_SPEED;
 
 pub use binding::{StiffBindings, step_bound_stiff};
 
@@ -96,10 +97,6 @@ pub(crate) struct Consts {
     /// Compliances `α̃` of the stretch–shear and bend–twist rows.
     pub(crate) alpha_gamma: Vec<Vec3<f64>>,
     pub(crate) alpha_omega: Vec<Vec3<f64>>,
-    /// The stretch row's compliance `α̃` of the extensible model, also in inextensible mode:
-    /// `Work::pin_blocks` regularises the stretch rows of elements between sticking points with
-    /// it.
-    pub(crate) alpha_axial: Vec<f64>,
     /// Whether any damping coefficient is positive.
     damped: bool,
     /// The constants of the element-wise passes as padded columns (`lanes.rs`).
@@ -396,9 +393,6 @@ impl Consts {
                 };
                 Vec3::new(compliance(kp, l), compliance(kp, l), stretch)
             })
-            .collect();
-        self.alpha_axial = (0..n)
-            .map(|j| compliance(p.stretch_stiffness[j].to_f64(), self.l0[j]))
             .collect();
         self.alpha_omega = (0..n.saturating_sub(1))
             .map(|j| {
@@ -1146,7 +1140,7 @@ fn solve_step<T: Real>(
     }
     let planes_active = planes.is_active() && direct;
     if planes_active {
-        planes.begin_step(w, k);
+        planes.begin_step(w, k, h);
     }
     // 2. Constraint solve.
     for c in &mut w.lambda {
@@ -1184,7 +1178,7 @@ fn solve_step<T: Real>(
                 };
                 if let Some(c) = contacts.as_deref_mut() {
                     let reuse = stiff.reuse_contact_queries;
-                    update = c.update(w, k, r <= tolerance, reuse);
+                    update = c.update(w, k, reuse);
                 }
                 if planes_active {
                     let u = planes.update(w, k);
@@ -1255,7 +1249,7 @@ fn direct_solve(
         if refactor && !last {
             w.precondition(k, stiff.geometric, first && it == 0);
         }
-        residual = w.rhs(k);
+        residual = w.rhs(k).max(tolerance * w.friction_imbalance);
         // At least one iteration: with λ = 0 the residual `C` of a compliant
         // constraint is its strain, not the imbalance of its force, so a gently
         // bent rod would pass the test without being solved at all.
@@ -1267,7 +1261,7 @@ fn direct_solve(
         // bound, moved); refactorise with the current ones, as Newton would.
         if !refactor && residual > 0.25 * previous {
             w.precondition(k, stiff.geometric, false);
-            residual = w.rhs(k);
+            residual = w.rhs(k).max(tolerance * w.friction_imbalance);
             refactor = true;
         }
         if refactor {

@@ -12,12 +12,10 @@ pub(crate) struct Pinned {
     pub(crate) point: usize,
     /// Unit normal of the wall, out of the mesh.
     pub(crate) normal: Vec3<f64>,
-    /// Sticking (no motion), or sliding in the tangent plane.
-    pub(crate) stick: bool,
     /// The normal of a second wall it touches (a crease of the mesh, where the two walls meet
-    /// at an angle towards the lumen): sliding, it moves only along the crease,
-    /// `normal × crease`. On a faceted vessel a point pinned to one face slides into the next
-    /// at every edge, and put back on that one slides into the first again.
+    /// at an angle towards the lumen): it moves only along the crease, `normal × crease`. On
+    /// a faceted vessel a point pinned to one face slides into the next at every edge, and put
+    /// back on that one slides into the first again.
     pub(crate) crease: Option<Vec3<f64>>,
     /// Held on a line along `normal` (a guide, [`pin_guided`](super::contact::pin_guided)) instead of a plane across it;
     /// the contact updates leave such points alone.
@@ -26,16 +24,150 @@ pub(crate) struct Pinned {
     /// the mesh: the mesh's updates leave such points alone, and the rod contacts' leave the
     /// mesh's.
     pub(crate) rod: bool,
-    /// Kinetic friction of a sliding point as the shift it gives the inertial target `x̃`
-    /// (`μ_k p_n t / m` for a unit direction `t` against the slip), already added to `x_pred`.
-    pub(crate) push: Vec3<f64>,
     /// Its normal impulse times the step, `p_n = n · g` [kg m], at the last update (from the
-    /// last step before the first).
+    /// last step before the first): what its friction is proportional to.
     pub(crate) pn: f64,
-    /// It stuck earlier in this step and static friction could not hold it: it slides for
-    /// the rest of the step (an active set that lets a point stick and slip in turn within
-    /// one step need not settle).
-    pub(crate) came_loose: bool,
+    /// Coulomb friction against its motion along the wall (`None`: frictionless, as a guide's
+    /// or a binding's line).
+    pub(crate) friction: Option<PinFriction>,
+}
+
+/// Coulomb friction of a pinned point, as a force of the step's own equations rather than a
+/// state of the active set.
+///
+/// The friction impulse (times the step, as XPBD's impulses) against the point's slip `s`
+/// (its motion over the step along the wall, relative to the wall, [`start`](Self::start)) is
+/// `f(s) = −μ_s p_n s / δ` up to `|s| = δ`, falls linearly to `μ_k p_n` at `2δ` and stays
+/// there (`δ` = [`stick_slip`](Self::stick_slip)): static friction as a stiff tangential
+/// spring of rest length zero, kinetic friction beyond. The solve evaluates `f` at every
+/// iterate (`Work::rhs`), so a converged step satisfies this law exactly for the normal
+/// impulse `p_n` of the last update; the Newton matrix carries its derivative `K_f` frozen at
+/// the last factorisation ([`freeze`](Self::freeze)), a chord approximation like the frames'
+/// geometric bound. A point holds (creeps slower than `δ / h`) while what drives it is below
+/// `μ_s p_n` and slides against `μ_k p_n` beyond, with no switch of the solve's matrix or
+/// targets between the two.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PinFriction {
+    /// Where the slip is measured from: the point's place at the start of the step, carried
+    /// with the wall (a moving obstacle, the other rod of a rod contact).
+    pub(crate) start: Vec3<f64>,
+    /// Static coefficient: the largest ratio of friction to normal impulse while it holds.
+    pub(crate) mu_s: f64,
+    /// Kinetic coefficient, while it slides.
+    pub(crate) mu_k: f64,
+    /// The slip over the step [m] up to which friction holds, `δ`.
+    pub(crate) stick_slip: f64,
+    /// The linearisation of the Newton matrix (`K_f = k_along t tᵀ + k_across (P − t tᵀ)` in
+    /// the wall's tangent space `P`, [kg]), frozen at the last factorisation: unit slip
+    /// direction `t` (zero before any slip), and the stiffnesses along and across it.
+    pub(crate) dir: Vec3<f64>,
+    pub(crate) k_along: f64,
+    pub(crate) k_across: f64,
+}
+
+/// The speed [m/s] below which friction holds a pinned point, `δ / h`
+/// ([`PinFriction::stick_slip`]): a point that static friction holds creeps at most this fast
+/// (0.1 mm in a second), and the tangential stiffness of a held point, `μ_s p_n / δ`, stays
+/// finite (for the nitinol wire pressed on the vessel at 1 ms, about 10⁴ times its mass).
+pub const STICK_SPEED: f64 = 1e-4;
+
+impl PinFriction {
+    /// Friction of coefficients `mu_s`, `mu_k` on a point whose slip over a step of `h` is
+    /// measured from `start` (`None` when both are zero).
+    pub(crate) fn new(start: Vec3<f64>, mu_s: f64, mu_k: f64, h: f64) -> Option<Self> {
+        (mu_s > 0.0 || mu_k > 0.0).then(|| Self {
+            start,
+            mu_s: mu_s.max(mu_k),
+            mu_k,
+            stick_slip: STICK_SPEED * h,
+            dir: Vec3::zeros(),
+            k_along: 0.0,
+            k_across: 0.0,
+        })
+    }
+
+    /// Whether a slip `slip` is within what friction holds.
+    pub(crate) fn holds(&self, slip: &Vec3<f64>) -> bool {
+        slip.norm() <= self.stick_slip
+    }
+
+    /// The friction's magnitude over `p_n` at a slip of length `s`, and its derivative.
+    fn law(&self, s: f64) -> (f64, f64) {
+        let d = self.stick_slip;
+        if s <= d {
+            (self.mu_s * s / d, self.mu_s / d)
+        } else if s < 2.0 * d {
+            let slope = (self.mu_k - self.mu_s) / d;
+            (self.mu_s + slope * (s - d), slope)
+        } else {
+            (self.mu_k, 0.0)
+        }
+    }
+
+    /// The friction impulse (times the step) at slip `slip` under normal impulse `pn`:
+    /// against the slip, of the magnitude the law gives.
+    pub(crate) fn impulse(&self, slip: &Vec3<f64>, pn: f64) -> Vec3<f64> {
+        let s = slip.norm();
+        if !(s > 0.0) || !(pn > 0.0) {
+            return Vec3::zeros();
+        }
+        let (mu, _) = self.law(s);
+        -slip * (mu * pn / s)
+    }
+
+    /// Freezes the matrix's linearisation at slip `slip` and normal impulse `pn`: along the
+    /// slip the law's slope (never negative: the falling stretch from static to kinetic is
+    /// left out of the matrix), across it `|f| / |s|` (the force turns with the slip), and
+    /// within the holding stretch `μ_s p_n / δ` both ways.
+    pub(crate) fn freeze(&mut self, slip: &Vec3<f64>, pn: f64) {
+        let pn = pn.max(0.0);
+        let s = slip.norm();
+        let (mu, slope) = self.law(s);
+        if s <= self.stick_slip {
+            self.dir = if s > 0.0 { slip / s } else { Vec3::zeros() };
+            self.k_along = slope * pn;
+            self.k_across = slope * pn;
+        } else {
+            self.dir = slip / s;
+            self.k_along = slope.max(0.0) * pn;
+            self.k_across = mu * pn / s;
+        }
+    }
+
+    /// Whether the frozen linearisation no longer fits slip `slip` under `pn` for a point of
+    /// mass `mass`: its mobility `1 / (m + eᵀ K_f e)` along or across the slip would change by
+    /// more than a factor of two. The solve's residual measures a pin's imbalance through that
+    /// mobility, so a point frozen as held (stiff) that has started to slide would pass the
+    /// tolerance unbalanced: the contacts' updates solve such a step again with the matrix
+    /// rebuilt.
+    pub(crate) fn stale(&self, slip: &Vec3<f64>, pn: f64, mass: f64) -> bool {
+        let mut now = *self;
+        now.freeze(slip, pn);
+        let t = if now.dir.norm_squared() > 0.5 {
+            now.dir
+        } else {
+            self.dir
+        };
+        if t.norm_squared() < 0.5 {
+            return false;
+        }
+        let across = if t.x.abs() < 0.9 {
+            Vec3::x()
+        } else {
+            Vec3::y()
+        };
+        let across = (across - t * t.dot(&across)).normalize();
+        [t, across].iter().any(|e| {
+            let ratio = (mass + self.stiffness_along(e)) / (mass + now.stiffness_along(e));
+            !(0.5..=2.0).contains(&ratio)
+        })
+    }
+
+    /// `eᵀ K_f e` for a unit vector `e` of the tangent space.
+    pub(crate) fn stiffness_along(&self, e: &Vec3<f64>) -> f64 {
+        let c = self.dir.dot(e);
+        self.k_across + (self.k_along - self.k_across) * c * c
+    }
 }
 
 impl Pinned {
@@ -45,13 +177,31 @@ impl Pinned {
         Self {
             point,
             normal: direction,
-            stick: false,
             crease: None,
             line: true,
             rod: false,
-            push: Vec3::zeros(),
             pn: 0.0,
-            came_loose: false,
+            friction: None,
+        }
+    }
+
+    /// Point `point` held on a wall (of the mesh, or a rod contact's plane with `rod`) of unit
+    /// normal `normal`, with friction `friction`.
+    pub(crate) fn on_wall(
+        point: usize,
+        normal: Vec3<f64>,
+        rod: bool,
+        pn: f64,
+        friction: Option<PinFriction>,
+    ) -> Self {
+        Self {
+            point,
+            normal,
+            crease: None,
+            line: false,
+            rod,
+            pn,
+            friction,
         }
     }
 
@@ -70,19 +220,8 @@ impl Pinned {
         (norm > 0.0).then(|| along / norm)
     }
 
-    /// The part of a motion `v` the pin allows: none when sticking, else its
-    /// [`sliding_part`](Self::sliding_part).
-    #[inline]
-    pub(crate) fn allowed(&self, v: &Vec3<f64>) -> Vec3<f64> {
-        if self.stick {
-            Vec3::zeros()
-        } else {
-            self.sliding_part(v)
-        }
-    }
-
-    /// The part of `v` along which the point slides, sticking or not: along the line (guide)
-    /// or the crease, or in the wall's tangent plane.
+    /// The part of `v` along which the point may move: along the line (guide) or the crease,
+    /// or in the wall's tangent plane.
     #[inline]
     pub(crate) fn sliding_part(&self, v: &Vec3<f64>) -> Vec3<f64> {
         if self.line {
@@ -93,4 +232,72 @@ impl Pinned {
             v - self.normal * self.normal.dot(v)
         }
     }
+
+    /// Whether its friction's frozen linearisation no longer fits its slip at `x`
+    /// ([`PinFriction::stale`]) for a point of inverse mass `w`.
+    pub(crate) fn friction_stale(&self, x: &Vec3<f64>, w: f64) -> bool {
+        match (self.friction, self.slip(x)) {
+            (Some(f), Some(slip)) if w > 0.0 => f.stale(&slip, self.pn, 1.0 / w),
+            _ => false,
+        }
+    }
+
+    /// Its slip over the step at `x`, if it has friction: its motion along what it slides,
+    /// from where the friction measures it.
+    #[inline]
+    pub(crate) fn slip(&self, x: &Vec3<f64>) -> Option<Vec3<f64>> {
+        self.friction.map(|f| self.sliding_part(&(x - f.start)))
+    }
+
+    /// The unit directions it moves along: one (a line, a crease) or two (a plane), the
+    /// second zero when there is one. With friction, the plane's are the frozen slip
+    /// direction and the one across it.
+    pub(crate) fn free_directions(&self) -> [Vec3<f64>; 2] {
+        if self.line {
+            return [self.normal, Vec3::zeros()];
+        }
+        if let Some(t) = self.crease_direction() {
+            return [t, Vec3::zeros()];
+        }
+        let n = self.normal;
+        let first = match self.friction {
+            Some(f) if f.dir.norm_squared() > 0.5 => (f.dir - n * n.dot(&f.dir)).normalize(),
+            _ => perpendiculars(&n)[0],
+        };
+        [first, n.cross(&first)]
+    }
+
+    /// Its inverse mass in the solve along each of [`free_directions`](Self::free_directions)
+    /// for a point of inverse mass `w`: `w` without friction, `1 / (m + eᵀ K_f e)` with it.
+    pub(crate) fn mobilities(&self, w: f64) -> [f64; 2] {
+        let dirs = self.free_directions();
+        dirs.map(|e| match self.friction {
+            _ if e == Vec3::zeros() => 0.0,
+            Some(f) if w > 0.0 => 1.0 / (1.0 / w + f.stiffness_along(&e)),
+            _ => w,
+        })
+    }
+
+    /// `A v` with `A = Σ_k e_k e_kᵀ c_k`, the pin's inverse mass (`c_k` its
+    /// [`mobilities`](Self::mobilities) for a point of inverse mass `w`): the motion it allows
+    /// a point of that inverse mass under an impulse `v / w`.
+    pub(crate) fn mobility_times(&self, w: f64, v: &Vec3<f64>) -> Vec3<f64> {
+        let dirs = self.free_directions();
+        let c = self.mobilities(w);
+        dirs[0] * (c[0] * dirs[0].dot(v)) + dirs[1] * (c[1] * dirs[1].dot(v))
+    }
+}
+
+/// Two unit vectors perpendicular to the unit vector `a` and to each other.
+pub(crate) fn perpendiculars(a: &Vec3<f64>) -> [Vec3<f64>; 2] {
+    // Cross with the axis `a` is least aligned with.
+    let pick = if a.x.abs() <= a.y.abs() && a.x.abs() <= a.z.abs() {
+        Vec3::x()
+    } else if a.y.abs() <= a.z.abs() {
+        Vec3::y()
+    } else {
+        Vec3::z()
+    };
+    let b = a.cross(&pick).normalize();
+    [b, a.cross(&b)]
 }

@@ -29,13 +29,12 @@
 //!    on it and pinned to it (inverse mass `w (I − n nᵀ)` in the updates and the banded matrix,
 //!    `Work::pin_blocks`); an iterate that carries a free point behind one of its planes pins it
 //!    there; a pinned point pushed behind another of its planes is moved onto that one
-//!    ([`RodPlanes`]'s `second_plane` says why not onto their crease); after each round a point its plane would have to pull is let go,
-//!    and Coulomb friction acts on the slip relative to the other side's motion by the mesh's
-//!    rules: a sliding point carries kinetic friction `μ_k p_n` against it as a shift of its
-//!    inertial target, sticks when static friction could have held it and it is not still
-//!    driven against its kinetic friction, and a sticking point that needs more than
-//!    `μ_s p_n` slides for the rest of the step. A point that stuck at the end of a step
-//!    starts the next one stuck where the other side carries it.
+//!    ([`RodPlanes`]'s `second_plane` says why not onto their crease); after each round a
+//!    point its plane would have to pull is let go. Coulomb friction acts on the slip relative
+//!    to the other side's motion as the mesh's does (`pin::PinFriction`: a force of the
+//!    solve, held within a small slip, kinetic beyond), with the normal impulse of the last
+//!    round. A point friction held at the end of a step starts the next one where the other
+//!    side carries it.
 //! 4. **Action and reaction, a step late.** The slave's plane is fixed for the step, so the
 //!    master does not feel it within the step. After every rod has taken its step, the force
 //!    the slave's planes exerted on its points (normal and friction, from the pins' impulses
@@ -54,9 +53,9 @@
 //! mesh (or a guide, or a binding's line) is left to them; a rod-contact plane never replaces
 //! a mesh contact within a step. Only the direct solver takes rod contacts.
 
-use super::contact::{Update, pin_impulse, sliding_friction};
+use super::contact::{Update, pin_impulse};
 use super::lanes::V3s;
-use super::pin::Pinned;
+use super::pin::{PinFriction, Pinned};
 use super::work::Work;
 use super::{Consts, StiffScratch};
 use crate::coupling::{CouplingStats, RodContactSpec};
@@ -113,8 +112,10 @@ pub(crate) struct RodPlanes {
     /// Per point: its normal impulse times the step `p_n` [kg m] at the end of the last step
     /// (0 when it was free), which starts its kinetic friction in the next.
     last_pn: Vec<f64>,
-    /// Per point: whether it stuck at the end of the last step.
+    /// Per point: whether friction held it at the end of the last step.
     last_stick: Vec<bool>,
+    /// The step being taken [s] (the friction's holding slip, `PinFriction`).
+    h: f64,
     /// After an accepted step: the force [N] each pinned slave point's plane exerted (normal
     /// and friction), as (index into `planes`, force).
     pub(crate) forces: Vec<(usize, Vec3<f64>)>,
@@ -131,6 +132,7 @@ impl Default for RodPlanes {
             slot: Vec::new(),
             last_pn: Vec::new(),
             last_stick: Vec::new(),
+            h: 0.0,
             forces: Vec::new(),
             friction: Friction {
                 static_coefficient: 0.0,
@@ -227,55 +229,52 @@ impl RodPlanes {
         }
     }
 
-    /// Pins point `i` on plane `h` (violated by `depth`), from where it is. At the start of a
-    /// step (`first`) a point that stuck at the end of the last one sticks, and a sliding one
-    /// gets the kinetic friction its last normal impulse gives against the slip
-    /// of the prediction; otherwise it slides.
-    fn pin(&mut self, w: &mut Work, k: &Consts, i: usize, h: usize, depth: f64, first: bool) {
+    /// Pins point `i` on plane `h` (violated by `depth`), from where it is, with the friction of
+    /// rod contacts against its slip relative to the other side and the normal impulse of its
+    /// last step. At the start of a step (`first`) a point that friction held at the end of the
+    /// last one starts where the other side carries it.
+    fn pin(&mut self, w: &mut Work, i: usize, h: usize, depth: f64, first: bool) {
         let hs = self.planes[h];
-        let stick = first && self.last_stick[i] && self.friction.static_coefficient > 0.0;
-        w.x.set(i, &(w.x.get(i) + hs.normal * depth));
-        let mut p = Pinned {
-            point: i,
-            normal: hs.normal,
-            stick,
-            crease: None,
-            line: false,
-            rod: true,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
+        let start = w.x_old.get(i) + hs.carried;
+        let x = if first && self.last_stick[i] {
+            start + hs.normal * (hs.offset - hs.normal.dot(&start)).max(0.0)
+        } else {
+            w.x.get(i) + hs.normal * depth
         };
-        let mu_k = self.friction.kinetic_coefficient;
-        let pn = self.last_pn[i];
-        if first && !stick && mu_k > 0.0 && pn > 0.0 {
-            let slip = p.sliding_part(&(w.x_pred.get(i) - w.x_old.get(i) - hs.carried));
-            if slip.norm() > 0.0 {
-                p.push = -slip.normalize() * (mu_k * pn * k.inv_mass[i]);
-                p.pn = pn;
-                w.x_pred.set(i, &(w.x_pred.get(i) + p.push));
-            }
-        }
+        w.x.set(i, &x);
+        let Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+        } = self.friction;
+        let friction = PinFriction::new(start, mu_s, mu_k, self.h);
         self.slot[i] = w.pinned.len();
-        w.pinned.push(p);
+        w.pinned.push(Pinned::on_wall(
+            i,
+            hs.normal,
+            true,
+            self.last_pn[i],
+            friction,
+        ));
     }
 
-    /// Step 3 of the module docs, before the solve: pins the points on or behind one of their
-    /// planes at the solve's starting guess (points another pin already holds are left to it).
-    pub(crate) fn begin_step(&mut self, w: &mut Work, k: &Consts) {
+    /// Step 3 of the module docs, before the solve of a step of `h`: pins the points on or
+    /// behind one of their planes at the solve's starting guess (points another pin already
+    /// holds are left to it).
+    pub(crate) fn begin_step(&mut self, w: &mut Work, k: &Consts, h: f64) {
+        self.h = h;
         self.reindex(w);
         let tol = self.tolerance();
         for i in 0..=w.n {
             if k.inv_mass[i] == 0.0 || self.slot[i] != usize::MAX {
                 continue;
             }
-            let Some((h, depth)) = self.deepest(i, &w.x.get(i)) else {
+            let Some((plane, depth)) = self.deepest(i, &w.x.get(i)) else {
                 continue;
             };
             if depth < -tol {
                 continue;
             }
-            self.pin(w, k, i, h, depth, true);
+            self.pin(w, i, plane, depth, true);
             self.second_plane(w, i);
         }
     }
@@ -297,10 +296,14 @@ impl RodPlanes {
         if depth <= self.tolerance() {
             return (false, false);
         }
-        let normal = self.planes[h].normal;
+        let (normal, carried) = (self.planes[h].normal, self.planes[h].carried);
+        let start = w.x_old.get(i) + carried;
         let p = &mut w.pinned[s];
         p.normal = normal;
         p.crease = None;
+        if let Some(f) = p.friction.as_mut() {
+            f.start = start;
+        }
         w.x.set(i, &(x + normal * depth));
         (true, true)
     }
@@ -321,7 +324,7 @@ impl RodPlanes {
                     continue;
                 };
                 if depth > tol {
-                    self.pin(w, k, i, h, depth, false);
+                    self.pin(w, i, h, depth, false);
                     self.second_plane(w, i);
                     changed = true;
                     matrix_changed = true;
@@ -338,71 +341,44 @@ impl RodPlanes {
         }
     }
 
-    /// After a round of the solve: lets go of points their planes would have to pull, gives
-    /// sliding points their kinetic friction (step 3 of the module docs).
+    /// After a round of the solve: lets go of points their planes would have to pull, gives the
+    /// others this solve's normal impulse for their friction (step 3 of the module docs).
     pub(crate) fn update(&mut self, w: &mut Work, k: &Consts) -> Update {
-        let mu_k = self.friction.kinetic_coefficient;
         let (mut changed, mut released, mut matrix_changed) = (false, false, false);
         for s in 0..w.pinned.len() {
             let mut p = w.pinned[s];
             if !p.rod {
                 continue;
             }
-            let i = p.point;
-            let g = pin_impulse(w, k, &w.lambda[0], i);
+            let g = pin_impulse(w, k, &w.lambda[0], p.point);
             // A rod-contact pin is on one plane (no crease, see `second_plane`).
             let pn = p.normal.dot(&g);
-            p.pn = pn;
-            let x_pred = w.x_pred.get(i);
             if !(pn > 0.0) {
-                w.x_pred.set(i, &(x_pred - p.push));
                 p.point = usize::MAX;
                 w.pinned[s] = p;
                 released = true;
                 continue;
             }
-            let mass = 1.0 / k.inv_mass[i];
-            let carried = self.carried(i, &p.normal);
-            if p.stick {
-                let need = p.sliding_part(&g).norm();
-                if need > self.friction.static_coefficient * pn {
-                    // Static friction cannot hold it: it slides for the rest of the step.
-                    p.stick = false;
-                    p.came_loose = true;
-                    p.push = p.sliding_part(&g) * (mu_k * pn / (need * mass));
-                    w.x_pred.set(i, &(x_pred + p.push));
-                    changed = true;
-                    matrix_changed = true;
-                }
-            } else {
-                // As the mesh's points (`contact::sliding_friction`), against the slip relative
-                // to the other side.
-                let slip = p.sliding_part(&(w.x.get(i) - w.x_old.get(i) - carried));
-                let (moved, stuck) = sliding_friction(w, k, &mut p, slip, pn, &self.friction);
-                changed |= moved;
-                matrix_changed |= stuck;
+            // As the mesh's points (`contact.rs`): solved again for a new normal impulse.
+            if p.friction.is_some() && (pn - p.pn).abs() > 0.1 * pn {
+                changed = true;
+            }
+            p.pn = pn;
+            if p.friction_stale(&w.x.get(p.point), k.inv_mass[p.point]) {
+                changed = true;
+                matrix_changed = true;
             }
             w.pinned[s] = p;
         }
         if released {
             w.pinned.retain(|p| p.point != usize::MAX);
             changed = true;
-            matrix_changed = true;
         }
         let caught = self.catch_penetrations(w, k);
         Update {
             resolve: changed || caught.resolve,
-            matrix_changed: matrix_changed || caught.matrix_changed,
+            matrix_changed: released || matrix_changed || caught.matrix_changed,
         }
-    }
-
-    /// The motion of the other side of point `i`'s plane of normal `normal` (zero if none
-    /// matches: the point's own planes are the only normals a pin takes).
-    fn carried(&self, i: usize, normal: &Vec3<f64>) -> Vec3<f64> {
-        self.of(i)
-            .iter()
-            .find(|h| h.normal == *normal)
-            .map_or(Vec3::zeros(), |h| h.carried)
     }
 
     /// After an accepted step of `h` with multipliers `lambda`: the force each pinned point's
@@ -417,7 +393,10 @@ impl RodPlanes {
             let i = p.point;
             let g = pin_impulse(w, k, lambda, i);
             self.last_pn[i] = p.normal.dot(&g).max(0.0);
-            self.last_stick[i] = p.stick;
+            self.last_stick[i] = p
+                .friction
+                .zip(p.slip(&w.x.get(i)))
+                .is_some_and(|(f, slip)| f.holds(&slip));
             let base = self.first[i];
             if let Some(h) = self.of(i).iter().position(|hs| hs.normal == p.normal)
                 && self.planes[base + h].slave

@@ -5,7 +5,7 @@
 use super::Consts;
 use super::direct::Assembled;
 use super::lanes::{F, Q, Q4s, V, V3s, below, load, mask_ge, padded, store};
-use super::pin::Pinned;
+use super::pin::{Pinned, perpendiculars};
 use super::{angle_over_sin_half, exp_small, inv_w, relative_rotation};
 use cosserat_model::Vec3;
 
@@ -65,11 +65,20 @@ pub(crate) struct Work {
     pub(crate) history: Option<f64>,
     /// The step the constants and the factorisation were last built for (`step_fixed`).
     pub(crate) solved_with: Option<f64>,
-    /// Points held on a mesh's surface in this step (`contact.rs`): their displacements are
-    /// projected onto the tangent plane (sliding) or removed (sticking) in every update, and
-    /// the Newton matrix is assembled with the same projected inverse masses
-    /// ([`pin_blocks`](Self::pin_blocks)). Empty without a mesh.
+    /// Points held on a wall, a guide's axis or a line in this step (`contact.rs`,
+    /// `rod_contact.rs`, `binding.rs`): their displacements are confined to what the pin
+    /// allows (and, with friction, weighed by its tangential stiffness) in every update, and
+    /// the Newton matrix is assembled with the same inverse masses
+    /// ([`pin_blocks`](Self::pin_blocks)). Empty without any.
     pub(crate) pinned: Vec<Pinned>,
+    /// Scratch of [`apply`](Self::apply): the pinned points' displacements before the update.
+    pin_u: Vec<Vec3<f64>>,
+    /// The largest `|u|` of a pinned point with friction over its holding slip `δ`, at the
+    /// last [`rhs`](Self::rhs): a step has converged only when it is at most 1 (`direct_solve`).
+    /// The tolerance on strains alone leaves a slip well below an element's length unresolved
+    /// (at 0.1 ms a rope's first step down a slope, 3e-8 m, is a strain of 3e-6 of its 1 cm
+    /// elements), and with it whether friction holds or slides.
+    pub(crate) friction_imbalance: f64,
     /// The clamp frames at the start of the step (`RodState::clamp_frames` in `f64`), and what
     /// each clamp carries through the step (`clamp.rs`; empty without clamps).
     pub(crate) clamp_frames: [cosserat_model::Quat<f64>; 2],
@@ -236,7 +245,11 @@ impl Work {
     /// body rotations: stretch–shear `½(λ gᵀ + g λᵀ) − (λ·g) I`, at most `2 |λ| |g|`;
     /// bend–twist, own frame `(λ·s_v)/(2 l̄)` and the neighbour coupling at most
     /// `|λ| (1 + 2|s_v|)/(2 l̄)`, together at most `|λ| / l̄` for small relative rotations.
+    ///
+    /// The pinned points' friction is linearised here too ([`freeze_friction`](Self::freeze_friction)):
+    /// both are the parts of the matrix taken from the current iterate.
     pub(crate) fn precondition(&mut self, k: &Consts, geometric: f64, use_previous: bool) {
+        self.freeze_friction();
         let c = &k.cols;
         let lam = if use_previous {
             &self.lambda_prev
@@ -372,7 +385,7 @@ impl Work {
             self.add_jt(k, &lambda);
             self.lambda = lambda;
         }
-        self.project_pinned();
+        let pinned = self.pinned_balance(k);
         for j in chunks(n) {
             let s = self.q.load(j).conj_mul(self.q_pred.load(j));
             // 1/s_w by the series of (1 − |s_v|²)^(−1/2) where it applies (as `inv_w`).
@@ -450,7 +463,7 @@ impl Work {
             let bend = res.abs_max().max(ju.abs_max()) * load(&c.lbar, j) * bends;
             worst = worst.max(local.max(bend));
         }
-        worst.to_array().into_iter().fold(0.0, f64::max)
+        worst.to_array().into_iter().fold(pinned, f64::max)
     }
 
     /// Applies the multiplier increments in `rhs` through the Jacobians of the last
@@ -468,8 +481,12 @@ impl Work {
     pub(crate) fn apply(&mut self, k: &Consts, max_move: f64) {
         let n = self.n;
         let mut rhs = std::mem::take(&mut self.rhs);
+        let mut before = std::mem::take(&mut self.pin_u);
+        before.clear();
+        before.extend(self.pinned.iter().map(|p| self.u_x.get(p.point)));
         self.add_jt(k, &rhs);
-        self.project_pinned();
+        self.pinned_update(k, &before);
+        self.pin_u = before;
         if !self.clamps.is_empty() {
             self.clamp_apply(k);
         }
@@ -604,33 +621,81 @@ impl Work {
         }
     }
 
-    /// The pinned points' part of `K⁻¹` applied to their displacements `u_x`: a sliding
-    /// point keeps only the component in its contact's tangent plane, a sticking one none.
-    fn project_pinned(&mut self) {
+    /// The pinned points' rows of `u = K⁻¹ (M (x̃ − x) + Jᵀ λ + f)`, from `u_x = x̃ − x + M⁻¹ Jᵀ λ`
+    /// as the free points have it: a pin without friction keeps the part of it the pin allows
+    /// (`K⁻¹` is the projected `M⁻¹`); one with friction adds the friction impulse `f` at the
+    /// current iterate ([`PinFriction`](super::pin::PinFriction)) and applies its inverse mass
+    /// `(M + K_f)⁻¹` in the directions it may move.
+    ///
+    /// Returns the largest such `|u|` of a point with friction over the shorter rest length of
+    /// its elements, a strain like the constraint rows' residuals: the rows see `J u`, which a
+    /// motion shared by neighbouring points leaves out (a rope sliding down a slope as a whole
+    /// would pass the tolerance with its friction unbalanced).
+    fn pinned_balance(&mut self, k: &Consts) -> f64 {
+        let mut worst = 0.0_f64;
+        let mut imbalance = 0.0_f64;
         for p in &self.pinned {
-            let u = p.allowed(&self.u_x.get(p.point));
-            self.u_x.set(p.point, &u);
+            let i = p.point;
+            let u = self.u_x.get(i);
+            let w = k.inv_mass[i];
+            let u = match (p.friction, p.slip(&self.x.get(i))) {
+                (Some(f), Some(slip)) if w > 0.0 => {
+                    let u = p.mobility_times(w, &(u / w + f.impulse(&slip, p.pn)));
+                    let il = [i.checked_sub(1), (i < self.n).then_some(i)]
+                        .into_iter()
+                        .flatten()
+                        .fold(0.0_f64, |m, j| m.max(k.cols.inv_l0[j]));
+                    worst = worst.max(u.norm() * il);
+                    imbalance = imbalance.max(u.norm() / f.stick_slip);
+                    u
+                }
+                _ => p.sliding_part(&u),
+            };
+            self.u_x.set(i, &u);
+        }
+        self.friction_imbalance = imbalance;
+        worst
+    }
+
+    /// The pinned points' rows of the update `Δx = u + K⁻¹ Jᵀ Δλ`, where `u_x` holds
+    /// `u + M⁻¹ Jᵀ Δλ` and `before` the pinned points' `u` (in `pinned`'s order).
+    fn pinned_update(&mut self, k: &Consts, before: &[Vec3<f64>]) {
+        for (p, u) in self.pinned.iter().zip(before) {
+            let i = p.point;
+            let w = k.inv_mass[i];
+            let added = self.u_x.get(i) - u;
+            let d = if p.friction.is_some() && w > 0.0 {
+                p.mobility_times(w, &(added / w))
+            } else {
+                p.sliding_part(&added)
+            };
+            self.u_x.set(i, &(u + d));
+        }
+    }
+
+    /// Freezes the friction of the pinned points for the Newton matrix at the current iterate
+    /// (`PinFriction::freeze`): called whenever the matrix is rebuilt, with the frames' bound.
+    pub(crate) fn freeze_friction(&mut self) {
+        for p in &mut self.pinned {
+            if let Some(slip) = p.slip(&self.x.get(p.point))
+                && let Some(f) = p.friction.as_mut()
+            {
+                f.freeze(&slip, p.pn);
+            }
         }
     }
 
     /// Corrects the blocks of [`assemble`](Self::assemble) for the pinned points: point `i`
     /// enters `J K⁻¹ Jᵀ` through `Γ_{i−1}` (as its end, `∂Γ/∂r = D_{i−1}/l0`) and `Γ_i` (as its
-    /// start, `−D_i/l0`) with inverse mass `w I`; pinned, it has `w (I − Σ_k n_k n_kᵀ)` with
-    /// `n_k` its contact normal (sliding), the two directions across a guide's axis (held on
-    /// the axis), or the three axes (sticking). So, per direction,
-    /// with `a = D_{i−1} n_k / l0_{i−1}` and `b = D_i n_k / l0_i`: `w a aᵀ` comes off the
-    /// diagonal block of `Γ_{i−1}`, `w b bᵀ` off that of `Γ_i`, and `w a bᵀ` is added to their
-    /// coupling (which holds `−w D_{i−1} D_iᵀ / (l0 l0')`).
-    ///
-    /// An element between two sticking points has no motion left along itself (the frame's
-    /// rotation changes `d3 · e` only to second order): its stretch row would be singular in
-    /// inextensible mode. Each sticking point therefore adds half the material's axial
-    /// compliance ([`Consts::alpha_axial`]) to the stretch rows of its elements, in the matrix
-    /// only: the fixed point (`C = 0` on that row) is unchanged, and the tension between two
-    /// sticking points is the one their (tiny) strain gives, as in a real wire.
+    /// start, `−D_i/l0`) with inverse mass `w I`; pinned, it has `w I − Σ_k c_k e_k e_kᵀ`
+    /// less: weight `c_k = w` along each direction the pin holds (its wall's normal, the two
+    /// across a guide's axis or a crease), and `c_k = w − 1/(m + e_kᵀ K_f e_k)` along each
+    /// direction it moves in with friction ([`Pinned::mobilities`]). So, per direction,
+    /// with `a = D_{i−1} e_k / l0_{i−1}` and `b = D_i e_k / l0_i`: `c_k a aᵀ` comes off the
+    /// diagonal block of `Γ_{i−1}`, `c_k b bᵀ` off that of `Γ_i`, and `c_k a bᵀ` is added to
+    /// their coupling (which holds `−w D_{i−1} D_iᵀ / (l0 l0')`).
     pub(crate) fn pin_blocks(&self, k: &Consts, out: &mut Assembled) {
         let n = self.n;
-        let axes = [Vec3::x(), Vec3::y(), Vec3::z()];
         let project = |j: usize, v: &Vec3<f64>| {
             let il = k.cols.inv_l0[j];
             Vec3::new(
@@ -646,41 +711,40 @@ impl Work {
             if w == 0.0 {
                 continue;
             }
-            let across;
-            let directions: &[Vec3<f64>] = if p.stick {
-                &axes
-            } else if p.line {
-                across = perpendiculars(&p.normal);
-                &across
+            let held = if p.line {
+                perpendiculars(&p.normal)
             } else if let Some(t) = p.crease_direction() {
-                across = perpendiculars(&t);
-                &across
+                perpendiculars(&t)
             } else {
-                std::slice::from_ref(&p.normal)
+                [p.normal, Vec3::zeros()]
             };
-            if p.stick {
-                for j in [i.wrapping_sub(1), i] {
-                    if j < n {
-                        out.records[j][5] += 0.5 * k.alpha_axial[j];
-                    }
+            let free = p.free_directions();
+            let mobile = p.mobilities(w);
+            let removed = [
+                (held[0], w),
+                (held[1], w),
+                (free[0], w - mobile[0]),
+                (free[1], w - mobile[1]),
+            ];
+            for (e, c) in removed {
+                if c == 0.0 || e == Vec3::zeros() {
+                    continue;
                 }
-            }
-            for nk in directions {
-                let a = (i >= 1).then(|| project(i - 1, nk));
-                let b = (i < n).then(|| project(i, nk));
+                let a = (i >= 1).then(|| project(i - 1, &e));
+                let b = (i < n).then(|| project(i, &e));
                 for (j, v) in [(i.wrapping_sub(1), a), (i, b)] {
                     if let Some(v) = v {
-                        let e = &mut out.records[j];
-                        for (slot, (r, c)) in upper.iter().enumerate() {
-                            e[slot] -= w * v[*r] * v[*c];
+                        let r = &mut out.records[j];
+                        for (slot, (x, y)) in upper.iter().enumerate() {
+                            r[slot] -= c * v[*x] * v[*y];
                         }
                     }
                 }
                 if let (Some(a), Some(b)) = (a, b) {
-                    let e = &mut out.records[i - 1];
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            e[Assembled::SECOND + 4 * r + c] += w * a[r] * b[c];
+                    let r = &mut out.records[i - 1];
+                    for x in 0..3 {
+                        for y in 0..3 {
+                            r[Assembled::SECOND + 4 * x + y] += c * a[x] * b[y];
                         }
                     }
                 }
@@ -840,20 +904,6 @@ impl Work {
     }
 }
 
-/// Two unit vectors perpendicular to the unit vector `a` and to each other.
-fn perpendiculars(a: &Vec3<f64>) -> [Vec3<f64>; 2] {
-    // Cross with the axis `a` is least aligned with.
-    let pick = if a.x.abs() <= a.y.abs() && a.x.abs() <= a.z.abs() {
-        Vec3::x()
-    } else if a.y.abs() <= a.z.abs() {
-        Vec3::y()
-    } else {
-        Vec3::z()
-    };
-    let b = a.cross(&pick).normalize();
-    [b, a.cross(&b)]
-}
-
 /// A 3×3 matrix per lane, row-major.
 type M = [[F; 3]; 3];
 
@@ -950,6 +1000,7 @@ mod tests {
     use crate::stepper::CpuRod;
     use crate::stiff::constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
     use crate::stiff::direct::{Masses, blocks};
+    use crate::stiff::pin::PinFriction;
     use cosserat_model::Quat;
     use cosserat_model::presets::preset;
     use cosserat_model::quat::exp_rotation;
@@ -1204,9 +1255,9 @@ mod tests {
     }
 
     /// The pinned points' corrections of the Newton matrix against `J K⁻¹ Jᵀ + α̃` built
-    /// densely with each pinned point's inverse mass `w (I − n nᵀ)` (sliding) or `0` (sticking),
-    /// plus half the axial compliance per sticking point on its elements' stretch rows; and the
-    /// projected update `Δx = K⁻¹ Jᵀ μ` of those points.
+    /// densely with each pinned point's inverse mass: `w (I − n nᵀ)` on a frictionless wall,
+    /// `w a aᵀ` on a line, `(m I + K_f)⁻¹` on the wall's plane with friction (sliding, and held
+    /// within the holding slip); and the update `Δx = K⁻¹ Jᵀ μ` of those points.
     /// A Newton step that would move a point further than the limit is shortened as a whole:
     /// every point's move, every frame's turn and every multiplier's increment is the full
     /// step's times one factor, and the farthest point moves exactly the limit.
@@ -1276,24 +1327,26 @@ mod tests {
         w.precondition(&k, 1.0, true);
         let (ss, bt) = reference(&k, &w);
         let normal = Vec3::new(0.3, -0.5, 0.8).normalize();
-        let pin = |point, stick, line| Pinned {
-            point,
-            normal,
-            stick,
-            crease: None,
-            line,
-            rod: false,
-            push: Vec3::zeros(),
-            pn: 0.0,
-            came_loose: false,
+        // With friction frozen as a slip across the wall (anisotropic) or within the holding
+        // slip (isotropic, a stiff spring).
+        let friction = |slip: Vec3<f64>, pn: f64| {
+            let mut f = PinFriction::new(Vec3::zeros(), 0.4, 0.3, 1e-3).unwrap();
+            f.freeze(&(slip - normal * normal.dot(&slip)), pn);
+            f
         };
-        // On a line, sliding neighbours, sticking inside and at the free end.
+        let sliding = friction(Vec3::new(1e-6, 2e-6, 0.0), 3e-9);
+        let held = friction(Vec3::new(1e-9, 0.0, 0.0), 3e-9);
+        assert!(sliding.k_along == 0.0 && sliding.k_across > 0.0);
+        assert!(held.k_along > 0.0 && held.k_across == held.k_along);
+        let pin = |point, friction| Pinned::on_wall(point, normal, false, 3e-9, friction);
+        // On a line, sliding without and with friction, held by friction inside and at the
+        // free end.
         w.pinned = vec![
-            pin(1, false, true),
-            pin(3, false, false),
-            pin(4, false, false),
-            pin(6, true, false),
-            pin(9, true, false),
+            Pinned::on_line(1, normal),
+            pin(3, None),
+            pin(4, Some(sliding)),
+            pin(6, Some(held)),
+            pin(9, Some(held)),
         ];
         let mut asm = Assembled::default();
         w.assemble(&k, &mut asm);
@@ -1320,8 +1373,15 @@ mod tests {
         for i in 0..=n {
             let wi = k.inv_mass[i];
             let m = match w.pinned.iter().find(|p| p.point == i) {
-                Some(p) if p.stick => nalgebra::Matrix3::zeros(),
                 Some(p) if p.line => p.normal * p.normal.transpose() * wi,
+                Some(p) if p.friction.is_some() => {
+                    // `(m I + K_f)⁻¹` on the tangent plane, from the friction's own terms.
+                    let f = p.friction.unwrap();
+                    let t = f.dir;
+                    let across = normal.cross(&t);
+                    t * t.transpose() / (1.0 / wi + f.k_along)
+                        + across * across.transpose() / (1.0 / wi + f.k_across)
+                }
                 Some(p) => (nalgebra::Matrix3::identity() - p.normal * p.normal.transpose()) * wi,
                 None => nalgebra::Matrix3::identity() * wi,
             };
@@ -1360,13 +1420,6 @@ mod tests {
                 let ao = k.cols.alpha_o.get(j);
                 for r in 0..3 {
                     alpha[6 * j + 3 + r] = ao[r];
-                }
-            }
-        }
-        for p in w.pinned.iter().filter(|p| p.stick) {
-            for j in [p.point.wrapping_sub(1), p.point] {
-                if j < n {
-                    alpha[6 * j + 2] += 0.5 * k.alpha_axial[j];
                 }
             }
         }
@@ -1417,11 +1470,21 @@ mod tests {
         };
         w.u_x.fill_zero();
         w.add_jt(&k, &mu);
-        w.project_pinned();
+        let raw = w.u_x.clone();
+        let before = vec![Vec3::zeros(); w.pinned.len()];
+        w.pinned_update(&k, &before);
         for p in &w.pinned {
             let u = w.u_x.get(p.point);
-            if p.stick {
-                assert_eq!(u, Vec3::zeros());
+            if let Some(f) = p.friction {
+                // `(m I + K_f)⁻¹ P` times the impulse `m u_raw`: along the slip the point's own
+                // mobility (sliding) or the spring's (held), across it the spring's.
+                let (t, r) = (f.dir, raw.get(p.point));
+                let across = normal.cross(&t);
+                let wi = k.inv_mass[p.point];
+                let want = t * (t.dot(&r) / (1.0 + wi * f.k_along))
+                    + across * (across.dot(&r) / (1.0 + wi * f.k_across));
+                assert!((u - want).norm() <= 1e-12 * r.norm(), "{u} vs {want}");
+                assert!(u.norm() > 0.0);
             } else if p.line {
                 assert!(u.cross(&p.normal).norm() <= 1e-12 * u.norm(), "{u}");
                 assert!(u.norm() > 0.0);
