@@ -359,6 +359,84 @@ mod tests {
         assert!(looped.contains("vx[x]") && looped.contains("for (var x = 1u; x < 5u; x += 2u)"));
     }
 
+    /// FNV-1a, 64 bits: a fixed digest of a kernel's text (no dependency, the same on every
+    /// machine).
+    fn digest(text: &str) -> u64 {
+        text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+        })
+    }
+
+    /// Kernels of scenes without rod contact are byte for byte what they were before rod
+    /// contact was added (`RODC`): free space on each path, mesh contact and bindings. The
+    /// digests were taken from the kernels of commit e2f0b74; a change to what these scenes
+    /// compile must update them on purpose.
+    #[test]
+    fn kernels_without_rod_contact_keep_their_text() {
+        let base = KernelConfig {
+            threads: 64,
+            per_thread: 2,
+            iterations: 10,
+            halo: 0,
+            exchange_steps: 1,
+            spin_cap: 1,
+            group: 1,
+            unroll: true,
+            bind_points: 0,
+            bind_inner: 0,
+            flags: vec![],
+        };
+        let cases: [(KernelConfig, u64); 6] = [
+            (base.clone(), 0x115e116b618b4604),
+            (
+                KernelConfig {
+                    flags: vec!["DRAG", "CLAMP", "REACT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0xb8e182c452d130c6,
+            ),
+            (
+                KernelConfig {
+                    threads: 128,
+                    halo: 24,
+                    exchange_steps: 3,
+                    spin_cap: 1024,
+                    flags: vec!["BEND_DAMP", "GRID", "NBR_SYNC", "COHERENT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0x5488c0a7819e1c35,
+            ),
+            (
+                KernelConfig {
+                    group: 32,
+                    threads: 128,
+                    flags: vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC", "REACT"],
+                    ..base.clone()
+                },
+                0x4384fe7abe3830ef,
+            ),
+            (
+                KernelConfig {
+                    flags: vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "REACT"],
+                    ..base.clone()
+                },
+                0x996ab782bc357d5e,
+            ),
+            (
+                KernelConfig {
+                    bind_points: 300,
+                    bind_inner: 200,
+                    flags: vec!["BIND", "DRAG", "CLAMP", "REACT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0xbd804de3c74c87d4,
+            ),
+        ];
+        let got: Vec<u64> = cases.iter().map(|(c, _)| digest(&c.source())).collect();
+        let want: Vec<u64> = cases.iter().map(|(_, d)| *d).collect();
+        assert_eq!(got, want, "digests (got, want): {got:#x?} {want:#x?}");
+    }
+
     #[test]
     fn disabled_terms_are_absent_from_the_source() {
         let cfg = KernelConfig {
