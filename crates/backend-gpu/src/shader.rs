@@ -21,12 +21,15 @@ pub(crate) const COMMON_WGSL: &str = include_str!("shaders/common.wgsl");
 pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 /// The wall-contact queries, composed after `common.wgsl` into kernels with `MESH`.
 pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wgsl");
+/// Rod–rod and self-contact (closest points, the contact impulse), composed after
+/// `common.wgsl` into kernels with `RODC`.
+pub(crate) const ROD_CONTACT_WGSL: &str = include_str!("shaders/rod_contact.wgsl");
 /// The stiff scheme's banded factorisation and solve (`banded.rs`).
 pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 14] = [
+pub(crate) const FLAGS: [&str; 15] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -41,6 +44,7 @@ pub(crate) const FLAGS: [&str; 14] = [
     "MESH",
     "GUIDE",
     "BIND",
+    "RODC",
 ];
 
 /// Flags of `rod_step.wgsl` chosen by [`crate::KernelVariant`], each validated with every scene
@@ -77,12 +81,29 @@ pub(crate) struct KernelConfig {
     pub(crate) bind_points: u32,
     /// `BIND`: the inner rods' points of the largest group (0 otherwise).
     pub(crate) bind_inner: u32,
+    /// `RODC`: the sizes of the workgroup's rod-contact arrays (all 0 otherwise).
+    pub(crate) rodc: RodcShape,
     /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
     pub(crate) group: u32,
     /// Unroll the per-thread `//#for` loops (the default); `false` emits them as WGSL loops.
     pub(crate) unroll: bool,
     /// Enabled flags (members of [`FLAGS`]).
     pub(crate) flags: Vec<&'static str>,
+}
+
+/// The sizes a kernel with `RODC` gives its rod-contact arrays (`shaders/rod_contact.wgsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub(crate) struct RodcShape {
+    /// Points of the largest group's rods (`RC_PTS`).
+    pub(crate) points: u32,
+    /// Their bounding spheres (`RC_SPH`).
+    pub(crate) spheres: u32,
+    /// Segments per bounding sphere (`RC_K`).
+    pub(crate) per_sphere: u32,
+    /// Overlapping sphere pairs one step can hold (`RC_PAIRS`).
+    pub(crate) pairs: u32,
+    /// Contacts one thread can hold (`RC_CAP`).
+    pub(crate) per_thread: u32,
 }
 
 impl KernelConfig {
@@ -114,6 +135,11 @@ impl KernelConfig {
         if flags.contains(&"CLAMP") && !flags.contains(&"REACT") {
             flags.push("REACT");
         }
+        // Bindings and rod contact both put the rods they couple into one workgroup (`GROUP`:
+        // the groups, each rod on its own run of threads).
+        if flags.contains(&"BIND") || flags.contains(&"RODC") {
+            flags.push("GROUP");
+        }
         let body = preprocess(kernel, &flags);
         let body = expand_loops(&body, self.per_thread, self.unroll);
         let wall = if self.flags.contains(&"MESH") {
@@ -121,7 +147,24 @@ impl KernelConfig {
         } else {
             ""
         };
-        format!("{prelude}{COMMON_WGSL}\n{wall}\n{body}")
+        // Only kernels with rod contact have its sizes and helpers: the others keep their text.
+        let (rodc_prelude, rodc) = if self.flags.contains(&"RODC") {
+            let r = &self.rodc;
+            (
+                format!(
+                    "const RC_PTS: u32 = {}u;\nconst RC_SPH: u32 = {}u;\nconst RC_K: u32 = {}u;\nconst RC_PAIRS: u32 = {}u;\nconst RC_CAP: u32 = {}u;\n",
+                    r.points.max(2),
+                    r.spheres.max(1),
+                    r.per_sphere.max(1),
+                    r.pairs.max(1),
+                    r.per_thread.max(1)
+                ),
+                format!("{ROD_CONTACT_WGSL}\n"),
+            )
+        } else {
+            (String::new(), String::new())
+        };
+        format!("{prelude}{rodc_prelude}{COMMON_WGSL}\n{wall}\n{rodc}{body}")
     }
 }
 
@@ -345,6 +388,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: RodcShape::default(),
             flags: vec![],
         };
         let src = cfg.source();
@@ -384,6 +428,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: RodcShape::default(),
             flags: vec![],
         };
         let cases: [(KernelConfig, u64); 6] = [
@@ -426,6 +471,7 @@ mod tests {
                 KernelConfig {
                     bind_points: 300,
                     bind_inner: 200,
+                    rodc: RodcShape::default(),
                     flags: vec!["BIND", "DRAG", "CLAMP", "REACT", "FAST", "REGC"],
                     ..base.clone()
                 },
@@ -450,6 +496,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: RodcShape::default(),
             flags: vec![],
         };
         let src = cfg.source();
@@ -499,9 +546,9 @@ mod tests {
             || (has("GRID") && has("PERSTEP"))
             || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
             || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
-            || ((has("MESH") || has("GUIDE") || has("BIND"))
+            || ((has("MESH") || has("GUIDE") || has("BIND") || has("RODC"))
                 && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
-            || (has("BIND") && has("EXTENSIBLE"))
+            || ((has("BIND") || has("RODC")) && has("EXTENSIBLE"))
             // The composer adds REACT to CLAMP.
             || (has("CLAMP") && !has("REACT"))
         {
@@ -510,7 +557,7 @@ mod tests {
         // The variant flags, with every scene/path combination they can meet.
         let mut variants = vec![flags.clone()];
         // Contact kernels are composed only with the production variant flags.
-        let contact = has("MESH") || has("GUIDE");
+        let contact = has("MESH") || has("GUIDE") || has("RODC");
         if contact {
             variants[0].push("REGC");
             if !has("EXTENSIBLE") {
@@ -550,6 +597,13 @@ mod tests {
                     unroll,
                     bind_points: 0,
                     bind_inner: 0,
+                    rodc: RodcShape {
+                        points: 66,
+                        spheres: 18,
+                        per_sphere: 4,
+                        pairs: 64,
+                        per_thread: 8,
+                    },
                     flags: flags.clone(),
                 };
                 let composed = cfg.source_of(text);
@@ -611,6 +665,36 @@ mod tests {
                     text, WALL_CONTACT_WGSL,
                     "wall_contact.wgsl on disk differs from the compiled-in copy"
                 );
+                continue;
+            }
+            if file.file_name().is_some_and(|f| f == "rod_contact.wgsl") {
+                // Composed into the kernels with `RODC` (validated in every combination with
+                // rod_step.wgsl's flags); here in one such kernel.
+                assert_eq!(
+                    text, ROD_CONTACT_WGSL,
+                    "rod_contact.wgsl on disk differs from the compiled-in copy"
+                );
+                let cfg = KernelConfig {
+                    threads: 64,
+                    per_thread: 2,
+                    iterations: 10,
+                    halo: 0,
+                    exchange_steps: 1,
+                    spin_cap: 1,
+                    group: 1,
+                    unroll: true,
+                    bind_points: 0,
+                    bind_inner: 0,
+                    rodc: RodcShape {
+                        points: 66,
+                        spheres: 18,
+                        per_sphere: 4,
+                        pairs: 64,
+                        per_thread: 8,
+                    },
+                    flags: vec!["RODC", "FAST", "REGC"],
+                };
+                validate(&name, &cfg.source());
                 continue;
             }
             if file.file_name().is_some_and(|f| f == "banded_solve.wgsl") {

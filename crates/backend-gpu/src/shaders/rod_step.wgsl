@@ -30,6 +30,18 @@
 //                 run of threads (`Item::lane0`, `groups`); the binding sweep follows each
 //                 constraint iteration, the outer rods' points and impulses exchanged in
 //                 workgroup memory (single-workgroup workgroup layout only, inextensible rods)
+//#if RODC
+// (Kernels without RODC and GROUP are composed without these lines, so that their text stays
+// what it was before rod contact existed: shader.rs checks their digests.)
+//   RODC          rod–rod and self-contact with friction (rod_contact.wgsl; collide rods.rs,
+//                 constraints rod_contact.rs): the rods share one workgroup as with BIND; each
+//                 step publishes their points, builds bounding spheres, finds overlapping
+//                 sphere pairs and tests their segments; after every constraint iteration the
+//                 contacts are resolved as one split-mass Jacobi pass through workgroup memory
+//                 (single-workgroup workgroup layout only, inextensible rods)
+//   GROUP         (implied by BIND and RODC) several rods per workgroup, each on its own run
+//                 of threads
+//#endif
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -227,9 +239,11 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 @group(0) @binding(20) var<storage, read> touch: array<Touch>;
 //#endif
 //#endif
-//#if BIND
+//#if GROUP
 // Per workgroup: its first item and number of items.
 @group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
+//#endif
+//#if BIND
 @group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
 // Per point of the group's outer rods (an outer rod's from its `Coupling::xo`): the point at the
 // step's start, then its velocity after each sweep, with its inverse mass in w, published for
@@ -245,6 +259,8 @@ var<workgroup> wb_i: array<vec4<u32>, BIND_IN>;
 // Per slot of an inner rod: the outer segment its point was last bound to (where the next
 // search walks from), NONE before the first.
 @group(0) @binding(31) var<storage, read_write> bind_seg: array<u32>;
+//#endif
+//#if GROUP
 const GROUP_MAX: u32 = 4u;
 //#else
 const GROUP_MAX: u32 = 1u;
@@ -551,7 +567,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#else
     // `tid` indexes the workgroup's exchange arrays, `lid` is the thread's place in its rod.
     let tid = lid_wg;
-//#if BIND
+//#if GROUP
     // A group of rods per workgroup (those a binding couples), each on its own run of threads
     // from its item's `lane0`; threads past the last rod's points idle through the barriers.
     let grp = groups[wid.x];
@@ -750,6 +766,41 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     }
 //#endfor
 //#endif
+//#if RODC
+    // Rod contact (rod_contact.wgsl): this rod's part and the group's spheres; the contacts
+    // this thread finds at a step's start stay in its registers for the step's sweeps: the
+    // group entries of their first points, their parameters, normal and bias (−gap / h), split
+    // effective inverse mass and its inverse, accumulated friction and normal impulses, and
+    // distance and radii.
+    let rc_grp = groups[wid.x];
+    let sd = strands[item_index];
+    let rc_last = strands[rc_grp.x + rc_grp.y - 1u];
+    let rc_spheres = rc_last.xs + rc_last.spheres;
+    var rc_ia: array<u32, RC_CAP>;
+    var rc_ib: array<u32, RC_CAP>;
+    var rc_st: array<vec2<f32>, RC_CAP>;
+    var rc_nb: array<vec4<f32>, RC_CAP>;
+    var rc_w: array<vec2<f32>, RC_CAP>;
+    var rc_l: array<vec4<f32>, RC_CAP>;
+    var rc_dr: array<vec2<f32>, RC_CAP>;
+    var rc_count = 0u;
+    var rc_max = 0u;
+//#for e 0 EPT
+    if it.w0 + b0 + {e} < it.w1 {
+        let k = sd.xp + it.w0 + b0 + {e};
+        atomicStore(&rcw_j[3u * k], 0u);
+        atomicStore(&rcw_j[3u * k + 1u], 0u);
+        atomicStore(&rcw_j[3u * k + 2u], 0u);
+    }
+//#endfor
+    if tid == 0u {
+        for (var k = 0u; k < 8u; k++) {
+            atomicStore(&rcw_stat[k], 0u);
+        }
+        atomicStore(&rcw_stat[RCW_MIND], 0x7f800000u);
+        atomicStore(&rcw_stat[RCW_MINR], 0x7f800000u);
+    }
+//#endif
 //#if MESH
     // Wall contact: per point, the contact of this step (normal, gap, accumulated normal and
     // friction impulses), the point's inverse mass, and its anchor (where it last walked the
@@ -814,7 +865,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         atomicStore(&wg_key, NONE);
         wg_stop = 0u;
     }
-//#if BIND
+//#if GROUP
     workgroupBarrier();
 //#endif
     // A rod that has diverged stays where it stopped (with the rods of its group).
@@ -1578,6 +1629,134 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#endfor
 //#endif
+//#if RODC
+        // Rod contact: the contacts of the step, found at its start (coupling.rs `detect`,
+        // collide rods.rs), each phase dealt out over all the workgroup's threads.
+        let rc_par = step & 1u;
+//#for e 0 EPT
+        if it.w0 + b0 + {e} < it.w1 {
+            let k = sd.xp + it.w0 + b0 + {e};
+            rcw_x[k] = vec4<f32>(rx[{e+1}], wm[{e+1}]);
+            atomicStore(&rcw_cnt[k], 0u);
+        }
+//#endfor
+        if tid == 0u {
+            atomicStore(&rcw_np, 0u);
+            atomicStore(&rcw_stat[RCW_STEP + (rc_par ^ 1u)], 0u);
+        }
+        workgroupBarrier();
+        // Bounding spheres (rods.rs `build_spheres`): the centre of the points' box, the
+        // farthest point from it, the rod's radius and half the margin.
+        for (var q = tid; q < rc_spheres; q += WG) {
+            let sp = rc_sphere(q, rc_grp.x, rc_grp.y);
+            let kd = strands[sp.item];
+            let k0 = kd.xp + sp.first;
+            var lo = rcw_x[k0].xyz;
+            var hi = lo;
+            for (var k = 1u; k <= sp.count; k++) {
+                let p = rcw_x[k0 + k].xyz;
+                lo = min(lo, p);
+                hi = max(hi, p);
+            }
+            let c = 0.5 * (lo + hi);
+            var r2 = 0.0;
+            for (var k = 0u; k <= sp.count; k++) {
+                let d = rcw_x[k0 + k].xyz - c;
+                r2 = max(r2, dot(d, d));
+            }
+            rcw_s[q] = vec4<f32>(c, sqrt(r2) + kd.radius + kd.half_margin);
+        }
+        workgroupBarrier();
+        // Overlapping sphere pairs (rods.rs `find_pairs`): a sphere with itself when its own
+        // segments may touch, two spheres of one rod when some of their segments are farther
+        // apart than the skip, any two when they overlap.
+        for (var q = tid; q < rc_spheres * rc_spheres; q += WG) {
+            let i = q / rc_spheres;
+            let j = q % rc_spheres;
+            if j < i {
+                continue;
+            }
+            let si = rc_sphere(i, rc_grp.x, rc_grp.y);
+            let sj = rc_sphere(j, rc_grp.x, rc_grp.y);
+            var want = true;
+            if si.item == sj.item {
+                let skip = strands[si.item].skip;
+                if i == j {
+                    want = skip != NONE && si.count > skip + 1u;
+                } else {
+                    want = skip != NONE && sj.first + sj.count - 1u - si.first > skip;
+                }
+            }
+            if want && i != j {
+                let d = rcw_s[i].xyz - rcw_s[j].xyz;
+                let rr = rcw_s[i].w + rcw_s[j].w;
+                want = dot(d, d) < rr * rr;
+            }
+            if want {
+                let k = atomicAdd(&rcw_np, 1u);
+                if k < RC_PAIRS {
+                    rcw_pairs[k] = (i << 16u) | j;
+                }
+            }
+        }
+        workgroupBarrier();
+        // The segment pairs of the sphere pairs (rods.rs `narrow`); a pair or contact that does
+        // not fit is counted (and makes the host's next read fail).
+        let rc_np = atomicLoad(&rcw_np);
+        if tid == 0u && rc_np > RC_PAIRS {
+            atomicAdd(&rcw_stat[RCW_DROP], rc_np - RC_PAIRS);
+        }
+        rc_count = 0u;
+        for (var q = tid; q < min(rc_np, RC_PAIRS) * RC_K * RC_K; q += WG) {
+            let f = rc_candidate(q, rc_grp.x, rc_grp.y);
+            if f.on {
+                if rc_count < RC_CAP {
+                    rc_ia[rc_count] = f.ia;
+                    rc_ib[rc_count] = f.ib;
+                    rc_st[rc_count] = f.st;
+                    rc_nb[rc_count] = vec4<f32>(f.n, (f.radii - f.dist) * inv_h);
+                    rc_dr[rc_count] = vec2<f32>(f.dist, f.radii);
+                    rc_count += 1u;
+                    atomicAdd(&rcw_cnt[f.ia], 1u);
+                    atomicAdd(&rcw_cnt[f.ia + 1u], 1u);
+                    atomicAdd(&rcw_cnt[f.ib], 1u);
+                    atomicAdd(&rcw_cnt[f.ib + 1u], 1u);
+                    atomicAdd(&rcw_stat[RCW_STEP + rc_par], 1u);
+                    atomicMin(&rcw_stat[RCW_MIND], bitcast<u32>(f.dist));
+                    atomicMin(&rcw_stat[RCW_MINR], bitcast<u32>(f.dist / f.radii));
+                } else {
+                    atomicAdd(&rcw_stat[RCW_DROP], 1u);
+                }
+            }
+        }
+        workgroupBarrier();
+        if tid == 0u {
+            rc_max = max(rc_max, atomicLoad(&rcw_stat[RCW_STEP + rc_par]));
+        }
+        // Each contact's effective inverse mass with its points' masses split among their
+        // contacts, and the radii of the nearest pair so far.
+        let rc_min = atomicLoad(&rcw_stat[RCW_MIND]);
+        for (var k = 0u; k < rc_count; k++) {
+            let st = rc_st[k];
+            let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
+            let ia = rc_ia[k];
+            let ib = rc_ib[k];
+            let w = vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w);
+            let m = vec4<f32>(
+                f32(atomicLoad(&rcw_cnt[ia])),
+                f32(atomicLoad(&rcw_cnt[ia + 1u])),
+                f32(atomicLoad(&rcw_cnt[ib])),
+                f32(atomicLoad(&rcw_cnt[ib + 1u])),
+            );
+            let ww = dot(c * c, w * m);
+            rc_w[k] = vec2<f32>(ww, select(0.0, 1.0 / ww, ww > 0.0));
+            rc_l[k] = vec4<f32>(0.0);
+            if bitcast<u32>(rc_dr[k].x) == rc_min {
+                atomicStore(&rcw_stat[RCW_RAD], bitcast<u32>(rc_dr[k].y));
+            }
+        }
+        workgroupBarrier();
+//#endif
 
 //#if !EXTENSIBLE
         // Distance constraints, red–black, as the CPU's solver: d = e + h (v_b - v_a) with e the
@@ -1804,6 +1983,55 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
             }
 //#endif
+//#if RODC
+            // Rod contact after the rods' own constraints (coupling.rs `sweep`): the velocities
+            // published, every contact resolved on them, each point's summed impulses taken.
+//#for e 0 EPT
+            if it.w0 + b0 + {e} < it.w1 {
+                rcw_x[sd.xp + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], wm[{e+1}]);
+            }
+//#endfor
+            workgroupBarrier();
+            for (var k = 0u; k < rc_count; k++) {
+                let w = rc_w[k];
+                if !(w.x > 0.0) {
+                    continue;
+                }
+                let ia = rc_ia[k];
+                let ib = rc_ib[k];
+                let st = rc_st[k];
+                let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
+                let v = (rcw_x[ia].xyz * c.x + rcw_x[ia + 1u].xyz * c.y)
+                    - (rcw_x[ib].xyz * c.z + rcw_x[ib + 1u].xyz * c.w);
+                let nb = rc_nb[k];
+                let l = rc_l[k];
+                let rs = rc_resolve(v, nb.xyz, nb.w, w.x, w.y, l.w, l.xyz, sd.mu_s, sd.mu_k);
+                rc_l[k] = vec4<f32>(rs.lt, rs.ln);
+                if any(rs.p != vec3<f32>(0.0)) {
+                    rc_add(ia, rs.p * c.x);
+                    rc_add(ia + 1u, rs.p * c.y);
+                    rc_add(ib, rs.p * -c.z);
+                    rc_add(ib + 1u, rs.p * -c.w);
+                }
+            }
+            workgroupBarrier();
+//#for e 0 EPT
+            if it.w0 + b0 + {e} < it.w1 {
+                let jp = rc_take(sd.xp + it.w0 + b0 + {e});
+                vx[{e+1}] += jp * wm[{e+1}];
+//#if REACT
+                // A held point does not move; what the contacts push on it is part of its
+                // reaction, as on the CPU.
+                if u32({e}) == 0u && react0 {
+                    jr0 -= jp;
+                }
+                if u32({e}) == rj1 {
+                    jr1 -= jp;
+                }
+//#endif
+            }
+//#endfor
+//#endif
         }
 //#else
 //#if MESH
@@ -1968,6 +2196,24 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#else
     workgroupBarrier();
     let first = atomicLoad(&wg_key);
+//#endif
+//#if RODC
+    // The group's statistics: the last step's contacts, the most in a step, the nearest pair,
+    // the steps and what did not fit (one thread per group writes them).
+    if tid == 0u && steps_done > 0u {
+        let o = wid.x * RC_STATS;
+        let lp = (params.base_step + chunk.offset + steps_done - 1u) & 1u;
+        atomicStore(&rc_stats[o + 2u], atomicLoad(&rcw_stat[RCW_STEP + lp]));
+        atomicMax(&rc_stats[o + 3u], rc_max);
+        let md = atomicLoad(&rcw_stat[RCW_MIND]);
+        if md < atomicLoad(&rc_stats[o]) {
+            atomicStore(&rc_stats[o], md);
+            atomicStore(&rc_stats[o + 1u], atomicLoad(&rcw_stat[RCW_RAD]));
+        }
+        atomicMin(&rc_stats[o + 4u], atomicLoad(&rcw_stat[RCW_MINR]));
+        atomicAdd(&rc_stats[o + 5u], steps_done);
+        atomicAdd(&rc_stats[o + 6u], atomicLoad(&rcw_stat[RCW_DROP]));
+    }
 //#endif
 //#if MESH
     // The counts of the last step, this thread's totals, and each point's last contact.

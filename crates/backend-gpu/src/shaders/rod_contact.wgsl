@@ -1,0 +1,267 @@
+// Rod–rod and self-contact (RODC): composed by src/shader.rs after common.wgsl into the step
+// kernels of scenes with rod contacts only, with the sizes RC_PTS (points of a group's rods),
+// RC_SPH (their bounding spheres), RC_K (segments per sphere), RC_PAIRS (overlapping sphere
+// pairs a step can hold) and RC_CAP (contacts a thread can hold) in the prelude.
+//
+// The model is the CPU's (backend-cpu coupling.rs): at the start of each step the rods' capsules
+// (radius r + margin / 2) are tested against each other and themselves with collide rods.rs'
+// broad phase (bounding spheres over runs of RC_K segments, the same pair rules) and its
+// segment–segment narrow phase (closest points, Ericson 5.1.9), and every contact becomes a
+// four-point constraint with Coulomb friction (constraints rod_contact.rs): non-penetration
+// `n · (v_a − v_b) >= −gap / h` with the barycentric weights (1 − s, s, 1 − t, t), and the
+// tangential impulse kept in the static cone, else on the kinetic one. The rods of a group share
+// one workgroup (as bindings do, `Item::lane0`), so every phase is a pass over workgroup memory:
+//
+//   1. each thread publishes its points (position, inverse mass) in `rcw_x`;
+//   2. the spheres, dealt out over all threads of the workgroup, in `rcw_s`;
+//   3. the sphere pairs (every pair, as the CPU's `AllPairs`: the same pairs as its sweep and
+//      prune), appended to `rcw_pairs`;
+//   4. the candidate segment pairs, RC_K × RC_K per sphere pair, dealt out in turn; a thread
+//      keeps the contacts it finds in its own registers for the step (RC_CAP of them), and each
+//      contact counts itself on its four points (`rcw_cnt`).
+//
+// Where the CPU resolves the contacts one after another (projected Gauss–Seidel), the GPU
+// resolves them all at once after every constraint iteration (Jacobi), each contact seeing its
+// points' velocities of the iteration's start. So that contacts sharing a point do not each
+// remove the same approach (and overshoot together), a point in m contacts takes part in each
+// with m times its inverse mass (mass splitting, Tonge, Coumans & Bender 2012): a contact's
+// effective inverse mass is W = Σ c_j² w_j m_j. The impulses are summed per point (`rcw_j`),
+// the whole impulse applied, so momentum is conserved and a contact's accumulated impulse is
+// what its points received, which keeps the clamping to a push and to the friction cones
+// exact. The fixed point is the CPU's; with few iterations the two differ by what each has not
+// yet converged (tests/rod_contact.rs states by how much).
+
+// A rod's part in rod contact (layout.rs `StrandG`).
+struct Strand {
+    xp: u32,
+    xs: u32,
+    spheres: u32,
+    skip: u32,
+    radius: f32,
+    half_margin: f32,
+    mu_s: f32,
+    mu_k: f32,
+}
+
+@group(0) @binding(29) var<storage, read> strands: array<Strand>;
+// Per group, RC_STATS words (sim.rs `RodcBuffers::stats`).
+@group(0) @binding(30) var<storage, read_write> rc_stats: array<atomic<u32>>;
+
+const RC_STATS: u32 = 8u;
+// Words of `rcw_stat`: contacts of the step (by the step's parity), the smallest distance of
+// the dispatch and the radii of that pair (f32 bits), the smallest distance over the radii,
+// contacts and sphere pairs dropped.
+const RCW_STEP: u32 = 0u;
+const RCW_MIND: u32 = 2u;
+const RCW_RAD: u32 = 3u;
+const RCW_MINR: u32 = 4u;
+const RCW_DROP: u32 = 5u;
+
+// The group's points at the step's start (position, inverse mass), then their velocities at
+// the start of each contact sweep.
+var<workgroup> rcw_x: array<vec4<f32>, RC_PTS>;
+// Contacts touching each point this step.
+var<workgroup> rcw_cnt: array<atomic<u32>, RC_PTS>;
+// The impulse each point receives in a sweep (three f32 as bits, summed by compare-exchange).
+var<workgroup> rcw_j: array<atomic<u32>, 3 * RC_PTS>;
+// Bounding spheres: centre, radius (with the rod's radius and half the margin).
+var<workgroup> rcw_s: array<vec4<f32>, RC_SPH>;
+// Overlapping sphere pairs of the step, `i << 16 | j` with i <= j, and their number.
+var<workgroup> rcw_pairs: array<u32, RC_PAIRS>;
+var<workgroup> rcw_np: atomic<u32>;
+var<workgroup> rcw_stat: array<atomic<u32>, 8>;
+
+// Sphere `q` of the group whose items start at `first`: its item, first segment and segments.
+struct RcSphere {
+    item: u32,
+    first: u32,
+    count: u32,
+}
+
+fn rc_sphere(q: u32, first: u32, count: u32) -> RcSphere {
+    var item = first;
+    for (var k = 1u; k < count; k++) {
+        if q >= strands[first + k].xs {
+            item = first + k;
+        }
+    }
+    let seg0 = (q - strands[item].xs) * RC_K;
+    return RcSphere(item, seg0, min(RC_K, items[item].n - seg0));
+}
+
+// Closest points of the segments p1q1 and p2q2 (collide rods.rs `closest_points_segments`,
+// Ericson 5.1.9): the parameters (s, t) along each.
+fn rc_closest(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec3<f32>) -> vec2<f32> {
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let r = p1 - p2;
+    let a = dot(d1, d1);
+    let e = dot(d2, d2);
+    let f = dot(d2, r);
+    let eps = 1.0e-30;
+    if a <= eps && e <= eps {
+        return vec2<f32>(0.0);
+    }
+    if a <= eps {
+        return vec2<f32>(0.0, clamp(f / e, 0.0, 1.0));
+    }
+    let c = dot(d1, r);
+    if e <= eps {
+        return vec2<f32>(clamp(-c / a, 0.0, 1.0), 0.0);
+    }
+    let b = dot(d1, d2);
+    let denom = a * e - b * b;
+    var s = 0.0;
+    if denom > 0.0 {
+        s = clamp((b * f - c * e) / denom, 0.0, 1.0);
+    }
+    var t = (b * s + f) / e;
+    if t < 0.0 {
+        t = 0.0;
+        s = clamp(-c / a, 0.0, 1.0);
+    } else if t > 1.0 {
+        t = 1.0;
+        s = clamp((b - c) / a, 0.0, 1.0);
+    }
+    return vec2<f32>(s, t);
+}
+
+// A unit normal for two segments whose centrelines touch exactly (rods.rs `fallback_normal`):
+// perpendicular to both if they are not parallel, else to the first, else +z.
+fn rc_fallback_normal(d1: vec3<f32>, d2: vec3<f32>) -> vec3<f32> {
+    let c = cross(d1, d2);
+    let n = length(c);
+    if n > 1.0e-30 {
+        return c / n;
+    }
+    let trial = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(d1.x) < 0.9 * length(d1));
+    let c2 = cross(d1, trial);
+    let n2 = length(c2);
+    if n2 > 1.0e-30 {
+        return c2 / n2;
+    }
+    return vec3<f32>(0.0, 0.0, 1.0);
+}
+
+// A contact found by `rc_candidate`: the group entries of a0 and b0, the parameters, the
+// normal from b to a, the centreline distance and the radii summed.
+struct RcFound {
+    on: bool,
+    ia: u32,
+    ib: u32,
+    st: vec2<f32>,
+    n: vec3<f32>,
+    dist: f32,
+    radii: f32,
+}
+
+// Candidate `q` of the step's sphere pairs (RC_K × RC_K segment pairs each): the segment
+// pairs the CPU's narrow phase tests (rods.rs `narrow`: a sphere with itself only j > i, a rod
+// with itself only |i − j| > skip), culled by their midpoints (conservatively, as there), then
+// closest points; a contact where the capsules of radius r + margin / 2 overlap.
+fn rc_candidate(q: u32, first: u32, count: u32) -> RcFound {
+    var out = RcFound(false, 0u, 0u, vec2<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+    let pair = rcw_pairs[q / (RC_K * RC_K)];
+    let i = pair >> 16u;
+    let j = pair & 0xffffu;
+    let ii = (q / RC_K) % RC_K;
+    let jj = q % RC_K;
+    let sa = rc_sphere(i, first, count);
+    let sb = rc_sphere(j, first, count);
+    if ii >= sa.count || jj >= sb.count || (i == j && jj <= ii) {
+        return out;
+    }
+    let ka = strands[sa.item];
+    let kb = strands[sb.item];
+    let seg_a = sa.first + ii;
+    let seg_b = sb.first + jj;
+    if sa.item == sb.item && max(seg_a, seg_b) - min(seg_a, seg_b) <= ka.skip {
+        return out;
+    }
+    let ia = ka.xp + seg_a;
+    let ib = kb.xp + seg_b;
+    let p1 = rcw_x[ia].xyz;
+    let q1 = rcw_x[ia + 1u].xyz;
+    let p2 = rcw_x[ib].xyz;
+    let q2 = rcw_x[ib + 1u].xyz;
+    let rr = ka.radius + ka.half_margin + kb.radius + kb.half_margin;
+    let reach = (0.5 * (length(q1 - p1) + length(q2 - p2)) + rr) * (1.0 + 1.0e-6);
+    let dm = 0.5 * (p1 + q1 - p2 - q2);
+    if dot(dm, dm) >= reach * reach {
+        return out;
+    }
+    let st = rc_closest(p1, q1, p2, q2);
+    let d = (p1 + (q1 - p1) * st.x) - (p2 + (q2 - p2) * st.y);
+    let d2 = dot(d, d);
+    if d2 >= rr * rr {
+        return out;
+    }
+    let dist = sqrt(d2);
+    var n = vec3<f32>(0.0);
+    if dist > 0.0 {
+        n = d / dist;
+    } else {
+        n = rc_fallback_normal(q1 - p1, q2 - p2);
+    }
+    return RcFound(true, ia, ib, st, n, dist, ka.radius + kb.radius);
+}
+
+// Adds `p` to the impulse point `k` receives in this sweep (compare-exchange on f32 bits; few
+// contacts share a point, so a try rarely fails).
+fn rc_add(k: u32, p: vec3<f32>) {
+    for (var c = 0u; c < 3u; c++) {
+        let x = p[c];
+        if x == 0.0 {
+            continue;
+        }
+        var old = atomicLoad(&rcw_j[3u * k + c]);
+        for (var tries = 0u; tries < 64u; tries++) {
+            let r = atomicCompareExchangeWeak(&rcw_j[3u * k + c], old, bitcast<u32>(bitcast<f32>(old) + x));
+            if r.exchanged {
+                break;
+            }
+            old = r.old_value;
+        }
+    }
+}
+
+// Takes the impulse point `k` received in this sweep and clears it for the next.
+fn rc_take(k: u32) -> vec3<f32> {
+    return vec3<f32>(
+        bitcast<f32>(atomicExchange(&rcw_j[3u * k], 0u)),
+        bitcast<f32>(atomicExchange(&rcw_j[3u * k + 1u], 0u)),
+        bitcast<f32>(atomicExchange(&rcw_j[3u * k + 2u], 0u)),
+    );
+}
+
+struct RcResolved {
+    // The impulse of this sweep (normal and friction), momentum [N s].
+    p: vec3<f32>,
+    ln: f32,
+    lt: vec3<f32>,
+}
+
+// One contact on the relative velocity `v` of its two closest points (rod_contact.rs
+// `RodContactSet::sweep`): the accumulated normal impulse `ln` clamped to a push that ends the
+// step touching (`bias` = −gap / h), then the accumulated friction impulse `lt` that stops the
+// sliding, kept in the static cone, else scaled onto the kinetic one; `w` is the contact's
+// (split) effective inverse mass.
+fn rc_resolve(v: vec3<f32>, n: vec3<f32>, bias: f32, w: f32, inv_w: f32, ln: f32, lt: vec3<f32>, mu_s: f32, mu_k: f32) -> RcResolved {
+    let acc = max(ln + (bias - dot(n, v)) * inv_w, 0.0);
+    if acc == 0.0 && ln == 0.0 {
+        // Apart and staying apart: no push, and no friction (its cone is empty).
+        return RcResolved(vec3<f32>(0.0), 0.0, lt);
+    }
+    let dn = acc - ln;
+    let x = v + n * (dn * w);
+    let vt = x - n * dot(n, x);
+    let want = lt - vt * inv_w;
+    let norm = length(want);
+    var nt = vec3<f32>(0.0);
+    if norm <= mu_s * acc {
+        nt = want;
+    } else if norm > 0.0 {
+        nt = want * (mu_k * acc / norm);
+    }
+    return RcResolved(n * dn + (nt - lt), acc, nt);
+}
