@@ -243,7 +243,7 @@ impl Plan {
         };
         // Rod contact keeps in workgroup memory, per point of the largest group, its position or
         // velocity (a vec4), its number of contacts and its impulse (4 words), and per bounding
-        // sphere a vec4 and room for 16 overlapping pairs.
+        // sphere a vec4, what it covers (2 words) and room for 16 overlapping pairs.
         let rodc_shape = if rodc {
             let per_sphere = rods
                 .iter()
@@ -275,7 +275,9 @@ impl Plan {
         } else {
             RodcShape::default()
         };
-        let rodc_bytes = 32 * rodc_shape.points + 16 * rodc_shape.spheres + 4 * rodc_shape.pairs;
+        // (Workgroup memory bounds the points far below the 65 536 segments a sphere's
+        // first segment is packed into.)
+        let rodc_bytes = 32 * rodc_shape.points + 24 * rodc_shape.spheres + 4 * rodc_shape.pairs;
         let (single_threads, single_ept) = if bind || rodc {
             // The fewest points per thread with which every group's rods fit one workgroup, in
             // its threads and its memory.

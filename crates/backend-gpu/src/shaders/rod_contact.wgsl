@@ -64,8 +64,11 @@ var<workgroup> rcw_x: array<vec4<f32>, RC_PTS>;
 var<workgroup> rcw_cnt: array<atomic<u32>, RC_PTS>;
 // The impulse each point receives in a sweep (three f32 as bits, summed by compare-exchange).
 var<workgroup> rcw_j: array<atomic<u32>, 3 * RC_PTS>;
-// Bounding spheres: centre, radius (with the rod's radius and half the margin).
+// Bounding spheres: centre, radius (with the rod's radius and half the margin); and which
+// segments each covers (`rc_sphere`, as `item`, `first | count << 16`), so that the pair and
+// narrow phases look them up in workgroup memory.
 var<workgroup> rcw_s: array<vec4<f32>, RC_SPH>;
+var<workgroup> rcw_m: array<vec2<u32>, RC_SPH>;
 // Overlapping sphere pairs of the step, `i << 16 | j` with i <= j, and their number.
 var<workgroup> rcw_pairs: array<u32, RC_PAIRS>;
 var<workgroup> rcw_np: atomic<u32>;
@@ -78,7 +81,7 @@ struct RcSphere {
     count: u32,
 }
 
-fn rc_sphere(q: u32, first: u32, count: u32) -> RcSphere {
+fn rc_sphere_of_strands(q: u32, first: u32, count: u32) -> RcSphere {
     var item = first;
     for (var k = 1u; k < count; k++) {
         if q >= strands[first + k].xs {
@@ -87,6 +90,12 @@ fn rc_sphere(q: u32, first: u32, count: u32) -> RcSphere {
     }
     let seg0 = (q - strands[item].xs) * RC_K;
     return RcSphere(item, seg0, min(RC_K, items[item].n - seg0));
+}
+
+// Sphere `q` as the sphere phase recorded it.
+fn rc_sphere(q: u32) -> RcSphere {
+    let m = rcw_m[q];
+    return RcSphere(m.x, m.y & 0xffffu, m.y >> 16u);
 }
 
 // Closest points of the segments p1q1 and p2q2 (collide rods.rs `closest_points_segments`,
@@ -159,15 +168,15 @@ struct RcFound {
 // pairs the CPU's narrow phase tests (rods.rs `narrow`: a sphere with itself only j > i, a rod
 // with itself only |i − j| > skip), culled by their midpoints (conservatively, as there), then
 // closest points; a contact where the capsules of radius r + margin / 2 overlap.
-fn rc_candidate(q: u32, first: u32, count: u32) -> RcFound {
+fn rc_candidate(q: u32) -> RcFound {
     var out = RcFound(false, 0u, 0u, vec2<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
     let pair = rcw_pairs[q / (RC_K * RC_K)];
     let i = pair >> 16u;
     let j = pair & 0xffffu;
     let ii = (q / RC_K) % RC_K;
     let jj = q % RC_K;
-    let sa = rc_sphere(i, first, count);
-    let sb = rc_sphere(j, first, count);
+    let sa = rc_sphere(i);
+    let sb = rc_sphere(j);
     if ii >= sa.count || jj >= sb.count || (i == j && jj <= ii) {
         return out;
     }
@@ -207,7 +216,8 @@ fn rc_candidate(q: u32, first: u32, count: u32) -> RcFound {
 }
 
 // Adds `p` to the impulse point `k` receives in this sweep (compare-exchange on f32 bits; few
-// contacts share a point, so a try rarely fails).
+// contacts share a point, so a try rarely fails; one that fails 64 times is counted as
+// dropped, which the host reports).
 fn rc_add(k: u32, p: vec3<f32>) {
     for (var c = 0u; c < 3u; c++) {
         let x = p[c];
@@ -215,12 +225,17 @@ fn rc_add(k: u32, p: vec3<f32>) {
             continue;
         }
         var old = atomicLoad(&rcw_j[3u * k + c]);
+        var done = false;
         for (var tries = 0u; tries < 64u; tries++) {
             let r = atomicCompareExchangeWeak(&rcw_j[3u * k + c], old, bitcast<u32>(bitcast<f32>(old) + x));
             if r.exchanged {
+                done = true;
                 break;
             }
             old = r.old_value;
+        }
+        if !done {
+            atomicAdd(&rcw_stat[RCW_DROP], 1u);
         }
     }
 }

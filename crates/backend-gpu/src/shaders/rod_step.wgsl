@@ -1648,7 +1648,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         // Bounding spheres (rods.rs `build_spheres`): the centre of the points' box, the
         // farthest point from it, the rod's radius and half the margin.
         for (var q = tid; q < rc_spheres; q += WG) {
-            let sp = rc_sphere(q, rc_grp.x, rc_grp.y);
+            let sp = rc_sphere_of_strands(q, rc_grp.x, rc_grp.y);
+            rcw_m[q] = vec2<u32>(sp.item, sp.first | (sp.count << 16u));
             let kd = strands[sp.item];
             let k0 = kd.xp + sp.first;
             var lo = rcw_x[k0].xyz;
@@ -1676,8 +1677,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             if j < i {
                 continue;
             }
-            let si = rc_sphere(i, rc_grp.x, rc_grp.y);
-            let sj = rc_sphere(j, rc_grp.x, rc_grp.y);
+            let si = rc_sphere(i);
+            let sj = rc_sphere(j);
             var want = true;
             if si.item == sj.item {
                 let skip = strands[si.item].skip;
@@ -1708,7 +1709,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
         rc_count = 0u;
         for (var q = tid; q < min(rc_np, RC_PAIRS) * RC_K * RC_K; q += WG) {
-            let f = rc_candidate(q, rc_grp.x, rc_grp.y);
+            let f = rc_candidate(q);
             if f.on {
                 if rc_count < RC_CAP {
                     rc_ia[rc_count] = f.ia;
