@@ -403,6 +403,33 @@ mod tests {
         assert!(looped.contains("vx[x]") && looped.contains("for (var x = 1u; x < 5u; x += 2u)"));
     }
 
+    /// A one-workgroup kernel of 64 threads × 2 points with `flags`.
+    fn small(flags: Vec<&'static str>) -> KernelConfig {
+        KernelConfig {
+            threads: 64,
+            per_thread: 2,
+            iterations: 10,
+            halo: 0,
+            exchange_steps: 1,
+            spin_cap: 1,
+            group: 1,
+            unroll: true,
+            bind_points: 0,
+            bind_inner: 0,
+            rodc: RodcShape::default(),
+            flags,
+        }
+    }
+
+    /// Rod-contact arrays for two rods of 32 elements.
+    const RODC_SHAPE: RodcShape = RodcShape {
+        points: 66,
+        spheres: 18,
+        per_sphere: 4,
+        pairs: 64,
+        per_thread: 8,
+    };
+
     /// FNV-1a, 64 bits: a fixed digest of a kernel's text (no dependency, the same on every
     /// machine).
     fn digest(text: &str) -> u64 {
@@ -417,20 +444,7 @@ mod tests {
     /// compile must update them on purpose.
     #[test]
     fn kernels_without_rod_contact_keep_their_text() {
-        let base = KernelConfig {
-            threads: 64,
-            per_thread: 2,
-            iterations: 10,
-            halo: 0,
-            exchange_steps: 1,
-            spin_cap: 1,
-            group: 1,
-            unroll: true,
-            bind_points: 0,
-            bind_inner: 0,
-            rodc: RodcShape::default(),
-            flags: vec![],
-        };
+        let base = small(vec![]);
         let cases: [(KernelConfig, u64); 6] = [
             (base.clone(), 0x115e116b618b4604),
             (
@@ -597,13 +611,7 @@ mod tests {
                     unroll,
                     bind_points: 0,
                     bind_inner: 0,
-                    rodc: RodcShape {
-                        points: 66,
-                        spheres: 18,
-                        per_sphere: 4,
-                        pairs: 64,
-                        per_thread: 8,
-                    },
+                    rodc: RODC_SHAPE,
                     flags: flags.clone(),
                 };
                 let composed = cfg.source_of(text);
@@ -675,24 +683,8 @@ mod tests {
                     "rod_contact.wgsl on disk differs from the compiled-in copy"
                 );
                 let cfg = KernelConfig {
-                    threads: 64,
-                    per_thread: 2,
-                    iterations: 10,
-                    halo: 0,
-                    exchange_steps: 1,
-                    spin_cap: 1,
-                    group: 1,
-                    unroll: true,
-                    bind_points: 0,
-                    bind_inner: 0,
-                    rodc: RodcShape {
-                        points: 66,
-                        spheres: 18,
-                        per_sphere: 4,
-                        pairs: 64,
-                        per_thread: 8,
-                    },
-                    flags: vec!["RODC", "FAST", "REGC"],
+                    rodc: RODC_SHAPE,
+                    ..small(vec!["RODC", "FAST", "REGC"])
                 };
                 validate(&name, &cfg.source());
                 continue;

@@ -107,8 +107,11 @@ fn pinned_moving(v: [f32; 3]) -> EndCondition<f32> {
     EndCondition::pinned().driven(PrescribedMotion::push(Vec3::new(v[0], v[1], v[2])))
 }
 
+/// State, parameters and end conditions of one test rod.
+type TestRod = (RodState<f32>, RodParams<f32>, [EndCondition<f32>; 2]);
+
 struct Case {
-    rods: Vec<(RodState<f32>, RodParams<f32>, [EndCondition<f32>; 2])>,
+    rods: Vec<TestRod>,
     spec: RodContactSpec,
 }
 
