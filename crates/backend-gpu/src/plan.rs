@@ -936,6 +936,51 @@ mod tests {
         assert!(longest.cfg.flags.contains(&"PERSTEP"));
     }
 
+    /// Rods in contact (the knot's two strands of 256 elements) share one workgroup on the
+    /// single-workgroup path, their arrays within the adapter's workgroup memory, each rod on
+    /// its own run of threads; the items name their first entries in the group's arrays.
+    #[test]
+    fn rods_in_contact_share_one_workgroup() {
+        for adapter in [h100(), lavapipe()] {
+            let limits = wgpu::Limits {
+                max_compute_workgroup_storage_size: adapter.max_workgroup_storage,
+                ..wgpu::Limits::default()
+            };
+            let mut rods = rods(&[256, 256]);
+            for r in &mut rods {
+                r.rod_contact = Some(crate::GpuRodContact {
+                    self_collisions: true,
+                    static_friction: 0.4,
+                    kinetic_friction: 0.3,
+                    margin: 2e-4,
+                    segments_per_sphere: 4,
+                });
+            }
+            let p = Plan::new(
+                &rods,
+                &settings(),
+                &GpuOptions::default(),
+                &Tuning::PRODUCTION,
+                &adapter,
+                &limits,
+            )
+            .expect("a plan");
+            eprintln!("{}: {}", adapter.name, p.describe());
+            assert_eq!(p.path, KernelPath::SingleWorkgroup);
+            assert!(p.cfg.flags.contains(&"RODC") && !p.cfg.flags.contains(&"BIND"));
+            assert_eq!((p.workgroups, p.groups.clone()), (1, vec![[0, 2]]));
+            let r = p.cfg.rodc;
+            assert_eq!((r.points, r.spheres, r.per_sphere), (514, 128, 4));
+            let lanes = 257u32.div_ceil(p.cfg.per_thread);
+            assert_eq!((p.items[0].lane0, p.items[1].lane0), (0, lanes));
+            assert!(2 * lanes <= p.cfg.threads);
+            let s = &p.strands;
+            assert_eq!((s[0].xp, s[1].xp, s[0].xs, s[1].xs), (0, 257, 0, 64));
+            // 1 cm elements of a 5 mm rod with a 0.2 mm margin: ⌊2 · 5.1 / 10⌋ + 1.
+            assert_eq!(s[0].skip, 2);
+        }
+    }
+
     /// Many short rods go one per subgroup, four per workgroup, where the subgroup size is fixed.
     #[test]
     fn many_short_rods_take_the_subgroup_layout() {
