@@ -87,7 +87,9 @@ pub struct GpuRodInput {
 /// (`cosserat_backend_cpu::coupling`), found by the collide crate's bounding spheres and
 /// segment–segment test (`cosserat_collide::RodCollider`) and resolved inside the constraint
 /// iterations (`cosserat_constraints::RodContactSet`). The rods that have it share one
-/// workgroup (at most four rods; `shaders/rod_contact.wgsl`).
+/// workgroup (at most four rods; `shaders/rod_contact.wgsl`). The bounding spheres' size is the
+/// kernel's own (`plan::RODC_SEGMENTS_PER_SPHERE`): the broad phase only culls, so the contacts
+/// are those of testing every segment pair whatever it is.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpuRodContact {
     /// Whether a rod collides with itself.
@@ -99,8 +101,6 @@ pub struct GpuRodContact {
     /// Speculative margin [m]: segments this close get a contact that stops them meeting within
     /// the step.
     pub margin: f32,
-    /// Segments per broad-phase bounding sphere.
-    pub segments_per_sphere: u32,
 }
 
 /// A binding of the rod it belongs to (the inner rod, a guidewire) to the centreline of an outer

@@ -243,12 +243,10 @@ impl Plan {
         };
         // Rod contact keeps in workgroup memory, per point of the largest group, its position or
         // velocity (a vec4), its number of contacts and its impulse (4 words), and per bounding
-        // sphere a vec4, what it covers (2 words) and room for 16 overlapping pairs.
+        // sphere a vec4, what it covers (2 words) and room for its overlapping pairs; the step's
+        // contacts are listed in storage.
         let rodc_shape = if rodc {
-            let per_sphere = rods
-                .iter()
-                .find_map(|r| r.rod_contact.map(|c| c.segments_per_sphere.max(1)))
-                .unwrap_or(4);
+            let per_sphere = RODC_SEGMENTS_PER_SPHERE;
             let points = group_points(&|r| rods[r].rod_contact.is_some());
             let spheres = coupled
                 .iter()
@@ -262,14 +260,15 @@ impl Plan {
                 .unwrap_or(1);
             if spheres >= 1 << 16 {
                 return Err(GpuError::InvalidInput(format!(
-                    "rod contact with {spheres} bounding spheres; at most 65 535 (use more segments_per_sphere)"
+                    "rod contact with {spheres} bounding spheres; at most 65 535"
                 )));
             }
             RodcShape {
                 points,
                 spheres,
                 per_sphere,
-                pairs: 16 * spheres,
+                // Every pair of spheres, or 32 a sphere (the knot's tightened core has ~10).
+                pairs: (spheres * (spheres + 1) / 2).min(32 * spheres),
                 per_thread: RODC_PER_THREAD,
             }
         } else {
@@ -738,10 +737,18 @@ fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG], groups: &[[u32; 2]])
     out
 }
 
-/// Contacts one thread keeps for its step's sweeps (`RC_CAP`): the candidates are dealt out
-/// over the workgroup's threads in turn, so a thread holds about its share of the contacts; a
-/// step that finds more is reported (`GpuError::InvalidInput` at the next read).
+/// Contacts one thread keeps for its step's sweeps (`RC_CAP`): the step's contacts are listed
+/// and dealt out over the workgroup's threads in turn, so the workgroup holds this many times
+/// its threads; a step that finds more is reported (`GpuError::InvalidInput` at the next read).
 pub(crate) const RODC_PER_THREAD: u32 = 16;
+
+/// Segments per bounding sphere of the GPU's broad phase (`RC_K`). The CPU's
+/// `segments_per_sphere` is not taken: spheres only cull, so any size finds the contacts of
+/// testing every segment pair (collide rods.rs), and one thread tests a sphere pair's
+/// segments, which wants fewer, longer spheres than the CPU's loop over pairs: with 8, the
+/// knot's tightened core has ~4 times fewer pairs than with 4 and its arrays fit the H100's
+/// workgroup memory.
+pub(crate) const RODC_SEGMENTS_PER_SPHERE: u32 = 8;
 
 /// Each item's part in rod contact ([`StrandG`]): its first entries in its workgroup's point and
 /// sphere arrays (after the group's earlier rods), its bounding spheres, and its self-contact
@@ -953,7 +960,6 @@ mod tests {
                     static_friction: 0.4,
                     kinetic_friction: 0.3,
                     margin: 2e-4,
-                    segments_per_sphere: 4,
                 });
             }
             let p = Plan::new(
@@ -970,12 +976,12 @@ mod tests {
             assert!(p.cfg.flags.contains(&"RODC") && !p.cfg.flags.contains(&"BIND"));
             assert_eq!((p.workgroups, p.groups.clone()), (1, vec![[0, 2]]));
             let r = p.cfg.rodc;
-            assert_eq!((r.points, r.spheres, r.per_sphere), (514, 128, 4));
+            assert_eq!((r.points, r.spheres, r.per_sphere), (514, 64, 8));
             let lanes = 257u32.div_ceil(p.cfg.per_thread);
             assert_eq!((p.items[0].lane0, p.items[1].lane0), (0, lanes));
             assert!(2 * lanes <= p.cfg.threads);
             let s = &p.strands;
-            assert_eq!((s[0].xp, s[1].xp, s[0].xs, s[1].xs), (0, 257, 0, 64));
+            assert_eq!((s[0].xp, s[1].xp, s[0].xs, s[1].xs), (0, 257, 0, 32));
             // 1 cm elements of a 5 mm rod with a 0.2 mm margin: ⌊2 · 5.1 / 10⌋ + 1.
             assert_eq!(s[0].skip, 2);
         }

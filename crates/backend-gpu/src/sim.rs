@@ -143,6 +143,9 @@ pub(crate) struct RodcBuffers {
     /// smallest distance over the radii (f32 bits), steps, contacts and sphere pairs that did
     /// not fit the kernel's arrays, and 0.
     pub(crate) stats: wgpu::Buffer,
+    /// Per workgroup, the step's contacts (three `vec4` each, `RC_LIST` of them): scratch of
+    /// one step.
+    list: wgpu::Buffer,
 }
 
 /// Statistics words per group of a kernel with rod contact.
@@ -534,6 +537,14 @@ impl GpuSimulation {
                     bytemuck::cast_slice(&rodc_stats_init(plan.groups.len())),
                     storage,
                 ),
+                list: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("rod contact list"),
+                    size: 48
+                        * u64::from(plan.cfg.threads * plan.cfg.rodc.per_thread)
+                        * plan.groups.len() as u64,
+                    usage: plain,
+                    mapped_at_creation: false,
+                }),
             }
         });
         let touch_buf = has_touch.then(|| {
@@ -674,7 +685,7 @@ impl GpuSimulation {
             entries.extend([ro(27), ro(28), rw(31)]);
         }
         if rodc_bufs.is_some() {
-            entries.extend([ro(27), ro(29), rw(30)]);
+            entries.extend([ro(27), ro(29), rw(30), rw(32)]);
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -825,7 +836,12 @@ impl GpuSimulation {
                 }
             }
             if let Some(b) = &rodc_bufs {
-                for (binding, buf) in [(27, &b.groups), (29, &b.strands), (30, &b.stats)] {
+                for (binding, buf) in [
+                    (27, &b.groups),
+                    (29, &b.strands),
+                    (30, &b.stats),
+                    (32, &b.list),
+                ] {
                     e.push(wgpu::BindGroupEntry {
                         binding,
                         resource: whole(buf),
@@ -1361,12 +1377,11 @@ pub(crate) fn validate(
             if !(ok(c.static_friction)
                 && ok(c.kinetic_friction)
                 && ok(c.margin)
-                && c.segments_per_sphere >= 1
                 && rod.params.radius.is_finite()
                 && rod.params.radius > 0.0)
             {
                 return Err(GpuError::InvalidInput(format!(
-                    "rod {r}: rod contact needs finite friction and margin >= 0, segments_per_sphere >= 1 and a radius > 0"
+                    "rod {r}: rod contact needs finite friction and margin >= 0 and a radius > 0"
                 )));
             }
         }

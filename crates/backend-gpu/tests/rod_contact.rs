@@ -78,7 +78,6 @@ fn gpu_spec(s: &RodContactSpec) -> GpuRodContact {
         static_friction: s.friction.static_coefficient as f32,
         kinetic_friction: s.friction.kinetic_coefficient as f32,
         margin: s.margin as f32,
-        segments_per_sphere: s.segments_per_sphere as u32,
     }
 }
 

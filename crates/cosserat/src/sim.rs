@@ -1058,7 +1058,6 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
         static_friction: c.friction.static_coefficient as f32,
         kinetic_friction: c.friction.kinetic_coefficient as f32,
         margin: c.margin as f32,
-        segments_per_sphere: c.segments_per_sphere.max(1) as u32,
     });
     let inputs = rods
         .into_iter()

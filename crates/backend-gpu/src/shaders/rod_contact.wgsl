@@ -16,9 +16,11 @@
 //   2. the spheres, dealt out over all threads of the workgroup, in `rcw_s`;
 //   3. the sphere pairs (every pair, as the CPU's `AllPairs`: the same pairs as its sweep and
 //      prune), appended to `rcw_pairs`;
-//   4. the candidate segment pairs, RC_K × RC_K per sphere pair, dealt out in turn; a thread
-//      keeps the contacts it finds in its own registers for the step (RC_CAP of them), and each
-//      contact counts itself on its four points (`rcw_cnt`).
+//   4. the segment pairs of each sphere pair, one thread a pair (`rc_pair`), culled by the
+//      segments' reach as on the CPU; the contacts are listed in storage (`rc_list`, one
+//      region per workgroup) and each counts itself on its four points (`rcw_cnt`);
+//   5. the list is dealt out over the threads in turn, each keeping its share (at most RC_CAP)
+//      in registers for the step's sweeps.
 //
 // Where the CPU resolves the contacts one after another (projected Gauss–Seidel), the GPU
 // resolves them all at once after every constraint iteration (Jacobi), each contact seeing its
@@ -44,14 +46,17 @@ struct Strand {
 }
 
 @group(0) @binding(29) var<storage, read> strands: array<Strand>;
+// The contacts of the step, per workgroup RC_LIST of three words each: (a0, b0, s, t), (n,
+// −gap / h), (distance, radii, 0, 0), floats as bits.
+@group(0) @binding(32) var<storage, read_write> rc_list: array<vec4<u32>>;
+// Contacts a workgroup can list in a step.
+const RC_LIST: u32 = WG * RC_CAP;
 // Per group, RC_STATS words (sim.rs `RodcBuffers::stats`).
 @group(0) @binding(30) var<storage, read_write> rc_stats: array<atomic<u32>>;
 
 const RC_STATS: u32 = 8u;
-// Words of `rcw_stat`: contacts of the step (by the step's parity), the smallest distance of
-// the dispatch and the radii of that pair (f32 bits), the smallest distance over the radii,
-// contacts and sphere pairs dropped.
-const RCW_STEP: u32 = 0u;
+// Words of `rcw_stat`: the smallest distance of the dispatch and the radii of that pair (f32
+// bits), the smallest distance over the radii, contacts and sphere pairs dropped.
 const RCW_MIND: u32 = 2u;
 const RCW_RAD: u32 = 3u;
 const RCW_MINR: u32 = 4u;
@@ -72,9 +77,12 @@ var<workgroup> rcw_m: array<vec2<u32>, RC_SPH>;
 // Overlapping sphere pairs of the step, `i << 16 | j` with i <= j, and their number.
 var<workgroup> rcw_pairs: array<u32, RC_PAIRS>;
 var<workgroup> rcw_np: atomic<u32>;
+// Contacts listed this step.
+var<workgroup> rcw_nc: atomic<u32>;
 var<workgroup> rcw_stat: array<atomic<u32>, 8>;
 
-// Sphere `q` of the group whose items start at `first`: its item, first segment and segments.
+// Sphere `q` of the group whose items start at `first`: its item, first segment and segments
+// (from the strands; the sphere phase records them in `rcw_m`).
 struct RcSphere {
     item: u32,
     first: u32,
@@ -152,91 +160,142 @@ fn rc_fallback_normal(d1: vec3<f32>, d2: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0, 0.0, 1.0);
 }
 
-// A contact found by `rc_candidate`: the group entries of a0 and b0, the parameters, the
-// normal from b to a, the centreline distance and the radii summed.
-struct RcFound {
-    on: bool,
-    ia: u32,
-    ib: u32,
-    st: vec2<f32>,
-    n: vec3<f32>,
-    dist: f32,
-    radii: f32,
+// Whether segment pq can come within `reach` of `c` (rods.rs `may_touch`): it lies within half
+// its length of its midpoint; conservative, with a slack against rounding.
+fn rc_may_touch(p: vec3<f32>, q: vec3<f32>, c: vec3<f32>, reach: f32) -> bool {
+    let d = 0.5 * (p + q) - c;
+    let r = (0.5 * length(q - p) + reach) * (1.0 + 1.0e-6);
+    return dot(d, d) < r * r;
 }
 
-// Candidate `q` of the step's sphere pairs (RC_K × RC_K segment pairs each): the segment
-// pairs the CPU's narrow phase tests (rods.rs `narrow`: a sphere with itself only j > i, a rod
-// with itself only |i − j| > skip), culled by their midpoints (conservatively, as there), then
-// closest points; a contact where the capsules of radius r + margin / 2 overlap.
-fn rc_candidate(q: u32) -> RcFound {
-    var out = RcFound(false, 0u, 0u, vec2<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
-    let pair = rcw_pairs[q / (RC_K * RC_K)];
+// Lists a contact of the step: its points' group entries, parameters, normal and bias, distance
+// and radii; counts it on its four points and in the nearest-pair statistics.
+fn rc_push(ia: u32, ib: u32, st: vec2<f32>, n: vec3<f32>, dist: f32, radii: f32, list: u32, inv_h: f32) {
+    let k = atomicAdd(&rcw_nc, 1u);
+    atomicMin(&rcw_stat[RCW_MIND], bitcast<u32>(dist));
+    atomicMin(&rcw_stat[RCW_MINR], bitcast<u32>(dist / radii));
+    if k >= RC_LIST {
+        return;
+    }
+    let o = list + 3u * k;
+    rc_list[o] = vec4<u32>(ia, ib, bitcast<u32>(st.x), bitcast<u32>(st.y));
+    rc_list[o + 1u] = bitcast<vec4<u32>>(vec4<f32>(n, (radii - dist) * inv_h));
+    rc_list[o + 2u] = vec4<u32>(bitcast<u32>(dist), bitcast<u32>(radii), 0u, 0u);
+    atomicAdd(&rcw_cnt[ia], 1u);
+    atomicAdd(&rcw_cnt[ia + 1u], 1u);
+    atomicAdd(&rcw_cnt[ib], 1u);
+    atomicAdd(&rcw_cnt[ib + 1u], 1u);
+}
+
+// The segment pairs of the step's sphere pair `q` (rods.rs `narrow`): a sphere with itself only
+// j > i, a rod with itself only |i − j| > skip; a segment tested only if it can reach the other
+// sphere, a pair only if their midpoints are near enough (all conservative, as there), then
+// closest points; a contact where the capsules of radius r + margin / 2 overlap, listed from
+// `list` on.
+fn rc_pair(q: u32, list: u32, inv_h: f32) {
+    let pair = rcw_pairs[q];
     let i = pair >> 16u;
     let j = pair & 0xffffu;
-    let ii = (q / RC_K) % RC_K;
-    let jj = q % RC_K;
     let sa = rc_sphere(i);
     let sb = rc_sphere(j);
-    if ii >= sa.count || jj >= sb.count || (i == j && jj <= ii) {
-        return out;
-    }
     let ka = strands[sa.item];
     let kb = strands[sb.item];
-    let seg_a = sa.first + ii;
-    let seg_b = sb.first + jj;
-    if sa.item == sb.item && max(seg_a, seg_b) - min(seg_a, seg_b) <= ka.skip {
-        return out;
+    let ca = rcw_s[i];
+    let cb = rcw_s[j];
+    let ra = ka.radius + ka.half_margin;
+    let rb = kb.radius + kb.half_margin;
+    let rr = ra + rb;
+    // The segments of b that can reach sphere a.
+    var mask_b = 0u;
+    for (var jj = 0u; jj < sb.count; jj++) {
+        let ib = kb.xp + sb.first + jj;
+        if i == j || rc_may_touch(rcw_x[ib].xyz, rcw_x[ib + 1u].xyz, ca.xyz, ca.w + rb) {
+            mask_b |= 1u << jj;
+        }
     }
-    let ia = ka.xp + seg_a;
-    let ib = kb.xp + seg_b;
-    let p1 = rcw_x[ia].xyz;
-    let q1 = rcw_x[ia + 1u].xyz;
-    let p2 = rcw_x[ib].xyz;
-    let q2 = rcw_x[ib + 1u].xyz;
-    let rr = ka.radius + ka.half_margin + kb.radius + kb.half_margin;
-    let reach = (0.5 * (length(q1 - p1) + length(q2 - p2)) + rr) * (1.0 + 1.0e-6);
-    let dm = 0.5 * (p1 + q1 - p2 - q2);
-    if dot(dm, dm) >= reach * reach {
-        return out;
-    }
-    let st = rc_closest(p1, q1, p2, q2);
-    let d = (p1 + (q1 - p1) * st.x) - (p2 + (q2 - p2) * st.y);
-    let d2 = dot(d, d);
-    if d2 >= rr * rr {
-        return out;
-    }
-    let dist = sqrt(d2);
-    var n = vec3<f32>(0.0);
-    if dist > 0.0 {
-        n = d / dist;
-    } else {
-        n = rc_fallback_normal(q1 - p1, q2 - p2);
-    }
-    return RcFound(true, ia, ib, st, n, dist, ka.radius + kb.radius);
-}
-
-// Adds `p` to the impulse point `k` receives in this sweep (compare-exchange on f32 bits; few
-// contacts share a point, so a try rarely fails; one that fails 64 times is counted as
-// dropped, which the host reports).
-fn rc_add(k: u32, p: vec3<f32>) {
-    for (var c = 0u; c < 3u; c++) {
-        let x = p[c];
-        if x == 0.0 {
+    for (var ii = 0u; ii < sa.count; ii++) {
+        let seg_a = sa.first + ii;
+        let ia = ka.xp + seg_a;
+        let p1 = rcw_x[ia].xyz;
+        let q1 = rcw_x[ia + 1u].xyz;
+        if i != j && !rc_may_touch(p1, q1, cb.xyz, cb.w + ra) {
             continue;
         }
-        var old = atomicLoad(&rcw_j[3u * k + c]);
-        var done = false;
-        for (var tries = 0u; tries < 64u; tries++) {
-            let r = atomicCompareExchangeWeak(&rcw_j[3u * k + c], old, bitcast<u32>(bitcast<f32>(old) + x));
-            if r.exchanged {
-                done = true;
-                break;
+        let m1 = 0.5 * (p1 + q1);
+        let e1 = 0.5 * length(q1 - p1);
+        var jj = select(0u, ii + 1u, i == j);
+        for (; jj < sb.count; jj++) {
+            let seg_b = sb.first + jj;
+            // Same rod: b comes after a, so the difference is seg_b − seg_a.
+            if (mask_b & (1u << jj)) == 0u || (sa.item == sb.item && seg_b - seg_a <= ka.skip) {
+                continue;
             }
-            old = r.old_value;
+            let ib = kb.xp + seg_b;
+            let p2 = rcw_x[ib].xyz;
+            let q2 = rcw_x[ib + 1u].xyz;
+            if !rc_may_touch(p2, q2, m1, e1 + rr) {
+                continue;
+            }
+            let st = rc_closest(p1, q1, p2, q2);
+            let d = (p1 + (q1 - p1) * st.x) - (p2 + (q2 - p2) * st.y);
+            let d2 = dot(d, d);
+            if d2 >= rr * rr {
+                continue;
+            }
+            let dist = sqrt(d2);
+            var n = vec3<f32>(0.0);
+            if dist > 0.0 {
+                n = d / dist;
+            } else {
+                n = rc_fallback_normal(q1 - p1, q2 - p2);
+            }
+            rc_push(ia, ib, st, n, dist, ka.radius + kb.radius, list, inv_h);
         }
-        if !done {
-            atomicAdd(&rcw_stat[RCW_DROP], 1u);
+    }
+}
+
+// The word of component `k % 3` of the `k / 3`-th of a contact's points a0, a0 + 1, b0, b0 + 1
+// in `rcw_j`, and its share of the impulse `p` (weights `c`, b's negative).
+fn rc_word(ia: u32, ib: u32, k: u32) -> u32 {
+    let pt = select(ib + k / 3u - 2u, ia + k / 3u, k < 6u);
+    return 3u * pt + k % 3u;
+}
+
+// Adds a contact's impulse `p`, shared by the weights `c`, to the impulses its four points
+// receive in this sweep: compare-exchanges on f32 bits, all twelve issued before any is waited
+// for, then retried where another contact of a shared point came between (few contacts share a
+// point, so few are). One that fails 64 times is counted as dropped, which the host reports.
+fn rc_add4(ia: u32, ib: u32, c: vec4<f32>, p: vec3<f32>) {
+    var old: array<u32, 12>;
+    for (var k = 0u; k < 12u; k++) {
+        old[k] = atomicLoad(&rcw_j[rc_word(ia, ib, k)]);
+    }
+    var left = 0u;
+    for (var k = 0u; k < 12u; k++) {
+        let x = c[k / 3u] * p[k % 3u];
+        if x != 0.0 {
+            let r = atomicCompareExchangeWeak(&rcw_j[rc_word(ia, ib, k)], old[k], bitcast<u32>(bitcast<f32>(old[k]) + x));
+            if !r.exchanged {
+                left |= 1u << k;
+                old[k] = r.old_value;
+            }
         }
+    }
+    for (var tries = 0u; tries < 64u && left != 0u; tries++) {
+        for (var k = 0u; k < 12u; k++) {
+            if (left & (1u << k)) != 0u {
+                let x = c[k / 3u] * p[k % 3u];
+                let r = atomicCompareExchangeWeak(&rcw_j[rc_word(ia, ib, k)], old[k], bitcast<u32>(bitcast<f32>(old[k]) + x));
+                if r.exchanged {
+                    left &= ~(1u << k);
+                } else {
+                    old[k] = r.old_value;
+                }
+            }
+        }
+    }
+    if left != 0u {
+        atomicAdd(&rcw_stat[RCW_DROP], countOneBits(left));
     }
 }
 

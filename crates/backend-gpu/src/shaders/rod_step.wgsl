@@ -770,8 +770,8 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     // Rod contact (rod_contact.wgsl): this rod's part and the group's spheres; the contacts
     // this thread finds at a step's start stay in its registers for the step's sweeps: the
     // group entries of their first points, their parameters, normal and bias (−gap / h), split
-    // effective inverse mass and its inverse, accumulated friction and normal impulses, and
-    // distance and radii.
+    // effective inverse mass and its inverse, and accumulated friction and normal impulses; the
+    // workgroup's region of the step's contact list.
     let rc_grp = groups[wid.x];
     let sd = strands[item_index];
     let rc_last = strands[rc_grp.x + rc_grp.y - 1u];
@@ -782,9 +782,9 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     var rc_nb: array<vec4<f32>, RC_CAP>;
     var rc_w: array<vec2<f32>, RC_CAP>;
     var rc_l: array<vec4<f32>, RC_CAP>;
-    var rc_dr: array<vec2<f32>, RC_CAP>;
     var rc_count = 0u;
     var rc_max = 0u;
+    let rc_list0 = wid.x * 3u * RC_LIST;
 //#for e 0 EPT
     if it.w0 + b0 + {e} < it.w1 {
         let k = sd.xp + it.w0 + b0 + {e};
@@ -1632,7 +1632,6 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#if RODC
         // Rod contact: the contacts of the step, found at its start (coupling.rs `detect`,
         // collide rods.rs), each phase dealt out over all the workgroup's threads.
-        let rc_par = step & 1u;
 //#for e 0 EPT
         if it.w0 + b0 + {e} < it.w1 {
             let k = sd.xp + it.w0 + b0 + {e};
@@ -1642,7 +1641,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
         if tid == 0u {
             atomicStore(&rcw_np, 0u);
-            atomicStore(&rcw_stat[RCW_STEP + (rc_par ^ 1u)], 0u);
+            atomicStore(&rcw_nc, 0u);
         }
         workgroupBarrier();
         // Bounding spheres (rods.rs `build_spheres`): the centre of the points' box, the
@@ -1677,21 +1676,22 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             if j < i {
                 continue;
             }
-            let si = rc_sphere(i);
-            let sj = rc_sphere(j);
-            var want = true;
-            if si.item == sj.item {
-                let skip = strands[si.item].skip;
-                if i == j {
-                    want = skip != NONE && si.count > skip + 1u;
+            let d = rcw_s[i].xyz - rcw_s[j].xyz;
+            let rr = rcw_s[i].w + rcw_s[j].w;
+            var want = i == j || dot(d, d) < rr * rr;
+            if want {
+                let si = rc_sphere(i);
+                let sj = rc_sphere(j);
+                if si.item == sj.item {
+                    let skip = strands[si.item].skip;
+                    if i == j {
+                        want = skip != NONE && si.count > skip + 1u;
+                    } else {
+                        want = skip != NONE && sj.first + sj.count - 1u - si.first > skip;
+                    }
                 } else {
-                    want = skip != NONE && sj.first + sj.count - 1u - si.first > skip;
+                    want = i != j;
                 }
-            }
-            if want && i != j {
-                let d = rcw_s[i].xyz - rcw_s[j].xyz;
-                let rr = rcw_s[i].w + rcw_s[j].w;
-                want = dot(d, d) < rr * rr;
             }
             if want {
                 let k = atomicAdd(&rcw_np, 1u);
@@ -1701,47 +1701,34 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             }
         }
         workgroupBarrier();
-        // The segment pairs of the sphere pairs (rods.rs `narrow`); a pair or contact that does
-        // not fit is counted (and makes the host's next read fail).
+        // The segment pairs of the sphere pairs (rods.rs `narrow`), one thread a pair; a pair or
+        // contact that does not fit is counted (and makes the host's next read fail).
         let rc_np = atomicLoad(&rcw_np);
-        if tid == 0u && rc_np > RC_PAIRS {
-            atomicAdd(&rcw_stat[RCW_DROP], rc_np - RC_PAIRS);
+        for (var q = tid; q < min(rc_np, RC_PAIRS); q += WG) {
+            rc_pair(q, rc_list0, inv_h);
         }
-        rc_count = 0u;
-        for (var q = tid; q < min(rc_np, RC_PAIRS) * RC_K * RC_K; q += WG) {
-            let f = rc_candidate(q);
-            if f.on {
-                if rc_count < RC_CAP {
-                    rc_ia[rc_count] = f.ia;
-                    rc_ib[rc_count] = f.ib;
-                    rc_st[rc_count] = f.st;
-                    rc_nb[rc_count] = vec4<f32>(f.n, (f.radii - f.dist) * inv_h);
-                    rc_dr[rc_count] = vec2<f32>(f.dist, f.radii);
-                    rc_count += 1u;
-                    atomicAdd(&rcw_cnt[f.ia], 1u);
-                    atomicAdd(&rcw_cnt[f.ia + 1u], 1u);
-                    atomicAdd(&rcw_cnt[f.ib], 1u);
-                    atomicAdd(&rcw_cnt[f.ib + 1u], 1u);
-                    atomicAdd(&rcw_stat[RCW_STEP + rc_par], 1u);
-                    atomicMin(&rcw_stat[RCW_MIND], bitcast<u32>(f.dist));
-                    atomicMin(&rcw_stat[RCW_MINR], bitcast<u32>(f.dist / f.radii));
-                } else {
-                    atomicAdd(&rcw_stat[RCW_DROP], 1u);
-                }
+        storageBarrier();
+        workgroupBarrier();
+        let rc_nc = atomicLoad(&rcw_nc);
+        if tid == 0u {
+            rc_max = max(rc_max, rc_nc);
+            let over = select(0u, rc_np - RC_PAIRS, rc_np > RC_PAIRS) + select(0u, rc_nc - RC_LIST, rc_nc > RC_LIST);
+            if over > 0u {
+                atomicAdd(&rcw_stat[RCW_DROP], over);
             }
         }
-        workgroupBarrier();
-        if tid == 0u {
-            rc_max = max(rc_max, atomicLoad(&rcw_stat[RCW_STEP + rc_par]));
-        }
-        // Each contact's effective inverse mass with its points' masses split among their
-        // contacts, and the radii of the nearest pair so far.
+        // Each thread's share of the list, with each contact's effective inverse mass, its
+        // points' masses split among their contacts; and the radii of the nearest pair so far.
         let rc_min = atomicLoad(&rcw_stat[RCW_MIND]);
-        for (var k = 0u; k < rc_count; k++) {
-            let st = rc_st[k];
+        rc_count = 0u;
+        for (var k = tid; k < min(rc_nc, RC_LIST); k += WG) {
+            let o = rc_list0 + 3u * k;
+            let e0 = rc_list[o];
+            let ia = e0.x;
+            let ib = e0.y;
+            let st = bitcast<vec2<f32>>(e0.zw);
+            let e2 = bitcast<vec2<f32>>(rc_list[o + 2u].xy);
             let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
-            let ia = rc_ia[k];
-            let ib = rc_ib[k];
             let w = vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w);
             let m = vec4<f32>(
                 f32(atomicLoad(&rcw_cnt[ia])),
@@ -1750,11 +1737,16 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 f32(atomicLoad(&rcw_cnt[ib + 1u])),
             );
             let ww = dot(c * c, w * m);
-            rc_w[k] = vec2<f32>(ww, select(0.0, 1.0 / ww, ww > 0.0));
-            rc_l[k] = vec4<f32>(0.0);
-            if bitcast<u32>(rc_dr[k].x) == rc_min {
-                atomicStore(&rcw_stat[RCW_RAD], bitcast<u32>(rc_dr[k].y));
+            rc_ia[rc_count] = ia;
+            rc_ib[rc_count] = ib;
+            rc_st[rc_count] = st;
+            rc_nb[rc_count] = bitcast<vec4<f32>>(rc_list[o + 1u]);
+            rc_w[rc_count] = vec2<f32>(ww, select(0.0, 1.0 / ww, ww > 0.0));
+            rc_l[rc_count] = vec4<f32>(0.0);
+            if bitcast<u32>(e2.x) == rc_min {
+                atomicStore(&rcw_stat[RCW_RAD], bitcast<u32>(e2.y));
             }
+            rc_count += 1u;
         }
         workgroupBarrier();
 //#endif
@@ -2009,10 +2001,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let rs = rc_resolve(v, nb.xyz, nb.w, w.x, w.y, l.w, l.xyz, sd.mu_s, sd.mu_k);
                 rc_l[k] = vec4<f32>(rs.lt, rs.ln);
                 if any(rs.p != vec3<f32>(0.0)) {
-                    rc_add(ia, rs.p * c.x);
-                    rc_add(ia + 1u, rs.p * c.y);
-                    rc_add(ib, rs.p * -c.z);
-                    rc_add(ib + 1u, rs.p * -c.w);
+                    rc_add4(ia, ib, c * vec4<f32>(1.0, 1.0, -1.0, -1.0), rs.p);
                 }
             }
             workgroupBarrier();
@@ -2203,8 +2192,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     // the steps and what did not fit (one thread per group writes them).
     if tid == 0u && steps_done > 0u {
         let o = wid.x * RC_STATS;
-        let lp = (params.base_step + chunk.offset + steps_done - 1u) & 1u;
-        atomicStore(&rc_stats[o + 2u], atomicLoad(&rcw_stat[RCW_STEP + lp]));
+        atomicStore(&rc_stats[o + 2u], atomicLoad(&rcw_nc));
         atomicMax(&rc_stats[o + 3u], rc_max);
         let md = atomicLoad(&rcw_stat[RCW_MIND]);
         if md < atomicLoad(&rc_stats[o]) {
