@@ -74,6 +74,13 @@ fn steppers() -> Vec<(&'static str, SimulationBuilder)> {
             bound.bind(inner, outer, BindingVariant::TwoWay),
         ),
         ("gpu explicit", explicit().backend(Backend::Gpu)),
+        (
+            "gpu rod contact",
+            explicit()
+                .with_rod(wire(0.015))
+                .rod_contacts(RodContactSpec::default())
+                .backend(Backend::Gpu),
+        ),
     ]
 }
 

@@ -30,8 +30,11 @@
 // effective inverse mass is W = Σ c_j² w_j m_j. The impulses are summed per point (`rcw_j`),
 // the whole impulse applied, so momentum is conserved and a contact's accumulated impulse is
 // what its points received, which keeps the clamping to a push and to the friction cones
-// exact. The fixed point is the CPU's; with few iterations the two differ by what each has not
-// yet converged (tests/rod_contact.rs states by how much).
+// exact. The sums are of integers (fixed point, `RC_FIX`), so they do not depend on the order in
+// which the threads add: a step is the same on every run, and a restored snapshot repeats its
+// steps bit for bit, as on every other kernel. The fixed point is the CPU's; with few
+// iterations the two differ by what each has not yet converged (tests/rod_contact.rs states by
+// how much).
 
 // A rod's part in rod contact (layout.rs `StrandG`).
 struct Strand {
@@ -62,13 +65,18 @@ const RCW_RAD: u32 = 3u;
 const RCW_MINR: u32 = 4u;
 const RCW_DROP: u32 = 5u;
 
-// The group's points at the step's start (position, inverse mass), then their velocities at
-// the start of each contact sweep.
+// The group's points at the step's start (position; w the inverse mass, or minus the mass of a
+// held point), then their velocities at the start of each contact sweep.
 var<workgroup> rcw_x: array<vec4<f32>, RC_PTS>;
 // Contacts touching each point this step.
 var<workgroup> rcw_cnt: array<atomic<u32>, RC_PTS>;
-// The impulse each point receives in a sweep (three f32 as bits, summed by compare-exchange).
-var<workgroup> rcw_j: array<atomic<u32>, 3 * RC_PTS>;
+// What each point receives in a sweep, as the velocity change it makes (a held point: the
+// impulse over its mass), in units of 1 / RC_FIX m/s: integers, whose sums do not depend on the
+// order of the additions.
+var<workgroup> rcw_j: array<atomic<i32>, 3 * RC_PTS>;
+// 2^20 units per m/s: 9.5e-7 m/s resolution (a point's position moves 1e-11 m per step of 10 µs
+// by it), ±2048 m/s range (a contact asking more has diverged).
+const RC_FIX: f32 = 1048576.0;
 // Bounding spheres: centre, radius (with the rod's radius and half the margin); and which
 // segments each covers (`rc_sphere`, as `item`, `first | count << 16`), so that the pair and
 // narrow phases look them up in workgroup memory.
@@ -254,58 +262,28 @@ fn rc_pair(q: u32, list: u32, inv_h: f32) {
     }
 }
 
-// The word of component `k % 3` of the `k / 3`-th of a contact's points a0, a0 + 1, b0, b0 + 1
-// in `rcw_j`, and its share of the impulse `p` (weights `c`, b's negative).
-fn rc_word(ia: u32, ib: u32, k: u32) -> u32 {
-    let pt = select(ib + k / 3u - 2u, ia + k / 3u, k < 6u);
-    return 3u * pt + k % 3u;
-}
-
-// Adds a contact's impulse `p`, shared by the weights `c`, to the impulses its four points
-// receive in this sweep: compare-exchanges on f32 bits, all twelve issued before any is waited
-// for, then retried where another contact of a shared point came between (few contacts share a
-// point, so few are). One that fails 64 times is counted as dropped, which the host reports.
-fn rc_add4(ia: u32, ib: u32, c: vec4<f32>, p: vec3<f32>) {
-    var old: array<u32, 12>;
-    for (var k = 0u; k < 12u; k++) {
-        old[k] = atomicLoad(&rcw_j[rc_word(ia, ib, k)]);
-    }
-    var left = 0u;
-    for (var k = 0u; k < 12u; k++) {
-        let x = c[k / 3u] * p[k % 3u];
-        if x != 0.0 {
-            let r = atomicCompareExchangeWeak(&rcw_j[rc_word(ia, ib, k)], old[k], bitcast<u32>(bitcast<f32>(old[k]) + x));
-            if !r.exchanged {
-                left |= 1u << k;
-                old[k] = r.old_value;
-            }
-        }
-    }
-    for (var tries = 0u; tries < 64u && left != 0u; tries++) {
-        for (var k = 0u; k < 12u; k++) {
-            if (left & (1u << k)) != 0u {
-                let x = c[k / 3u] * p[k % 3u];
-                let r = atomicCompareExchangeWeak(&rcw_j[rc_word(ia, ib, k)], old[k], bitcast<u32>(bitcast<f32>(old[k]) + x));
-                if r.exchanged {
-                    left &= ~(1u << k);
-                } else {
-                    old[k] = r.old_value;
-                }
-            }
-        }
-    }
-    if left != 0u {
-        atomicAdd(&rcw_stat[RCW_DROP], countOneBits(left));
+// Adds a contact's impulse `p`, shared by the weights `c` (b's negative), to what its four points
+// a0, a0 + 1, b0, b0 + 1 receive in this sweep, as velocity changes: `f` holds each point's
+// inverse mass, or for a held point one over its mass (what its thread multiplies back into
+// the held end's reaction).
+fn rc_add4(ia: u32, ib: u32, c: vec4<f32>, f: vec4<f32>, p: vec3<f32>) {
+    let pts = vec4<u32>(ia, ia + 1u, ib, ib + 1u);
+    for (var j = 0u; j < 4u; j++) {
+        let q = p * (c[j] * f[j] * RC_FIX);
+        atomicAdd(&rcw_j[3u * pts[j]], i32(round(q.x)));
+        atomicAdd(&rcw_j[3u * pts[j] + 1u], i32(round(q.y)));
+        atomicAdd(&rcw_j[3u * pts[j] + 2u], i32(round(q.z)));
     }
 }
 
-// Takes the impulse point `k` received in this sweep and clears it for the next.
+// Takes what point `k` received in this sweep (a velocity change, m/s) and clears it for the
+// next.
 fn rc_take(k: u32) -> vec3<f32> {
     return vec3<f32>(
-        bitcast<f32>(atomicExchange(&rcw_j[3u * k], 0u)),
-        bitcast<f32>(atomicExchange(&rcw_j[3u * k + 1u], 0u)),
-        bitcast<f32>(atomicExchange(&rcw_j[3u * k + 2u], 0u)),
-    );
+        f32(atomicExchange(&rcw_j[3u * k], 0)),
+        f32(atomicExchange(&rcw_j[3u * k + 1u], 0)),
+        f32(atomicExchange(&rcw_j[3u * k + 2u], 0)),
+    ) * (1.0 / RC_FIX);
 }
 
 struct RcResolved {

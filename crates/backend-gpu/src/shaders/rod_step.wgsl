@@ -785,12 +785,20 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     var rc_count = 0u;
     var rc_max = 0u;
     let rc_list0 = wid.x * 3u * RC_LIST;
+    // Each point's inverse mass, or minus its mass where it is held (`rcw_x`'s w).
+    var rc_m: array<f32, EPT>;
+//#for e 0 EPT
+    rc_m[{e}] = wm[{e+1}];
+    if it.w0 + b0 + {e} < it.w1 && !(wm[{e+1}] > 0.0) {
+        rc_m[{e}] = -slots[it.base + it.w0 + b0 + {e}].a.z;
+    }
+//#endfor
 //#for e 0 EPT
     if it.w0 + b0 + {e} < it.w1 {
         let k = sd.xp + it.w0 + b0 + {e};
-        atomicStore(&rcw_j[3u * k], 0u);
-        atomicStore(&rcw_j[3u * k + 1u], 0u);
-        atomicStore(&rcw_j[3u * k + 2u], 0u);
+        atomicStore(&rcw_j[3u * k], 0);
+        atomicStore(&rcw_j[3u * k + 1u], 0);
+        atomicStore(&rcw_j[3u * k + 2u], 0);
     }
 //#endfor
     if tid == 0u {
@@ -1635,7 +1643,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#for e 0 EPT
         if it.w0 + b0 + {e} < it.w1 {
             let k = sd.xp + it.w0 + b0 + {e};
-            rcw_x[k] = vec4<f32>(rx[{e+1}], wm[{e+1}]);
+            rcw_x[k] = vec4<f32>(rx[{e+1}], rc_m[{e}]);
             atomicStore(&rcw_cnt[k], 0u);
         }
 //#endfor
@@ -1729,7 +1737,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             let st = bitcast<vec2<f32>>(e0.zw);
             let e2 = bitcast<vec2<f32>>(rc_list[o + 2u].xy);
             let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
-            let w = vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w);
+            let w = max(vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w), vec4<f32>(0.0));
             let m = vec4<f32>(
                 f32(atomicLoad(&rcw_cnt[ia])),
                 f32(atomicLoad(&rcw_cnt[ia + 1u])),
@@ -1981,7 +1989,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
             // published, every contact resolved on them, each point's summed impulses taken.
 //#for e 0 EPT
             if it.w0 + b0 + {e} < it.w1 {
-                rcw_x[sd.xp + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], wm[{e+1}]);
+                rcw_x[sd.xp + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], rc_m[{e}]);
             }
 //#endfor
             workgroupBarrier();
@@ -2001,22 +2009,26 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
                 let rs = rc_resolve(v, nb.xyz, nb.w, w.x, w.y, l.w, l.xyz, sd.mu_s, sd.mu_k);
                 rc_l[k] = vec4<f32>(rs.lt, rs.ln);
                 if any(rs.p != vec3<f32>(0.0)) {
-                    rc_add4(ia, ib, c * vec4<f32>(1.0, 1.0, -1.0, -1.0), rs.p);
+                    let wf = vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w);
+                    let f = select(-1.0 / wf, wf, wf > vec4<f32>(0.0));
+                    rc_add4(ia, ib, c * vec4<f32>(1.0, 1.0, -1.0, -1.0), f, rs.p);
                 }
             }
             workgroupBarrier();
 //#for e 0 EPT
             if it.w0 + b0 + {e} < it.w1 {
-                let jp = rc_take(sd.xp + it.w0 + b0 + {e});
-                vx[{e+1}] += jp * wm[{e+1}];
+                let dv = rc_take(sd.xp + it.w0 + b0 + {e});
+                if rc_m[{e}] > 0.0 {
+                    vx[{e+1}] += dv;
+                }
 //#if REACT
-                // A held point does not move; what the contacts push on it is part of its
-                // reaction, as on the CPU.
+                // A held point does not move; what the contacts push on it (its velocity
+                // change times its mass) is part of its reaction, as on the CPU.
                 if u32({e}) == 0u && react0 {
-                    jr0 -= jp;
+                    jr0 += dv * rc_m[{e}];
                 }
                 if u32({e}) == rj1 {
-                    jr1 -= jp;
+                    jr1 += dv * rc_m[{e}];
                 }
 //#endif
             }
