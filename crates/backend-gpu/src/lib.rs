@@ -78,8 +78,8 @@ pub struct GpuRodInput {
     pub guide: Option<GpuGuide>,
     /// This rod is bound inside another one (a guidewire in a catheter).
     pub binding: Option<GpuBinding>,
-    /// This rod touches the other rods that have rod contact, and itself (`None`: it touches
-    /// no rod). Every rod that has it must have the same settings.
+    /// This rod touches the other rods and itself (`None`: it touches no rod). Every rod has it,
+    /// with the same settings, or none does.
     pub rod_contact: Option<GpuRodContact>,
 }
 

@@ -1364,6 +1364,12 @@ pub(crate) fn validate(
                 "rod {r}: state and parameter arrays do not match its {n} elements"
             )));
         }
+        if rod.rod_contact.is_none() && rods.iter().any(|r| r.rod_contact.is_some()) {
+            // The kernel with rod contact gives every rod its part in the group's arrays.
+            return Err(GpuError::InvalidInput(format!(
+                "rod {r} has no rod contact while others have: on the GPU every rod touches the others or none does"
+            )));
+        }
         if let (Some(c), Some(first)) = (
             &rod.rod_contact,
             rods.iter().find_map(|r| r.rod_contact.as_ref()),

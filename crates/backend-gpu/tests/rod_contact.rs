@@ -406,3 +406,35 @@ fn contacts_step_the_same_on_every_run_and_after_a_restore() {
         );
     }
 }
+
+/// What the kernel cannot step is refused before anything runs: rod contact on some rods only,
+/// with other settings on another rod, or on extensible rods.
+#[test]
+fn rod_contact_the_kernel_cannot_step_is_refused() {
+    let refused = |mut rods: Vec<GpuRodInput>, s: SolverSettings<f32>| {
+        GpuSimulation::new(std::mem::take(&mut rods), &s, GpuOptions::default())
+            .err()
+            .map(|e| e.to_string())
+    };
+    let case = crossing(0.4);
+    let mut some = case.gpu_input();
+    some[1].rod_contact = None;
+    let e = refused(some, settings()).expect("refused");
+    assert!(e.contains("every rod touches the others or none"), "{e}");
+    let mut other = case.gpu_input();
+    if let Some(c) = other[1].rod_contact.as_mut() {
+        c.margin *= 2.0;
+    }
+    let e = refused(other, settings()).expect("refused");
+    assert!(e.contains("settings differ"), "{e}");
+    // Checked when the kernel is planned, after an adapter is found.
+    let extensible = SolverSettings {
+        extensible: true,
+        ..settings()
+    };
+    let e = refused(case.gpu_input(), extensible).expect("refused");
+    assert!(
+        e.contains("inextensible rods only") || (!gpu_required() && e.contains("adapter")),
+        "{e}"
+    );
+}
