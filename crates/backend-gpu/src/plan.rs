@@ -587,14 +587,15 @@ impl Plan {
             + if mesh { ept * 256 } else { 0 }
             // A binding's walk along the outer rod and its compare-exchange loops.
             + if bind { ept * 64 + iterations * ept * 8 } else { 0 }
-            // Rod contact: the strided loops over spheres, sphere pairs and candidate segment
-            // pairs, and per sweep each contact's compare-exchange loops (a few tries each).
+            // Rod contact: the strided loops over spheres (and their points), sphere pairs and
+            // their segments (a sphere pair's k + k² tests on one thread), and per sweep each
+            // of the thread's contacts and its four points.
             + if rodc {
                 let (k, t) = (rodc_shape.per_sphere, threads.max(1));
                 let sph = rodc_shape.spheres;
-                (sph + sph * sph + rodc_shape.pairs * k * k) / t
+                (2 * sph * (k + 1) + sph * sph + rodc_shape.pairs * (k + k * k)) / t
                     + 8
-                    + rodc_shape.per_thread * (4 + iterations * 40)
+                    + rodc_shape.per_thread * (2 + iterations * 6)
             } else {
                 0
             };
