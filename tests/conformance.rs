@@ -74,6 +74,13 @@ fn steppers() -> Vec<(&'static str, SimulationBuilder)> {
             bound.bind(inner, outer, BindingVariant::TwoWay),
         ),
         ("gpu explicit", explicit().backend(Backend::Gpu)),
+        (
+            "gpu rod contact",
+            explicit()
+                .with_rod(wire(0.015))
+                .rod_contacts(RodContactSpec::default())
+                .backend(Backend::Gpu),
+        ),
     ]
 }
 
@@ -357,10 +364,12 @@ fn a_snapshot_of_another_stepper_is_refused() {
 
 #[test]
 fn a_scene_that_needs_what_the_stepper_lacks_is_refused_with_everything_missing() {
-    // The GPU lacks rod–rod contact and f64 (and is checked before any adapter is asked for).
+    // The GPU lacks direct distance constraints and f64, not rod–rod contact (and is checked
+    // before any adapter is asked for).
     let err = SimulationBuilder::new()
         .dt(EXPLICIT_DT)
         .double_precision(true)
+        .direct_constraints(true)
         .backend(Backend::Gpu)
         .with_rod(wire(0.0).guide(0.1))
         .with_rod(wire(0.015))
@@ -371,7 +380,8 @@ fn a_scene_that_needs_what_the_stepper_lacks_is_refused_with_everything_missing(
     let msg = err.to_string();
     if cfg!(feature = "gpu") {
         assert!(msg.contains("gpu explicit"), "{msg}");
-        assert!(msg.contains("rod–rod"), "{msg}");
+        assert!(msg.contains("direct distance constraints"), "{msg}");
+        assert!(!msg.contains("rod–rod"), "{msg}");
         assert!(msg.contains("f64"), "{msg}");
         assert!(!msg.contains("introducer guide"), "{msg}");
     }

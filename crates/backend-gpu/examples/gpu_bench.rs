@@ -68,6 +68,7 @@ fn pendulum(n: usize, angle: f64) -> GpuRodInput {
         wall: None,
         guide: None,
         binding: None,
+        rod_contact: None,
     }
 }
 

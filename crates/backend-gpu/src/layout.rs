@@ -192,6 +192,24 @@ gpu_struct! {
 }
 
 gpu_struct! {
+    /// A rod's part in rod contact (`strands`, binding 29; kernels with `RODC`): its first entry
+    /// in its workgroup's point arrays (`xp`) and sphere array (`xs`), its number of
+    /// bounding spheres, the self-contact skip (segment pairs `|i − j| <= skip` of the rod are
+    /// not tested; `NONE` when it does not touch itself), its radius, half the margin and the
+    /// friction coefficients.
+    struct StrandG as "Strand" {
+        xp: u32,
+        xs: u32,
+        spheres: u32,
+        skip: u32,
+        radius: f32,
+        half_margin: f32,
+        mu_s: f32,
+        mu_k: f32,
+    }
+}
+
+gpu_struct! {
     /// A held end's prescribed motion (`drives`, binding 4): velocity `v` and angular velocity
     /// `w` (world frame) during steps `[window[0], window[1])`.
     struct DriveG as "Drive" {
@@ -363,6 +381,7 @@ mod tests {
             ),
             (1, vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "CLAMP"]),
             (1, vec!["MESH", "BIND", "DRAG", "FAST", "REGC", "CLAMP"]),
+            (1, vec!["RODC", "DRAG", "FAST", "REGC", "CLAMP"]),
         ] {
             let cfg = KernelConfig {
                 threads: 64,
@@ -375,12 +394,16 @@ mod tests {
                 unroll: true,
                 bind_points: 0,
                 bind_inner: 0,
+                rodc: Default::default(),
                 flags: flags.clone(),
             };
             let src = cfg.source();
             let module = naga::front::wgsl::parse_str(&src)
                 .unwrap_or_else(|e| panic!("{flags:?}: {}", e.emit_to_string(&src)));
-            for layout in &SHARED {
+            // Rod contact's struct exists only in its kernels.
+            let rodc = [StrandG::LAYOUT];
+            let extra: &[GpuLayout] = if flags.contains(&"RODC") { &rodc } else { &[] };
+            for layout in SHARED.iter().chain(extra) {
                 let Some(wgsl) = wgsl_struct(&module, layout.wgsl) else {
                     panic!("{flags:?}: no struct `{}` in the kernel", layout.wgsl);
                 };
@@ -445,6 +468,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: Default::default(),
             flags: vec![],
         }
         .source();

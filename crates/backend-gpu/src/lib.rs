@@ -78,6 +78,29 @@ pub struct GpuRodInput {
     pub guide: Option<GpuGuide>,
     /// This rod is bound inside another one (a guidewire in a catheter).
     pub binding: Option<GpuBinding>,
+    /// This rod touches the other rods and itself (`None`: it touches no rod). Every rod has it,
+    /// with the same settings, or none does.
+    pub rod_contact: Option<GpuRodContact>,
+}
+
+/// Rod–rod and self-contact with Coulomb friction: the CPU's `RodContactSpec`
+/// (`cosserat_backend_cpu::coupling`), found by the collide crate's bounding spheres and
+/// segment–segment test (`cosserat_collide::RodCollider`) and resolved inside the constraint
+/// iterations (`cosserat_constraints::RodContactSet`). The rods that have it share one
+/// workgroup (at most four rods; `shaders/rod_contact.wgsl`). The bounding spheres' size is the
+/// kernel's own (`plan::RODC_SEGMENTS_PER_SPHERE`): the broad phase only culls, so the contacts
+/// are those of testing every segment pair whatever it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuRodContact {
+    /// Whether a rod collides with itself.
+    pub self_collisions: bool,
+    /// Static friction coefficient.
+    pub static_friction: f32,
+    /// Kinetic friction coefficient.
+    pub kinetic_friction: f32,
+    /// Speculative margin [m]: segments this close get a contact that stops them meeting within
+    /// the step.
+    pub margin: f32,
 }
 
 /// A binding of the rod it belongs to (the inner rod, a guidewire) to the centreline of an outer

@@ -9,8 +9,8 @@
 //! the only other source of a [`Tuning`].
 
 use crate::device::AdapterSummary;
-use crate::layout::{CouplingG, ItemG, NONE};
-use crate::shader::KernelConfig;
+use crate::layout::{CouplingG, ItemG, NONE, StrandG};
+use crate::shader::{KernelConfig, RodcShape};
 use crate::{EndCondition, GpuError, GpuOptions, GpuRodInput, KernelPath, SolverSettings};
 
 /// Loop iterations lavapipe runs per invocation before it silently stops all loops (GPU.md),
@@ -95,6 +95,8 @@ pub(crate) struct Plan {
     /// binding (both empty without bindings).
     pub(crate) groups: Vec<[u32; 2]>,
     pub(crate) couplings: Vec<CouplingG>,
+    /// Rod contact: per item its part ([`StrandG`]; empty without rod contact).
+    pub(crate) strands: Vec<StrandG>,
     /// Most steps one dispatch of a persistent path runs.
     pub(crate) steps_per_dispatch: u32,
 }
@@ -174,8 +176,24 @@ impl Plan {
             }
             flags.push("BIND");
         }
+        // Rod contact: every rod that has it shares one workgroup with the others.
+        let rodc = rods.iter().any(|r| r.rod_contact.is_some());
+        if rodc {
+            if extensible {
+                return Err(GpuError::InvalidInput(
+                    "rod contact runs on the GPU with inextensible rods only".into(),
+                ));
+            }
+            if bind {
+                return Err(GpuError::InvalidInput(
+                    "bindings and rod contact in one simulation run on the CPU backends only"
+                        .into(),
+                ));
+            }
+            flags.push("RODC");
+        }
         let coupled = coupled_groups(rods)?;
-        let contact = mesh || guide || bind;
+        let contact = mesh || guide || bind || rodc;
         let iterations = if extensible {
             0
         } else {
@@ -223,7 +241,43 @@ impl Plan {
         } else {
             (0, 0)
         };
-        let (single_threads, single_ept) = if bind {
+        // Rod contact keeps in workgroup memory, per point of the largest group, its position or
+        // velocity (a vec4), its number of contacts and its impulse (4 words), and per bounding
+        // sphere a vec4, what it covers (2 words) and room for its overlapping pairs; the step's
+        // contacts are listed in storage.
+        let rodc_shape = if rodc {
+            let per_sphere = RODC_SEGMENTS_PER_SPHERE;
+            let points = group_points(&|r| rods[r].rod_contact.is_some());
+            let spheres = coupled
+                .iter()
+                .map(|g| {
+                    g.iter()
+                        .filter(|&&r| rods[r].rod_contact.is_some())
+                        .map(|&r| (rods[r].state.elements() as u32).div_ceil(per_sphere))
+                        .sum::<u32>()
+                })
+                .max()
+                .unwrap_or(1);
+            if spheres >= 1 << 16 {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod contact with {spheres} bounding spheres; at most 65 535"
+                )));
+            }
+            RodcShape {
+                points,
+                spheres,
+                per_sphere,
+                // Every pair of spheres, or 32 a sphere (the knot's tightened core has ~10).
+                pairs: (spheres * (spheres + 1) / 2).min(32 * spheres),
+                per_thread: RODC_PER_THREAD,
+            }
+        } else {
+            RodcShape::default()
+        };
+        // (Workgroup memory bounds the points far below the 65 536 segments a sphere's
+        // first segment is packed into.)
+        let rodc_bytes = 32 * rodc_shape.points + 24 * rodc_shape.spheres + 4 * rodc_shape.pairs;
+        let (single_threads, single_ept) = if bind || rodc {
             // The fewest points per thread with which every group's rods fit one workgroup, in
             // its threads and its memory.
             let lanes = |ept: u32| -> u32 {
@@ -241,6 +295,7 @@ impl Plan {
                 round_up(lanes(ept), 32) * (per_thread_bytes + if mesh { 16 } else { 0 })
                     + 24 * bind_points
                     + 16 * bind_inner
+                    + rodc_bytes
                     + 256
             };
             let ept = (1..=32)
@@ -248,7 +303,8 @@ impl Plan {
                 .find(|&e| lanes(e) <= max_threads && bytes(e) <= storage_cap)
                 .ok_or_else(|| {
                     GpuError::InvalidInput(format!(
-                        "bound rods with {bind_points} points in their outer rods and {bind_inner} in their inner rods do not fit one workgroup's {} bytes of memory",
+                        "coupled rods (bindings: {bind_points} points in outer rods and {bind_inner} in inner rods; rod contact: {} points) do not fit one workgroup's {} bytes of memory",
+                        rodc_shape.points,
                         limits.max_compute_workgroup_storage_size
                     ))
                 })?;
@@ -397,6 +453,7 @@ impl Plan {
         let mut workgroups = None;
         let mut groups = Vec::new();
         let mut couplings = Vec::new();
+        let mut strands = Vec::new();
         let mut xs_used = 1;
         let (threads, ept, items, halo_used) = match path {
             KernelPath::SingleWorkgroup => {
@@ -426,7 +483,7 @@ impl Plan {
                         lane0,
                     }
                 };
-                let items = if bind {
+                let items = if bind || rodc {
                     // The items group by group, each rod on its own run of threads.
                     let mut items = Vec::with_capacity(rods.len());
                     for g in &coupled {
@@ -437,7 +494,12 @@ impl Plan {
                             lane += (rods[r].state.elements() as u32 + 1).div_ceil(single_ept);
                         }
                     }
-                    couplings = coupling_of_items(rods, &items, &groups);
+                    if bind {
+                        couplings = coupling_of_items(rods, &items, &groups);
+                    }
+                    if rodc {
+                        strands = strands_of_items(rods, &items, &groups, rodc_shape.per_sphere);
+                    }
                     workgroups = Some(groups.len() as u32);
                     items
                 } else {
@@ -508,6 +570,7 @@ impl Plan {
             unroll: true,
             bind_points,
             bind_inner,
+            rodc: rodc_shape,
             flags,
         };
         // Loop iterations per step and invocation, generously counted, for software adapters.
@@ -523,7 +586,19 @@ impl Plan {
             // small meshes of software runs.
             + if mesh { ept * 256 } else { 0 }
             // A binding's walk along the outer rod and its compare-exchange loops.
-            + if bind { ept * 64 + iterations * ept * 8 } else { 0 };
+            + if bind { ept * 64 + iterations * ept * 8 } else { 0 }
+            // Rod contact: the strided loops over spheres (and their points), sphere pairs and
+            // their segments (a sphere pair's k + k² tests on one thread), and per sweep each
+            // of the thread's contacts and its four points.
+            + if rodc {
+                let (k, t) = (rodc_shape.per_sphere, threads.max(1));
+                let sph = rodc_shape.spheres;
+                (2 * sph * (k + 1) + sph * sph + rodc_shape.pairs * (k + k * k)) / t
+                    + 8
+                    + rodc_shape.per_thread * (2 + iterations * 6)
+            } else {
+                0
+            };
         let mut spd = options.max_steps_per_dispatch.max(1);
         if adapter.software {
             spd = spd.min((SOFTWARE_LOOP_BUDGET / loops_per_step).max(1));
@@ -535,6 +610,7 @@ impl Plan {
             items,
             groups,
             couplings,
+            strands,
             steps_per_dispatch: spd,
         })
     }
@@ -597,6 +673,14 @@ pub(crate) fn coupled_groups(rods: &[GpuRodInput]) -> Result<Vec<Vec<usize>>, Gp
             root[a.max(o)] = a.min(o);
         }
     }
+    // Rod contact couples every rod that has it with every other.
+    let touching: Vec<usize> = (0..rods.len())
+        .filter(|&r| rods[r].rod_contact.is_some())
+        .collect();
+    for w in touching.windows(2) {
+        let (a, b) = (find(&mut root, w[0]), find(&mut root, w[1]));
+        root[a.max(b)] = a.min(b);
+    }
     let mut groups: Vec<Vec<usize>> = Vec::new();
     let mut group_of = vec![usize::MAX; rods.len()];
     for r in 0..rods.len() {
@@ -609,7 +693,7 @@ pub(crate) fn coupled_groups(rods: &[GpuRodInput]) -> Result<Vec<Vec<usize>>, Gp
     }
     if let Some(g) = groups.iter().find(|g| g.len() > 4) {
         return Err(GpuError::InvalidInput(format!(
-            "rods {g:?} are bound together: the GPU binds at most 4 rods in one group"
+            "rods {g:?} are bound together or touch each other: the GPU couples at most 4 rods in one group"
         )));
     }
     Ok(groups)
@@ -649,6 +733,69 @@ fn coupling_of_items(rods: &[GpuRodInput], items: &[ItemG], groups: &[[u32; 2]])
                 out[k].xi = inner;
                 inner += items[k].n + 1;
             }
+        }
+    }
+    out
+}
+
+/// Contacts one thread keeps for its step's sweeps (`RC_CAP`): the step's contacts are listed
+/// and dealt out over the workgroup's threads in turn, so the workgroup holds this many times
+/// its threads; a step that finds more is reported (`GpuError::InvalidInput` at the next read).
+pub(crate) const RODC_PER_THREAD: u32 = 16;
+
+/// Segments per bounding sphere of the GPU's broad phase (`RC_K`). The CPU's
+/// `segments_per_sphere` is not taken: spheres only cull, so any size finds the contacts of
+/// testing every segment pair (collide rods.rs), and one thread tests a sphere pair's
+/// segments, which wants fewer, longer spheres than the CPU's loop over pairs: with 8, the
+/// knot's tightened core has ~4 times fewer pairs than with 4 and its arrays fit the H100's
+/// workgroup memory.
+pub(crate) const RODC_SEGMENTS_PER_SPHERE: u32 = 8;
+
+/// Each item's part in rod contact ([`StrandG`]): its first entries in its workgroup's point and
+/// sphere arrays (after the group's earlier rods), its bounding spheres, and its self-contact
+/// skip as the CPU computes it (`cosserat_collide::RodCollider::self_skip_for` on the chain of
+/// radius `r + margin / 2`), from the rod's initial mean segment length.
+fn strands_of_items(
+    rods: &[GpuRodInput],
+    items: &[ItemG],
+    groups: &[[u32; 2]],
+    per_sphere: u32,
+) -> Vec<StrandG> {
+    let mut out = vec![StrandG::default(); items.len()];
+    for &[first, count] in groups {
+        let (mut xp, mut xs) = (0, 0);
+        for k in first as usize..(first + count) as usize {
+            let rod = &rods[items[k].rod as usize];
+            let Some(c) = rod.rod_contact else { continue };
+            let n = items[k].n;
+            let half = 0.5 * c.margin;
+            let pts = &rod.state.positions;
+            let len: f64 = pts
+                .windows(2)
+                .map(|w| f64::from((w[1] - w[0]).norm()))
+                .sum();
+            let h = len / f64::from(n);
+            let radius = f64::from(rod.params.radius + half);
+            let skip = if !c.self_collisions {
+                NONE
+            } else if h.is_nan() || h <= 0.0 {
+                n
+            } else {
+                ((2.0 * radius / h).floor() as u32 + 1).clamp(1, n)
+            };
+            let spheres = n.div_ceil(per_sphere);
+            out[k] = StrandG {
+                xp,
+                xs,
+                spheres,
+                skip,
+                radius: rod.params.radius,
+                half_margin: half,
+                mu_s: c.static_friction,
+                mu_k: c.kinetic_friction,
+            };
+            xp += n + 1;
+            xs += spheres;
         }
     }
     out
@@ -696,6 +843,7 @@ pub(crate) mod fixtures {
                     wall: None,
                     guide: None,
                     binding: None,
+                    rod_contact: None,
                 }
             })
             .collect()
@@ -794,6 +942,50 @@ mod tests {
         let longest = plan(&[5000], &lavapipe());
         assert_eq!(longest.path, KernelPath::DispatchPerStep);
         assert!(longest.cfg.flags.contains(&"PERSTEP"));
+    }
+
+    /// Rods in contact (the knot's two strands of 256 elements) share one workgroup on the
+    /// single-workgroup path, their arrays within the adapter's workgroup memory, each rod on
+    /// its own run of threads; the items name their first entries in the group's arrays.
+    #[test]
+    fn rods_in_contact_share_one_workgroup() {
+        for adapter in [h100(), lavapipe()] {
+            let limits = wgpu::Limits {
+                max_compute_workgroup_storage_size: adapter.max_workgroup_storage,
+                ..wgpu::Limits::default()
+            };
+            let mut rods = rods(&[256, 256]);
+            for r in &mut rods {
+                r.rod_contact = Some(crate::GpuRodContact {
+                    self_collisions: true,
+                    static_friction: 0.4,
+                    kinetic_friction: 0.3,
+                    margin: 2e-4,
+                });
+            }
+            let p = Plan::new(
+                &rods,
+                &settings(),
+                &GpuOptions::default(),
+                &Tuning::PRODUCTION,
+                &adapter,
+                &limits,
+            )
+            .expect("a plan");
+            eprintln!("{}: {}", adapter.name, p.describe());
+            assert_eq!(p.path, KernelPath::SingleWorkgroup);
+            assert!(p.cfg.flags.contains(&"RODC") && !p.cfg.flags.contains(&"BIND"));
+            assert_eq!((p.workgroups, p.groups.clone()), (1, vec![[0, 2]]));
+            let r = p.cfg.rodc;
+            assert_eq!((r.points, r.spheres, r.per_sphere), (514, 64, 8));
+            let lanes = 257u32.div_ceil(p.cfg.per_thread);
+            assert_eq!((p.items[0].lane0, p.items[1].lane0), (0, lanes));
+            assert!(2 * lanes <= p.cfg.threads);
+            let s = &p.strands;
+            assert_eq!((s[0].xp, s[1].xp, s[0].xs, s[1].xs), (0, 257, 0, 32));
+            // 1 cm elements of a 5 mm rod with a 0.2 mm margin: ⌊2 · 5.1 / 10⌋ + 1.
+            assert_eq!(s[0].skip, 2);
+        }
     }
 
     /// Many short rods go one per subgroup, four per workgroup, where the subgroup size is fixed.

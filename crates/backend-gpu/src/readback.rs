@@ -13,7 +13,7 @@
 //! [`GpuOptions::spin_wait_us`]: crate::GpuOptions::spin_wait_us
 
 use crate::layout::{ClampG, DriveG};
-use crate::sim::{EndTrack, WALL_STATS, WallRead};
+use crate::sim::{EndTrack, RODC_STATS, WALL_STATS, WallRead};
 use crate::{DivergedQuantity, Divergence, GpuError, GpuSimulation};
 use cosserat_model::{Quat, Vec3};
 use rayon::prelude::*;
@@ -37,6 +37,8 @@ enum Part {
     Contacts,
     /// Bindings: each inner point's last outer segment.
     BoundSegments,
+    /// Rod contact: per-group statistics.
+    RodContactStats,
 }
 
 /// A position read in flight.
@@ -319,6 +321,12 @@ impl GpuSimulation {
                     };
                     &b.segments
                 }
+                Part::RodContactStats => {
+                    let Some(b) = self.rodc.as_ref() else {
+                        unreachable!("rod contact statistics are read only with their buffers")
+                    };
+                    &b.stats
+                }
                 Part::WallStats | Part::Contacts => {
                     let Some(w) = self.wall.as_ref() else {
                         unreachable!("wall parts are read only with wall buffers")
@@ -397,28 +405,41 @@ impl GpuSimulation {
     /// [`Self::read_positions`].
     pub fn read_state(&mut self) -> Result<Vec<cosserat_model::RodState<f32>>, GpuError> {
         use cosserat_model::RodState;
-        let all = if self.wall.is_some() {
-            // The wall's statistics and contacts come in the same round trip.
-            let mut parts = self.whole_state_parts();
-            let wall_at = parts.iter().map(|p| p.1 as usize).sum();
+        // The wall's statistics and contacts, and rod contact's statistics, come in the same
+        // round trip, after the state.
+        let mut parts = self.whole_state_parts();
+        let extra_at: usize = parts.iter().map(|p| p.1 as usize).sum();
+        let wall_bytes = 4 * WALL_STATS * self.rods.len();
+        if self.wall.is_some() {
             parts.extend([
-                (
-                    Part::WallStats,
-                    4 * WALL_STATS as u64 * self.rods.len() as u64,
-                ),
+                (Part::WallStats, wall_bytes as u64),
                 (Part::Contacts, 32 * self.slots),
             ]);
-            let mut all = self.read_buffers(&parts)?;
-            let wall = all.split_off(wall_at);
-            let (stats, contacts) = wall.split_at(4 * WALL_STATS * self.rods.len());
+        }
+        let rodc_bytes = 4 * RODC_STATS * self.plan.groups.len();
+        if self.rodc.is_some() {
+            parts.push((Part::RodContactStats, rodc_bytes as u64));
+        }
+        let mut all = self.read_buffers(&parts)?;
+        let mut extra = all.split_off(extra_at);
+        if self.rodc.is_some() {
+            let words = extra.split_off(extra.len() - rodc_bytes);
+            self.rodc_read = Some(bytemuck::pod_collect_to_vec(&words));
+        }
+        if self.wall.is_some() {
+            let (stats, contacts) = extra.split_at(wall_bytes);
             self.wall_read = Some(WallRead {
                 stats: bytemuck::pod_collect_to_vec(stats),
                 contacts: bytemuck::pod_collect_to_vec(contacts),
             });
-            all
-        } else {
-            self.read_whole_state()?
-        };
+        }
+        let dropped = self.rod_contact_dropped();
+        if dropped > 0 {
+            return Err(GpuError::InvalidInput(format!(
+                "rod contact: {dropped} contacts or sphere pairs did not fit the kernel's arrays (at most {} contacts per thread and {} sphere pairs); the GPU cannot step this scene, use --backend cpu",
+                self.plan.cfg.rodc.per_thread, self.plan.cfg.rodc.pairs
+            )));
+        }
         let b = (16 * self.slots) as usize;
         let clamps_at = 4 * b + self.status_bytes();
         self.status_error(bytemuck::cast_slice(&all[4 * b..clamps_at]))?;

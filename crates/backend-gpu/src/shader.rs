@@ -21,12 +21,15 @@ pub(crate) const COMMON_WGSL: &str = include_str!("shaders/common.wgsl");
 pub(crate) const ROD_STEP_WGSL: &str = include_str!("shaders/rod_step.wgsl");
 /// The wall-contact queries, composed after `common.wgsl` into kernels with `MESH`.
 pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wgsl");
+/// Rod–rod and self-contact (closest points, the contact impulse), composed after
+/// `common.wgsl` into kernels with `RODC`.
+pub(crate) const ROD_CONTACT_WGSL: &str = include_str!("shaders/rod_contact.wgsl");
 /// The stiff scheme's banded factorisation and solve (`banded.rs`).
 pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
-pub(crate) const FLAGS: [&str; 14] = [
+pub(crate) const FLAGS: [&str; 15] = [
     "EXTENSIBLE",
     "STRETCH_DAMP",
     "BEND_DAMP",
@@ -41,6 +44,7 @@ pub(crate) const FLAGS: [&str; 14] = [
     "MESH",
     "GUIDE",
     "BIND",
+    "RODC",
 ];
 
 /// Flags of `rod_step.wgsl` chosen by [`crate::KernelVariant`], each validated with every scene
@@ -77,12 +81,29 @@ pub(crate) struct KernelConfig {
     pub(crate) bind_points: u32,
     /// `BIND`: the inner rods' points of the largest group (0 otherwise).
     pub(crate) bind_inner: u32,
+    /// `RODC`: the sizes of the workgroup's rod-contact arrays (all 0 otherwise).
+    pub(crate) rodc: RodcShape,
     /// Invocations per rod with `SUBGROUP` (the adapter's subgroup size); 1 otherwise.
     pub(crate) group: u32,
     /// Unroll the per-thread `//#for` loops (the default); `false` emits them as WGSL loops.
     pub(crate) unroll: bool,
     /// Enabled flags (members of [`FLAGS`]).
     pub(crate) flags: Vec<&'static str>,
+}
+
+/// The sizes a kernel with `RODC` gives its rod-contact arrays (`shaders/rod_contact.wgsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub(crate) struct RodcShape {
+    /// Points of the largest group's rods (`RC_PTS`).
+    pub(crate) points: u32,
+    /// Their bounding spheres (`RC_SPH`).
+    pub(crate) spheres: u32,
+    /// Segments per bounding sphere (`RC_K`).
+    pub(crate) per_sphere: u32,
+    /// Overlapping sphere pairs one step can hold (`RC_PAIRS`).
+    pub(crate) pairs: u32,
+    /// Contacts one thread can hold (`RC_CAP`).
+    pub(crate) per_thread: u32,
 }
 
 impl KernelConfig {
@@ -114,6 +135,11 @@ impl KernelConfig {
         if flags.contains(&"CLAMP") && !flags.contains(&"REACT") {
             flags.push("REACT");
         }
+        // Bindings and rod contact both put the rods they couple into one workgroup (`GROUP`:
+        // the groups, each rod on its own run of threads).
+        if flags.contains(&"BIND") || flags.contains(&"RODC") {
+            flags.push("GROUP");
+        }
         let body = preprocess(kernel, &flags);
         let body = expand_loops(&body, self.per_thread, self.unroll);
         let wall = if self.flags.contains(&"MESH") {
@@ -121,7 +147,24 @@ impl KernelConfig {
         } else {
             ""
         };
-        format!("{prelude}{COMMON_WGSL}\n{wall}\n{body}")
+        // Only kernels with rod contact have its sizes and helpers: the others keep their text.
+        let (rodc_prelude, rodc) = if self.flags.contains(&"RODC") {
+            let r = &self.rodc;
+            (
+                format!(
+                    "const RC_PTS: u32 = {}u;\nconst RC_SPH: u32 = {}u;\nconst RC_K: u32 = {}u;\nconst RC_PAIRS: u32 = {}u;\nconst RC_CAP: u32 = {}u;\n",
+                    r.points.max(2),
+                    r.spheres.max(1),
+                    r.per_sphere.max(1),
+                    r.pairs.max(1),
+                    r.per_thread.max(1)
+                ),
+                format!("{ROD_CONTACT_WGSL}\n"),
+            )
+        } else {
+            (String::new(), String::new())
+        };
+        format!("{prelude}{rodc_prelude}{COMMON_WGSL}\n{wall}\n{rodc}{body}")
     }
 }
 
@@ -345,6 +388,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: RodcShape::default(),
             flags: vec![],
         };
         let src = cfg.source();
@@ -357,6 +401,100 @@ mod tests {
         }
         .source();
         assert!(looped.contains("vx[x]") && looped.contains("for (var x = 1u; x < 5u; x += 2u)"));
+    }
+
+    /// A one-workgroup kernel of 64 threads × 2 points with `flags`.
+    fn small(flags: Vec<&'static str>) -> KernelConfig {
+        KernelConfig {
+            threads: 64,
+            per_thread: 2,
+            iterations: 10,
+            halo: 0,
+            exchange_steps: 1,
+            spin_cap: 1,
+            group: 1,
+            unroll: true,
+            bind_points: 0,
+            bind_inner: 0,
+            rodc: RodcShape::default(),
+            flags,
+        }
+    }
+
+    /// Rod-contact arrays for two rods of 32 elements.
+    const RODC_SHAPE: RodcShape = RodcShape {
+        points: 66,
+        spheres: 18,
+        per_sphere: 4,
+        pairs: 64,
+        per_thread: 8,
+    };
+
+    /// FNV-1a, 64 bits: a fixed digest of a kernel's text (no dependency, the same on every
+    /// machine).
+    fn digest(text: &str) -> u64 {
+        text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+        })
+    }
+
+    /// Kernels of scenes without rod contact are byte for byte what they were before rod
+    /// contact was added (`RODC`): free space on each path, mesh contact and bindings. The
+    /// digests were taken from the kernels of commit e2f0b74; a change to what these scenes
+    /// compile must update them on purpose.
+    #[test]
+    fn kernels_without_rod_contact_keep_their_text() {
+        let base = small(vec![]);
+        let cases: [(KernelConfig, u64); 6] = [
+            (base.clone(), 0x115e116b618b4604),
+            (
+                KernelConfig {
+                    flags: vec!["DRAG", "CLAMP", "REACT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0xb8e182c452d130c6,
+            ),
+            (
+                KernelConfig {
+                    threads: 128,
+                    halo: 24,
+                    exchange_steps: 3,
+                    spin_cap: 1024,
+                    flags: vec!["BEND_DAMP", "GRID", "NBR_SYNC", "COHERENT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0x5488c0a7819e1c35,
+            ),
+            (
+                KernelConfig {
+                    group: 32,
+                    threads: 128,
+                    flags: vec!["SUBGROUP", "SHFL", "DRAG", "FAST", "REGC", "REACT"],
+                    ..base.clone()
+                },
+                0x4384fe7abe3830ef,
+            ),
+            (
+                KernelConfig {
+                    flags: vec!["MESH", "GUIDE", "DRAG", "FAST", "REGC", "REACT"],
+                    ..base.clone()
+                },
+                0x996ab782bc357d5e,
+            ),
+            (
+                KernelConfig {
+                    bind_points: 300,
+                    bind_inner: 200,
+                    rodc: RodcShape::default(),
+                    flags: vec!["BIND", "DRAG", "CLAMP", "REACT", "FAST", "REGC"],
+                    ..base.clone()
+                },
+                0xbd804de3c74c87d4,
+            ),
+        ];
+        let got: Vec<u64> = cases.iter().map(|(c, _)| digest(&c.source())).collect();
+        let want: Vec<u64> = cases.iter().map(|(_, d)| *d).collect();
+        assert_eq!(got, want, "digests (got, want): {got:#x?} {want:#x?}");
     }
 
     #[test]
@@ -372,6 +510,7 @@ mod tests {
             unroll: true,
             bind_points: 0,
             bind_inner: 0,
+            rodc: RodcShape::default(),
             flags: vec![],
         };
         let src = cfg.source();
@@ -421,9 +560,9 @@ mod tests {
             || (has("GRID") && has("PERSTEP"))
             || (has("SUBGROUP") && (has("GRID") || has("PERSTEP") || !has("SHFL")))
             || (has("SHFL") && !(has("SUBGROUP") || has("GRID") || has("PERSTEP")))
-            || ((has("MESH") || has("GUIDE") || has("BIND"))
+            || ((has("MESH") || has("GUIDE") || has("BIND") || has("RODC"))
                 && (has("GRID") || has("PERSTEP") || has("SUBGROUP") || has("SHFL")))
-            || (has("BIND") && has("EXTENSIBLE"))
+            || ((has("BIND") || has("RODC")) && has("EXTENSIBLE"))
             // The composer adds REACT to CLAMP.
             || (has("CLAMP") && !has("REACT"))
         {
@@ -432,7 +571,7 @@ mod tests {
         // The variant flags, with every scene/path combination they can meet.
         let mut variants = vec![flags.clone()];
         // Contact kernels are composed only with the production variant flags.
-        let contact = has("MESH") || has("GUIDE");
+        let contact = has("MESH") || has("GUIDE") || has("RODC");
         if contact {
             variants[0].push("REGC");
             if !has("EXTENSIBLE") {
@@ -472,6 +611,7 @@ mod tests {
                     unroll,
                     bind_points: 0,
                     bind_inner: 0,
+                    rodc: RODC_SHAPE,
                     flags: flags.clone(),
                 };
                 let composed = cfg.source_of(text);
@@ -533,6 +673,20 @@ mod tests {
                     text, WALL_CONTACT_WGSL,
                     "wall_contact.wgsl on disk differs from the compiled-in copy"
                 );
+                continue;
+            }
+            if file.file_name().is_some_and(|f| f == "rod_contact.wgsl") {
+                // Composed into the kernels with `RODC` (validated in every combination with
+                // rod_step.wgsl's flags); here in one such kernel.
+                assert_eq!(
+                    text, ROD_CONTACT_WGSL,
+                    "rod_contact.wgsl on disk differs from the compiled-in copy"
+                );
+                let cfg = KernelConfig {
+                    rodc: RODC_SHAPE,
+                    ..small(vec!["RODC", "FAST", "REGC"])
+                };
+                validate(&name, &cfg.source());
                 continue;
             }
             if file.file_name().is_some_and(|f| f == "banded_solve.wgsl") {

@@ -89,6 +89,10 @@ pub struct GpuSimulation {
     pub(crate) wall_read: Option<WallRead>,
     /// Bindings' buffers (kernels with `BIND`).
     pub(crate) bind: Option<BindBuffers>,
+    /// Rod contact's buffers (kernels with `RODC`).
+    pub(crate) rodc: Option<RodcBuffers>,
+    /// Rod contact's statistics words as last read with the state ([`RODC_STATS`] per group).
+    pub(crate) rodc_read: Option<Vec<u32>>,
     /// The reaction filter's weights for one step (`ParamsU::rf_keep` and the next two).
     reaction_filter: [f32; 3],
     /// The held ends as last read with the state (their reactions), two per rod.
@@ -126,6 +130,33 @@ pub(crate) struct BindBuffers {
     /// Per slot of an inner rod, the outer segment its point was last bound to: state (a
     /// snapshot carries it, so that a restored run finds the same segments).
     pub(crate) segments: wgpu::Buffer,
+}
+
+/// The buffers of a kernel with rod contact (see `shaders/rod_contact.wgsl`, `RODC`).
+pub(crate) struct RodcBuffers {
+    /// Per workgroup, its first item and number of items.
+    groups: wgpu::Buffer,
+    /// Per item, its part in rod contact ([`crate::layout::StrandG`]).
+    strands: wgpu::Buffer,
+    /// Per group, [`RODC_STATS`] words: the smallest centreline distance seen (f32 bits), the
+    /// radii of that pair (f32 bits), contacts at the last step, most contacts in a step, the
+    /// smallest distance over the radii (f32 bits), steps, contacts and sphere pairs that did
+    /// not fit the kernel's arrays, and 0.
+    pub(crate) stats: wgpu::Buffer,
+    /// Per workgroup, the step's contacts (three `vec4` each, `RC_LIST` of them): scratch of
+    /// one step.
+    list: wgpu::Buffer,
+}
+
+/// Statistics words per group of a kernel with rod contact.
+pub(crate) const RODC_STATS: usize = 8;
+
+/// The statistics words of a group before its first step (no distance seen: +∞).
+pub(crate) fn rodc_stats_init(groups: usize) -> Vec<u32> {
+    let inf = f32::INFINITY.to_bits();
+    (0..groups)
+        .flat_map(|_| [inf, 0, 0, 0, inf, 0, 0, 0])
+        .collect()
 }
 
 /// Statistics words per rod of a kernel with wall contact.
@@ -495,6 +526,27 @@ impl GpuSimulation {
                 ),
             }
         });
+        // Rod contact: the groups, each item's part, and the statistics per group.
+        let rodc_bufs = plan.cfg.flags.contains(&"RODC").then(|| {
+            let plain = wgpu::BufferUsages::STORAGE;
+            RodcBuffers {
+                groups: init("groups", bytemuck::cast_slice(&plan.groups), plain),
+                strands: init("strands", bytemuck::cast_slice(&plan.strands), plain),
+                stats: init(
+                    "rod contact stats",
+                    bytemuck::cast_slice(&rodc_stats_init(plan.groups.len())),
+                    storage,
+                ),
+                list: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("rod contact list"),
+                    size: 48
+                        * u64::from(plan.cfg.threads * plan.cfg.rodc.per_thread)
+                        * plan.groups.len() as u64,
+                    usage: plain,
+                    mapped_at_creation: false,
+                }),
+            }
+        });
         let touch_buf = has_touch.then(|| {
             init(
                 "touch",
@@ -631,6 +683,9 @@ impl GpuSimulation {
         }
         if bind_bufs.is_some() {
             entries.extend([ro(27), ro(28), rw(31)]);
+        }
+        if rodc_bufs.is_some() {
+            entries.extend([ro(27), ro(29), rw(30), rw(32)]);
         }
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rod step"),
@@ -780,6 +835,19 @@ impl GpuSimulation {
                     });
                 }
             }
+            if let Some(b) = &rodc_bufs {
+                for (binding, buf) in [
+                    (27, &b.groups),
+                    (29, &b.strands),
+                    (30, &b.stats),
+                    (32, &b.list),
+                ] {
+                    e.push(wgpu::BindGroupEntry {
+                        binding,
+                        resource: whole(buf),
+                    });
+                }
+            }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rod step"),
                 layout: &bgl,
@@ -853,6 +921,8 @@ impl GpuSimulation {
             wall: wall_bufs.map(|(_, _, w)| w),
             wall_read: None,
             bind: bind_bufs,
+            rodc: rodc_bufs,
+            rodc_read: None,
             reaction_filter: {
                 let (keep, old, new) = cosserat_problem::report::reaction_filter_weights(
                     options.reaction_cutoff_hz,
@@ -911,6 +981,37 @@ impl GpuSimulation {
             segment_contacts: u64::from(w[8]),
             queries: u64::from(w[6]),
             ..Default::default()
+        })
+    }
+
+    /// Rod–rod and self-contact statistics of all groups together as of the last
+    /// [`Self::read_state`] (`None` without rod contact, or before the first read): the CPU's
+    /// `CouplingStats` (contacts at the last step and at most, the smallest centreline distance
+    /// of two non-neighbouring segments seen at a step's start with the radii of that pair and
+    /// the smallest ratio), with `detection_seconds` 0 (detection is not timed on its own).
+    pub fn rod_contact_stats(&self) -> Option<cosserat_problem::CouplingStats> {
+        let words = self.rodc_read.as_ref()?;
+        let f = |w: u32| f64::from(f32::from_bits(w));
+        let mut out = cosserat_problem::CouplingStats::default();
+        for g in words.chunks_exact(RODC_STATS) {
+            out.contacts += g[2] as usize;
+            out.max_contacts += g[3] as usize;
+            if f(g[0]) < out.min_separation {
+                out.min_separation = f(g[0]);
+                out.min_separation_radii = f(g[1]);
+            }
+            out.min_separation_ratio = out.min_separation_ratio.min(f(g[4]));
+            out.steps = out.steps.max(u64::from(g[5]));
+        }
+        Some(out)
+    }
+
+    /// Contacts and sphere pairs that did not fit the rod-contact kernel's arrays since the
+    /// start, as of the last [`Self::read_state`] (0 without rod contact). The kernel drops
+    /// them, so a nonzero count makes [`Self::read_state`] fail.
+    pub fn rod_contact_dropped(&self) -> u64 {
+        self.rodc_read.as_ref().map_or(0, |w| {
+            w.chunks_exact(RODC_STATS).map(|g| u64::from(g[6])).sum()
         })
     }
 
@@ -1262,6 +1363,33 @@ pub(crate) fn validate(
             return Err(GpuError::InvalidInput(format!(
                 "rod {r}: state and parameter arrays do not match its {n} elements"
             )));
+        }
+        if rod.rod_contact.is_none() && rods.iter().any(|r| r.rod_contact.is_some()) {
+            // The kernel with rod contact gives every rod its part in the group's arrays.
+            return Err(GpuError::InvalidInput(format!(
+                "rod {r} has no rod contact while others have: on the GPU every rod touches the others or none does"
+            )));
+        }
+        if let (Some(c), Some(first)) = (
+            &rod.rod_contact,
+            rods.iter().find_map(|r| r.rod_contact.as_ref()),
+        ) {
+            if c != first {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {r}: rod contact settings differ from the rods' before it; every rod that touches rods has the same ones"
+                )));
+            }
+            let ok = |x: f32| x.is_finite() && x >= 0.0;
+            if !(ok(c.static_friction)
+                && ok(c.kinetic_friction)
+                && ok(c.margin)
+                && rod.params.radius.is_finite()
+                && rod.params.radius > 0.0)
+            {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {r}: rod contact needs finite friction and margin >= 0 and a radius > 0"
+                )));
+            }
         }
         if let (Some(w), Some(first)) = (&rod.wall, rods.iter().find_map(|r| r.wall.as_ref())) {
             if !std::sync::Arc::ptr_eq(&w.collider, &first.collider) {

@@ -2,9 +2,9 @@
 //! refreshed after every batch so that reads cost no round trip of their own.
 //!
 //! The rods can be split across several devices ([`GpuStepper::on_gpus`]): each device steps a
-//! contiguous share of them as a [`GpuSimulation`] of its own. The kernels couple no two rods
-//! (rod contact and bindings run on the CPU), so a share needs nothing from another during a
-//! batch: every device is given its steps before any is waited for, and the one round trip per
+//! contiguous share of them as a [`GpuSimulation`] of its own. Rods that bindings or rod
+//! contact couple are stepped in one workgroup and never split between shares, so a share
+//! needs nothing from another during a batch: every device is given its steps before any is waited for, and the one round trip per
 //! batch reads them one after the other while the others are still running.
 
 use cosserat_model::energy::{Energies, ForceModel, energies};
@@ -181,12 +181,13 @@ impl GpuStepper {
     }
 
     /// What the GPU stepper runs besides free rods: contact with one static mesh, the
-    /// introducer guide and bindings (on the single-workgroup path).
+    /// introducer guide, bindings, and rod–rod and self-contact (on the single-workgroup path).
     pub fn supported() -> Capabilities {
         Capabilities::of(&[
             Capability::MeshContact,
             Capability::Guide,
             Capability::Bindings,
+            Capability::RodContact,
         ])
     }
 
@@ -496,7 +497,23 @@ impl Stepper for GpuStepper {
     }
 
     fn coupling_stats(&self) -> Option<CouplingStats> {
-        None
+        // Every device's groups together (rods in contact are never split between devices).
+        self.parts
+            .iter()
+            .filter_map(GpuSimulation::rod_contact_stats)
+            .reduce(|a, b| CouplingStats {
+                contacts: a.contacts + b.contacts,
+                max_contacts: a.max_contacts + b.max_contacts,
+                min_separation: a.min_separation.min(b.min_separation),
+                min_separation_radii: if b.min_separation < a.min_separation {
+                    b.min_separation_radii
+                } else {
+                    a.min_separation_radii
+                },
+                min_separation_ratio: a.min_separation_ratio.min(b.min_separation_ratio),
+                steps: a.steps.max(b.steps),
+                ..a
+            })
     }
 
     fn stiff_summary(&self) -> Option<StiffSummary> {

@@ -116,6 +116,7 @@ impl Case {
                 wall: None,
                 guide: None,
                 binding: None,
+                rod_contact: None,
             })
             .collect()
     }

@@ -59,6 +59,7 @@ fn rods() -> Vec<GpuRodInput> {
                 wall: None,
                 guide: None,
                 binding: None,
+                rod_contact: None,
             }
         })
         .collect()

@@ -1052,6 +1052,13 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
             offset_correction: cosserat_constraints::binding::DEFAULT_OFFSET_CORRECTION as f32,
         });
     }
+    // Rod contact: every rod touches every other and itself, as on the CPU.
+    let rod_contact = b.rod_contact.map(|c| cosserat_backend_gpu::GpuRodContact {
+        self_collisions: c.self_collisions,
+        static_friction: c.friction.static_coefficient as f32,
+        kinetic_friction: c.friction.kinetic_coefficient as f32,
+        margin: c.margin as f32,
+    });
     let inputs = rods
         .into_iter()
         .zip(bound)
@@ -1079,6 +1086,7 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
                 wall,
                 guide,
                 binding,
+                rod_contact,
             }
         })
         .collect();

@@ -30,6 +30,18 @@
 //                 run of threads (`Item::lane0`, `groups`); the binding sweep follows each
 //                 constraint iteration, the outer rods' points and impulses exchanged in
 //                 workgroup memory (single-workgroup workgroup layout only, inextensible rods)
+//#if RODC
+// (Kernels without RODC and GROUP are composed without these lines, so that their text stays
+// what it was before rod contact existed: shader.rs checks their digests.)
+//   RODC          rod–rod and self-contact with friction (rod_contact.wgsl; collide rods.rs,
+//                 constraints rod_contact.rs): the rods share one workgroup as with BIND; each
+//                 step publishes their points, builds bounding spheres, finds overlapping
+//                 sphere pairs and tests their segments; after every constraint iteration the
+//                 contacts are resolved as one split-mass Jacobi pass through workgroup memory
+//                 (single-workgroup workgroup layout only, inextensible rods)
+//   GROUP         (implied by BIND and RODC) several rods per workgroup, each on its own run
+//                 of threads
+//#endif
 //   GRID          several co-resident workgroups per rod, one grid barrier per step
 //   PERSTEP       one dispatch per step, reading src_* and writing the state buffers
 //   SUBGROUP      one rod per group of SG invocations (one whole subgroup); neighbours exchange
@@ -227,9 +239,11 @@ var<workgroup> sh_g: array<vec2<f32>, 2 * WG>;
 @group(0) @binding(20) var<storage, read> touch: array<Touch>;
 //#endif
 //#endif
-//#if BIND
+//#if GROUP
 // Per workgroup: its first item and number of items.
 @group(0) @binding(27) var<storage, read> groups: array<vec2<u32>>;
+//#endif
+//#if BIND
 @group(0) @binding(28) var<storage, read> couplings: array<Coupling>;
 // Per point of the group's outer rods (an outer rod's from its `Coupling::xo`): the point at the
 // step's start, then its velocity after each sweep, with its inverse mass in w, published for
@@ -245,6 +259,8 @@ var<workgroup> wb_i: array<vec4<u32>, BIND_IN>;
 // Per slot of an inner rod: the outer segment its point was last bound to (where the next
 // search walks from), NONE before the first.
 @group(0) @binding(31) var<storage, read_write> bind_seg: array<u32>;
+//#endif
+//#if GROUP
 const GROUP_MAX: u32 = 4u;
 //#else
 const GROUP_MAX: u32 = 1u;
@@ -551,7 +567,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#else
     // `tid` indexes the workgroup's exchange arrays, `lid` is the thread's place in its rod.
     let tid = lid_wg;
-//#if BIND
+//#if GROUP
     // A group of rods per workgroup (those a binding couples), each on its own run of threads
     // from its item's `lane0`; threads past the last rod's points idle through the barriers.
     let grp = groups[wid.x];
@@ -750,6 +766,49 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
     }
 //#endfor
 //#endif
+//#if RODC
+    // Rod contact (rod_contact.wgsl): this rod's part and the group's spheres; the contacts
+    // this thread finds at a step's start stay in its registers for the step's sweeps: the
+    // group entries of their first points, their parameters, normal and bias (−gap / h), split
+    // effective inverse mass and its inverse, and accumulated friction and normal impulses; the
+    // workgroup's region of the step's contact list.
+    let rc_grp = groups[wid.x];
+    let sd = strands[item_index];
+    let rc_last = strands[rc_grp.x + rc_grp.y - 1u];
+    let rc_spheres = rc_last.xs + rc_last.spheres;
+    var rc_ia: array<u32, RC_CAP>;
+    var rc_ib: array<u32, RC_CAP>;
+    var rc_st: array<vec2<f32>, RC_CAP>;
+    var rc_nb: array<vec4<f32>, RC_CAP>;
+    var rc_w: array<vec2<f32>, RC_CAP>;
+    var rc_l: array<vec4<f32>, RC_CAP>;
+    var rc_count = 0u;
+    var rc_max = 0u;
+    let rc_list0 = wid.x * 3u * RC_LIST;
+    // Each point's inverse mass, or minus its mass where it is held (`rcw_x`'s w).
+    var rc_m: array<f32, EPT>;
+//#for e 0 EPT
+    rc_m[{e}] = wm[{e+1}];
+    if it.w0 + b0 + {e} < it.w1 && !(wm[{e+1}] > 0.0) {
+        rc_m[{e}] = -slots[it.base + it.w0 + b0 + {e}].a.z;
+    }
+//#endfor
+//#for e 0 EPT
+    if it.w0 + b0 + {e} < it.w1 {
+        let k = sd.xp + it.w0 + b0 + {e};
+        atomicStore(&rcw_j[3u * k], 0);
+        atomicStore(&rcw_j[3u * k + 1u], 0);
+        atomicStore(&rcw_j[3u * k + 2u], 0);
+    }
+//#endfor
+    if tid == 0u {
+        for (var k = 0u; k < 8u; k++) {
+            atomicStore(&rcw_stat[k], 0u);
+        }
+        atomicStore(&rcw_stat[RCW_MIND], 0x7f800000u);
+        atomicStore(&rcw_stat[RCW_MINR], 0x7f800000u);
+    }
+//#endif
 //#if MESH
     // Wall contact: per point, the contact of this step (normal, gap, accumulated normal and
     // friction impulses), the point's inverse mass, and its anchor (where it last walked the
@@ -814,7 +873,7 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         atomicStore(&wg_key, NONE);
         wg_stop = 0u;
     }
-//#if BIND
+//#if GROUP
     workgroupBarrier();
 //#endif
     // A rod that has diverged stays where it stopped (with the rods of its group).
@@ -1578,6 +1637,127 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
         }
 //#endfor
 //#endif
+//#if RODC
+        // Rod contact: the contacts of the step, found at its start (coupling.rs `detect`,
+        // collide rods.rs), each phase dealt out over all the workgroup's threads.
+//#for e 0 EPT
+        if it.w0 + b0 + {e} < it.w1 {
+            let k = sd.xp + it.w0 + b0 + {e};
+            rcw_x[k] = vec4<f32>(rx[{e+1}], rc_m[{e}]);
+            atomicStore(&rcw_cnt[k], 0u);
+        }
+//#endfor
+        if tid == 0u {
+            atomicStore(&rcw_np, 0u);
+            atomicStore(&rcw_nc, 0u);
+        }
+        workgroupBarrier();
+        // Bounding spheres (rods.rs `build_spheres`): the centre of the points' box, the
+        // farthest point from it, the rod's radius and half the margin.
+        for (var q = tid; q < rc_spheres; q += WG) {
+            let sp = rc_sphere_of_strands(q, rc_grp.x, rc_grp.y);
+            rcw_m[q] = vec2<u32>(sp.item, sp.first | (sp.count << 16u));
+            let kd = strands[sp.item];
+            let k0 = kd.xp + sp.first;
+            var lo = rcw_x[k0].xyz;
+            var hi = lo;
+            for (var k = 1u; k <= sp.count; k++) {
+                let p = rcw_x[k0 + k].xyz;
+                lo = min(lo, p);
+                hi = max(hi, p);
+            }
+            let c = 0.5 * (lo + hi);
+            var r2 = 0.0;
+            for (var k = 0u; k <= sp.count; k++) {
+                let d = rcw_x[k0 + k].xyz - c;
+                r2 = max(r2, dot(d, d));
+            }
+            rcw_s[q] = vec4<f32>(c, sqrt(r2) + kd.radius + kd.half_margin);
+        }
+        workgroupBarrier();
+        // Overlapping sphere pairs (rods.rs `find_pairs`): a sphere with itself when its own
+        // segments may touch, two spheres of one rod when some of their segments are farther
+        // apart than the skip, any two when they overlap.
+        for (var q = tid; q < rc_spheres * rc_spheres; q += WG) {
+            let i = q / rc_spheres;
+            let j = q % rc_spheres;
+            if j < i {
+                continue;
+            }
+            let d = rcw_s[i].xyz - rcw_s[j].xyz;
+            let rr = rcw_s[i].w + rcw_s[j].w;
+            var want = i == j || dot(d, d) < rr * rr;
+            if want {
+                let si = rc_sphere(i);
+                let sj = rc_sphere(j);
+                if si.item == sj.item {
+                    let skip = strands[si.item].skip;
+                    if i == j {
+                        want = skip != NONE && si.count > skip + 1u;
+                    } else {
+                        want = skip != NONE && sj.first + sj.count - 1u - si.first > skip;
+                    }
+                } else {
+                    want = i != j;
+                }
+            }
+            if want {
+                let k = atomicAdd(&rcw_np, 1u);
+                if k < RC_PAIRS {
+                    rcw_pairs[k] = (i << 16u) | j;
+                }
+            }
+        }
+        workgroupBarrier();
+        // The segment pairs of the sphere pairs (rods.rs `narrow`), one thread a pair; a pair or
+        // contact that does not fit is counted (and makes the host's next read fail).
+        let rc_np = atomicLoad(&rcw_np);
+        for (var q = tid; q < min(rc_np, RC_PAIRS); q += WG) {
+            rc_pair(q, rc_list0, inv_h);
+        }
+        storageBarrier();
+        workgroupBarrier();
+        let rc_nc = atomicLoad(&rcw_nc);
+        if tid == 0u {
+            rc_max = max(rc_max, rc_nc);
+            let over = select(0u, rc_np - RC_PAIRS, rc_np > RC_PAIRS) + select(0u, rc_nc - RC_LIST, rc_nc > RC_LIST);
+            if over > 0u {
+                atomicAdd(&rcw_stat[RCW_DROP], over);
+            }
+        }
+        // Each thread's share of the list, with each contact's effective inverse mass, its
+        // points' masses split among their contacts; and the radii of the nearest pair so far.
+        let rc_min = atomicLoad(&rcw_stat[RCW_MIND]);
+        rc_count = 0u;
+        for (var k = tid; k < min(rc_nc, RC_LIST); k += WG) {
+            let o = rc_list0 + 3u * k;
+            let e0 = rc_list[o];
+            let ia = e0.x;
+            let ib = e0.y;
+            let st = bitcast<vec2<f32>>(e0.zw);
+            let e2 = bitcast<vec2<f32>>(rc_list[o + 2u].xy);
+            let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
+            let w = max(vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w), vec4<f32>(0.0));
+            let m = vec4<f32>(
+                f32(atomicLoad(&rcw_cnt[ia])),
+                f32(atomicLoad(&rcw_cnt[ia + 1u])),
+                f32(atomicLoad(&rcw_cnt[ib])),
+                f32(atomicLoad(&rcw_cnt[ib + 1u])),
+            );
+            let ww = dot(c * c, w * m);
+            rc_ia[rc_count] = ia;
+            rc_ib[rc_count] = ib;
+            rc_st[rc_count] = st;
+            rc_nb[rc_count] = bitcast<vec4<f32>>(rc_list[o + 1u]);
+            rc_w[rc_count] = vec2<f32>(ww, select(0.0, 1.0 / ww, ww > 0.0));
+            rc_l[rc_count] = vec4<f32>(0.0);
+            if bitcast<u32>(e2.x) == rc_min {
+                atomicStore(&rcw_stat[RCW_RAD], bitcast<u32>(e2.y));
+            }
+            rc_count += 1u;
+        }
+        workgroupBarrier();
+//#endif
 
 //#if !EXTENSIBLE
         // Distance constraints, red–black, as the CPU's solver: d = e + h (v_b - v_a) with e the
@@ -1804,6 +1984,56 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#endfor
             }
 //#endif
+//#if RODC
+            // Rod contact after the rods' own constraints (coupling.rs `sweep`): the velocities
+            // published, every contact resolved on them, each point's summed impulses taken.
+//#for e 0 EPT
+            if it.w0 + b0 + {e} < it.w1 {
+                rcw_x[sd.xp + it.w0 + b0 + {e}] = vec4<f32>(vx[{e+1}], rc_m[{e}]);
+            }
+//#endfor
+            workgroupBarrier();
+            for (var k = 0u; k < rc_count; k++) {
+                let w = rc_w[k];
+                if !(w.x > 0.0) {
+                    continue;
+                }
+                let ia = rc_ia[k];
+                let ib = rc_ib[k];
+                let st = rc_st[k];
+                let c = vec4<f32>(1.0 - st.x, st.x, 1.0 - st.y, st.y);
+                let v = (rcw_x[ia].xyz * c.x + rcw_x[ia + 1u].xyz * c.y)
+                    - (rcw_x[ib].xyz * c.z + rcw_x[ib + 1u].xyz * c.w);
+                let nb = rc_nb[k];
+                let l = rc_l[k];
+                let rs = rc_resolve(v, nb.xyz, nb.w, w.x, w.y, l.w, l.xyz, sd.mu_s, sd.mu_k);
+                rc_l[k] = vec4<f32>(rs.lt, rs.ln);
+                if any(rs.p != vec3<f32>(0.0)) {
+                    let wf = vec4<f32>(rcw_x[ia].w, rcw_x[ia + 1u].w, rcw_x[ib].w, rcw_x[ib + 1u].w);
+                    let f = select(-1.0 / wf, wf, wf > vec4<f32>(0.0));
+                    rc_add4(ia, ib, c * vec4<f32>(1.0, 1.0, -1.0, -1.0), f, rs.p);
+                }
+            }
+            workgroupBarrier();
+//#for e 0 EPT
+            if it.w0 + b0 + {e} < it.w1 {
+                let dv = rc_take(sd.xp + it.w0 + b0 + {e});
+                if rc_m[{e}] > 0.0 {
+                    vx[{e+1}] += dv;
+                }
+//#if REACT
+                // A held point does not move; what the contacts push on it (its velocity
+                // change times its mass) is part of its reaction, as on the CPU.
+                if u32({e}) == 0u && react0 {
+                    jr0 += dv * rc_m[{e}];
+                }
+                if u32({e}) == rj1 {
+                    jr1 += dv * rc_m[{e}];
+                }
+//#endif
+            }
+//#endfor
+//#endif
         }
 //#else
 //#if MESH
@@ -1968,6 +2198,23 @@ fn main(@builtin(local_invocation_index) lid_wg: u32, @builtin(workgroup_id) wid
 //#else
     workgroupBarrier();
     let first = atomicLoad(&wg_key);
+//#endif
+//#if RODC
+    // The group's statistics: the last step's contacts, the most in a step, the nearest pair,
+    // the steps and what did not fit (one thread per group writes them).
+    if tid == 0u && steps_done > 0u {
+        let o = wid.x * RC_STATS;
+        atomicStore(&rc_stats[o + 2u], atomicLoad(&rcw_nc));
+        atomicMax(&rc_stats[o + 3u], rc_max);
+        let md = atomicLoad(&rcw_stat[RCW_MIND]);
+        if md < atomicLoad(&rc_stats[o]) {
+            atomicStore(&rc_stats[o], md);
+            atomicStore(&rc_stats[o + 1u], atomicLoad(&rcw_stat[RCW_RAD]));
+        }
+        atomicMin(&rc_stats[o + 4u], atomicLoad(&rcw_stat[RCW_MINR]));
+        atomicAdd(&rc_stats[o + 5u], steps_done);
+        atomicAdd(&rc_stats[o + 6u], atomicLoad(&rcw_stat[RCW_DROP]));
+    }
 //#endif
 //#if MESH
     // The counts of the last step, this thread's totals, and each point's last contact.
