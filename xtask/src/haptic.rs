@@ -13,11 +13,13 @@
 //!   (`scenes/stiff-catheter-guidewire.toml`), 256 elements each, at 1 kHz as five steps of
 //!   0.2 ms per tick;
 //! - the soft wire at 1 kHz and the nitinol wire at 1 kHz again with the second-order
-//!   integrator (`solver.stiff.integrator = "bdf2"`), which costs more per step.
+//!   integrator (`solver.stiff.integrator = "bdf2"`), which costs more per step;
+//! - the nitinol wire and the same wire in the `steel` preset at 1 kHz as one step of 1 ms per
+//!   tick, 256 elements.
 //!
 //! Each loop's tips (every rod's) are compared with a reference run to the same end: the
 //! explicit insertion (`scenes/guidewire-insertion.toml`, 700 000 steps) for the soft wire, the
-//! nitinol scenes at dt 5e-5 s with 512 elements per rod for the others. It writes `docs/benchmarks/haptic.md`; the
+//! nitinol scenes (and the steel wire's) at dt 5e-5 s with 512 elements per rod for the others. It writes `docs/benchmarks/haptic.md`; the
 //! exit status says whether every loop's 99th percentile is within its tick on this machine.
 
 use crate::bench::{conditions, machine, root};
@@ -53,6 +55,14 @@ const NITINOL_REFERENCE: (SceneWith, &str) = (
     "`scenes/nitinol-guidewire-insertion.toml` at dt 5e-5 s (512 elements)",
 );
 
+const STEEL_REFERENCE: (SceneWith, &str) = (
+    (
+        "scenes/nitinol-guidewire-insertion.toml",
+        &[("solver.dt", "5e-5"), ("rod.0.material.preset", "steel")],
+    ),
+    "`scenes/nitinol-guidewire-insertion.toml` with the `steel` preset at dt 5e-5 s (512 elements)",
+);
+
 const PAIR_REFERENCE: (SceneWith, &str) = (
     (
         "scenes/stiff-catheter-guidewire.toml",
@@ -61,7 +71,7 @@ const PAIR_REFERENCE: (SceneWith, &str) = (
     "`scenes/stiff-catheter-guidewire.toml` at dt 5e-5 s (512 elements each)",
 );
 
-const LOOPS: [Loop; 6] = [
+const LOOPS: [Loop; 8] = [
     Loop {
         label: "soft wire, 1 kHz (1 × 1 ms)",
         scene: ("scenes/stiff-guidewire-insertion.toml", &[]),
@@ -125,6 +135,30 @@ const LOOPS: [Loop; 6] = [
         steps_per_tick: 5,
         period: 1e-3,
         reference: PAIR_REFERENCE,
+    },
+    Loop {
+        label: "nitinol wire, 256 elements, 1 kHz (1 × 1 ms)",
+        scene: (
+            "scenes/nitinol-guidewire-insertion.toml",
+            &[("rod.0.elements", "256"), ("solver.dt", "1e-3")],
+        ),
+        steps_per_tick: 1,
+        period: 1e-3,
+        reference: NITINOL_REFERENCE,
+    },
+    Loop {
+        label: "steel wire, 256 elements, 1 kHz (1 × 1 ms)",
+        scene: (
+            "scenes/nitinol-guidewire-insertion.toml",
+            &[
+                ("rod.0.elements", "256"),
+                ("solver.dt", "1e-3"),
+                ("rod.0.material.preset", "steel"),
+            ],
+        ),
+        steps_per_tick: 1,
+        period: 1e-3,
+        reference: STEEL_REFERENCE,
     },
 ];
 
