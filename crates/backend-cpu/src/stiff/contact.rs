@@ -430,7 +430,11 @@ impl StiffContacts {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
         } = self.mesh.friction_at(i);
-        let friction = PinFriction::new(start, mu_s, mu_k, self.h);
+        let mut friction = PinFriction::new(start, mu_s, mu_k, self.h);
+        if let (Touch::Slide(_), Some(f)) = (self.last[i], friction) {
+            let predicted = w.x_pred.get(i) - start;
+            friction = Some(f.continuing(&(predicted - normal * normal.dot(&predicted))));
+        }
         w.pinned
             .push(Pinned::on_wall(i, normal, false, pn, friction));
     }

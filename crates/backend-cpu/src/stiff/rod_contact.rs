@@ -246,7 +246,14 @@ impl RodPlanes {
             static_coefficient: mu_s,
             kinetic_coefficient: mu_k,
         } = self.friction;
-        let friction = PinFriction::new(start, mu_s, mu_k, self.h);
+        let mut friction = PinFriction::new(start, mu_s, mu_k, self.h);
+        if self.last_pn[i] > 0.0
+            && !self.last_stick[i]
+            && let Some(f) = friction
+        {
+            let predicted = w.x_pred.get(i) - start;
+            friction = Some(f.continuing(&(predicted - hs.normal * hs.normal.dot(&predicted))));
+        }
         self.slot[i] = w.pinned.len();
         w.pinned.push(Pinned::on_wall(
             i,

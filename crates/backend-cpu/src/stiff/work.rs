@@ -73,8 +73,10 @@ pub(crate) struct Work {
     pub(crate) pinned: Vec<Pinned>,
     /// Scratch of [`apply`](Self::apply): the pinned points' displacements before the update.
     pin_u: Vec<Vec3<f64>>,
-    /// The largest `|u|` of a pinned point with friction over its holding slip `δ`, at the
-    /// last [`rhs`](Self::rhs): a step has converged only when it is at most 1 (`direct_solve`).
+    /// The largest correction a pinned point with friction still needs (its imbalance over its
+    /// mass plus the law's own stiffness, `PinFriction::tangent`) over its holding slip `δ`,
+    /// at the last [`rhs`](Self::rhs): a step has converged only when it is at most 1
+    /// (`direct_solve`).
     /// The tolerance on strains alone leaves a slip well below an element's length unresolved
     /// (at 0.1 ms a rope's first step down a slope, 3e-8 m, is a strain of 3e-6 of its 1 cm
     /// elements), and with it whether friction holds or slides.
@@ -640,13 +642,15 @@ impl Work {
             let w = k.inv_mass[i];
             let u = match (p.friction, p.slip(&self.x.get(i))) {
                 (Some(f), Some(slip)) if w > 0.0 => {
-                    let u = p.mobility_times(w, &(u / w + f.impulse(&slip, p.pn)));
+                    let imbalance_impulse = p.sliding_part(&(u / w + f.impulse(&slip, p.pn)));
+                    let correction = imbalance_impulse.norm() / (1.0 / w + f.tangent(&slip, p.pn));
+                    let u = p.mobility_times(w, &imbalance_impulse);
                     let il = [i.checked_sub(1), (i < self.n).then_some(i)]
                         .into_iter()
                         .flatten()
                         .fold(0.0_f64, |m, j| m.max(k.cols.inv_l0[j]));
                     worst = worst.max(u.norm() * il);
-                    imbalance = imbalance.max(u.norm() / f.stick_slip);
+                    imbalance = imbalance.max(correction / f.stick_slip);
                     u
                 }
                 _ => p.sliding_part(&u),
@@ -1334,7 +1338,12 @@ mod tests {
             f.freeze(&(slip - normal * normal.dot(&slip)), pn);
             f
         };
-        let sliding = friction(Vec3::new(1e-6, 2e-6, 0.0), 3e-9);
+        let slide = Vec3::new(1e-6, 2e-6, 0.0);
+        // A slide's first freeze is the secant both ways; frozen again sliding the same way,
+        // the law's slope along it (none).
+        let mut sliding = friction(slide, 3e-9);
+        assert!(sliding.k_along == sliding.k_across && sliding.k_across > 0.0);
+        sliding.freeze(&(slide - normal * normal.dot(&slide)), 3e-9);
         let held = friction(Vec3::new(1e-9, 0.0, 0.0), 3e-9);
         assert!(sliding.k_along == 0.0 && sliding.k_across > 0.0);
         assert!(held.k_along > 0.0 && held.k_across == held.k_along);
