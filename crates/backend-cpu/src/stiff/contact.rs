@@ -15,8 +15,8 @@
 //! ([`PinFriction`]): against its slip over the step (relative to its obstacle's surface), a
 //! stiff tangential spring `μ_s p_n / δ` up to a slip `δ` of [`STICK_SPEED`](super::pin::STICK_SPEED)
 //! times the step (static friction: the point holds, creeping at most that fast), kinetic
-//! friction `μ_k p_n` beyond, evaluated at every iterate of the solve, its derivative in the
-//! Newton matrix. Earlier versions switched each point between sticking (pinned still) and
+//! friction `μ_k p_n` beyond, evaluated at every iterate of the solve, a frozen
+//! linearisation of it in the Newton matrix. Earlier versions switched each point between sticking (pinned still) and
 //! sliding (kinetic friction as a shift of its inertial target) between rounds of the solve;
 //! a stiff wire pressed on the vessel at 1 ms then had no stable active set (a point's own
 //! share of the impulse that held it said nothing of its neighbours' push), its steps ended

@@ -41,9 +41,10 @@ pub(crate) struct Pinned {
 /// there (`δ` = [`stick_slip`](Self::stick_slip)): static friction as a stiff tangential
 /// spring of rest length zero, kinetic friction beyond. The solve evaluates `f` at every
 /// iterate (`Work::rhs`), so a converged step satisfies this law exactly for the normal
-/// impulse `p_n` of the last update; the Newton matrix carries its derivative `K_f` frozen at
-/// the last factorisation ([`freeze`](Self::freeze)), a chord approximation like the frames'
-/// geometric bound. A point holds (creeps slower than `δ / h`) while what drives it is below
+/// impulse `p_n` of the last update; the Newton matrix carries a linearisation `K_f` of it
+/// (its slope, or its secant where a slide starts or reverses) frozen at the last
+/// factorisation ([`freeze`](Self::freeze)), a chord approximation like the frames' geometric
+/// bound. A point holds (creeps slower than `δ / h`) while what drives it is below
 /// `μ_s p_n` and slides against `μ_k p_n` beyond, with no switch of the solve's matrix or
 /// targets between the two.
 #[derive(Clone, Copy, Debug)]
