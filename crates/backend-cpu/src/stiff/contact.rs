@@ -45,7 +45,7 @@
 //!    friction) is read: a point the wall would have to pull (`n·g ≤ 0`) is released; the
 //!    others take their new normal impulse `p_n = n·g` for their friction;
 //! 4. if a point was released or caught, or a normal impulse changed by more than
-//!    [`NORMAL_CHANGE`], the solve continues from its current multipliers, for at most
+//!    [`NORMAL_CHANGE`](super::pin::NORMAL_CHANGE), the solve continues from its current multipliers, for at most
 //!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
 //!    changed; positions a last change moves onto the wall are not solved again (the next
 //!    step does).
@@ -78,10 +78,6 @@ const ITERATION_MOVE: f64 = 1.0;
 /// How far a touching point may move between two detections of one step before it is queried
 /// again, as a fraction of the penetration tolerance (see `StiffContacts::detect`).
 const REUSE_DISTANCE: f64 = 0.5;
-
-/// The relative change of a pinned point's normal impulse between two rounds of a step above
-/// which the step is solved again with the new one (its friction is proportional to it).
-const NORMAL_CHANGE: f64 = 0.1;
 
 /// The largest turn [rad] of a pinned point's wall normal that keeps the step's factorisation:
 /// a chord iteration with the old normal's projection still converges, and one that does not
@@ -469,16 +465,9 @@ impl StiffContacts {
                 w.pinned[s] = p;
                 continue;
             }
-            // Friction in proportion to this solve's normal impulse: a change of more than
-            // [`NORMAL_CHANGE`] is solved again.
-            if p.friction.is_some() && (pn - p.pn).abs() > NORMAL_CHANGE * pn {
-                changed = true;
-            }
-            p.pn = pn;
-            if p.friction_stale(&w.x.get(i), k.inv_mass[i]) {
-                changed = true;
-                matrix_changed = true;
-            }
+            let (resolve, rebuild) = p.take_normal_impulse(pn, &w.x.get(i), k.inv_mass[i]);
+            changed |= resolve;
+            matrix_changed |= rebuild;
             w.pinned[s] = p;
         }
         if released {

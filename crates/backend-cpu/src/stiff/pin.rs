@@ -5,6 +5,10 @@
 
 use cosserat_model::Vec3;
 
+/// The relative change of a pinned point's normal impulse between two rounds of a step above
+/// which the step is solved again with the new one (its friction is proportional to it).
+pub(crate) const NORMAL_CHANGE: f64 = 0.1;
+
 /// A point held on the mesh's surface for one step's solve.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Pinned {
@@ -283,6 +287,18 @@ impl Pinned {
         } else {
             v - self.normal * self.normal.dot(v)
         }
+    }
+
+    /// Takes the normal impulse `pn` of a round's solve, at `x`, for a point of inverse mass
+    /// `w`. Returns whether the step must be solved again (its friction, proportional to the
+    /// normal impulse, changed by more than [`NORMAL_CHANGE`]; or its frozen linearisation no
+    /// longer fits, [`friction_stale`](Self::friction_stale)) and whether the matrix must be
+    /// rebuilt for it (the latter).
+    pub(crate) fn take_normal_impulse(&mut self, pn: f64, x: &Vec3<f64>, w: f64) -> (bool, bool) {
+        let moved = self.friction.is_some() && (pn - self.pn).abs() > NORMAL_CHANGE * pn;
+        self.pn = pn;
+        let stale = self.friction_stale(x, w);
+        (moved || stale, stale)
     }
 
     /// Whether its friction's frozen linearisation no longer fits its slip at `x`

@@ -367,14 +367,10 @@ impl RodPlanes {
                 continue;
             }
             // As the mesh's points (`contact.rs`): solved again for a new normal impulse.
-            if p.friction.is_some() && (pn - p.pn).abs() > 0.1 * pn {
-                changed = true;
-            }
-            p.pn = pn;
-            if p.friction_stale(&w.x.get(p.point), k.inv_mass[p.point]) {
-                changed = true;
-                matrix_changed = true;
-            }
+            let (resolve, rebuild) =
+                p.take_normal_impulse(pn, &w.x.get(p.point), k.inv_mass[p.point]);
+            changed |= resolve;
+            matrix_changed |= rebuild;
             w.pinned[s] = p;
         }
         if released {
