@@ -115,7 +115,8 @@ fn drawn_pixels(rgba: &[u8]) -> (usize, usize) {
 /// The pendulum's rope (16 elements, pinned at its first end) pushed along its axis at
 /// 0.1 m/s for 0.2 s of simulated time, then twisted, photographed, and closed: the command
 /// exits 0, both pictures are the size asked and show the rope, and the summary says the
-/// held end moved 20 mm along the axis.
+/// held end moved 20 mm along the axis. The viewer said once which gamepad it reads, or that
+/// it found none (this machine may have no `/dev/input` at all).
 #[test]
 fn a_scripted_hand_pushes_the_wire_in_a_window() {
     if !xvfb_available() {
@@ -134,7 +135,7 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
     )
     .unwrap();
     let started = std::time::Instant::now();
-    let Some((stdout, _)) = view_under_xvfb(&[
+    let Some((stdout, stderr)) = view_under_xvfb(&[
         "view".as_ref(),
         "scenes/pendulum.toml".as_ref(),
         "--elements".as_ref(),
@@ -160,6 +161,11 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
     );
     assert!(summary["frames"].as_u64().unwrap() >= 1, "{line}");
     assert!(summary["time_s"].as_f64().unwrap() > 0.349, "{line}");
+    assert_eq!(stderr.matches("gamepad: ").count(), 1, "{stderr}");
+    assert!(
+        summary["gamepad"].is_string() || stderr.contains("gamepad: none found"),
+        "{line}\n{stderr}"
+    );
     assert!(
         summary["hand_force_norm_n"].as_f64().unwrap() > 0.0,
         "{line}"
@@ -178,7 +184,7 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
 }
 
 /// `--frames K` closes the window after K frames, saving the last with `--screenshot`; the
-/// scene runs as written meanwhile (nobody steers).
+/// scene runs as written meanwhile (nobody steers). With `--no-gamepad` no pad is looked for.
 #[test]
 fn frames_close_the_window() {
     if !xvfb_available() {
@@ -186,9 +192,10 @@ fn frames_close_the_window() {
     }
     let dir = scratch("frames");
     let last = dir.join("last.png");
-    let Some((stdout, _)) = view_under_xvfb(&[
+    let Some((stdout, stderr)) = view_under_xvfb(&[
         "view".as_ref(),
         "scenes/pendulum.toml".as_ref(),
+        "--no-gamepad".as_ref(),
         "--elements".as_ref(),
         "8".as_ref(),
         "--width".as_ref(),
@@ -205,6 +212,8 @@ fn frames_close_the_window() {
     let summary = summary(&stdout);
     assert_eq!(summary["frames"], 5, "{summary}");
     assert_eq!(summary["hand_displacement_m"], 0.0, "{summary}");
+    assert!(summary["gamepad"].is_null(), "{summary}");
+    assert!(!stderr.contains("gamepad"), "{stderr}");
     let (w, h, rgba) = pixels(&last);
     assert_eq!((w, h), (160, 120));
     assert!(drawn_pixels(&rgba).0 > 0);

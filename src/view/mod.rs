@@ -1,11 +1,13 @@
 //! `cosserat view SCENE`: a window that simulates a scene in real time while it draws it, with
-//! the held end of its wire steered by the keyboard, the mouse or a script.
+//! the held end of its wire steered by the keyboard, the mouse, a gamepad or a script.
 //!
 //! Two threads: the physics ([`physics`]) steps the simulation against the wall clock in 1 ms
 //! ticks and publishes the latest state through a mailbox; the window ([`window`], on the main
 //! thread, as window systems require) draws the newest state with `cosserat-render`'s
 //! pipelines at up to `--max-fps` and turns input into the hand's push and twist, which the
-//! physics reads every tick through the same control call a haptic device makes. Neither waits
+//! physics reads every tick through the same control call a haptic device makes; a gamepad
+//! ([`gamepad`], Linux only) is read on a thread of its own and its actions are sent to the
+//! window's event loop, which applies them as it applies keys. Neither waits
 //! for the other: a slow frame never holds a tick back, and physics that cannot keep up shows a
 //! real-time factor below 1 instead of freezing the window.
 //!
@@ -13,6 +15,7 @@
 //! displacement and force, the tip, the real-time factor), and with `--stats FILE` writes the
 //! timings; a script (`--script`, [`script`]) makes all of it testable under Xvfb.
 
+mod gamepad;
 mod physics;
 mod script;
 mod window;
@@ -72,6 +75,9 @@ pub(crate) struct ViewArgs {
     /// Write the run's timings (frames, fps, real-time factor, tick times) as JSON here.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
+    /// Do not look for a gamepad (Linux: /dev/input/event*) nor read one.
+    #[arg(long)]
+    no_gamepad: bool,
 }
 
 /// `cosserat view`: opens the window and runs until it is closed, the script quits or
@@ -161,11 +167,28 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
     });
     // The display is opened before the physics starts: without one, the command stops here
     // with an error rather than a panic.
-    let event_loop = winit::event_loop::EventLoop::new().map_err(|e| {
+    let event_loop = winit::event_loop::EventLoop::<gamepad::PadAction>::with_user_event()
+        .build()
+        .map_err(|e| {
         format!(
             "cosserat view needs a display and found none ({e}); set DISPLAY, or run it under `xvfb-run`"
         )
     })?;
+    // The pad's reader hands its actions to the event loop, which wakes to apply them; it ends
+    // when the loop has closed (or the pad is unplugged).
+    let pad = if args.no_gamepad {
+        None
+    } else {
+        gamepad::find()
+    };
+    let pad_name = pad.as_ref().map(|p| p.name().to_string());
+    if let Some(pad) = pad {
+        let proxy = event_loop.create_proxy();
+        pad.spawn(args.push_speed, args.twist_rate, move |action| {
+            proxy.send_event(action).is_ok()
+        })
+        .map_err(|e| format!("cannot start the gamepad's thread: {e}"))?;
+    }
     let controls = Arc::new(Controls::default());
     let mailbox = Arc::new(Mailbox::default());
     let physics = {
@@ -211,7 +234,15 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
     if let Some(e) = &window.error {
         return Err(e.clone());
     }
-    let summary = summary(&name, &args.scene, hand, &physics, &window, wall_s);
+    let summary = summary(
+        &name,
+        &args.scene,
+        hand,
+        pad_name.as_deref(),
+        &physics,
+        &window,
+        wall_s,
+    );
     println!("{summary}");
     if let Some(path) = &args.stats {
         let stats = stats(&physics, &window, wall_s);
@@ -303,6 +334,7 @@ fn summary(
     name: &str,
     scene: &Path,
     hand: Option<Hand>,
+    gamepad: Option<&str>,
     physics: &PhysicsReport,
     window: &WindowReport,
     wall_s: f64,
@@ -324,6 +356,7 @@ fn summary(
         "fps_median": median_fps(window),
         "screenshots": window.screenshots,
         "adapter": window.adapter,
+        "gamepad": gamepad,
         "stopped": physics.stopped,
         "wall_s": wall_s,
     })

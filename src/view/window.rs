@@ -1,5 +1,5 @@
-//! The window: draws the latest pose the physics published, turns keys and mouse into the
-//! hand's controls and the camera, and shows what the hand feels in the window's title.
+//! The window: draws the latest pose the physics published, turns keys, mouse and gamepad into
+//! the hand's controls and the camera, and shows what the hand feels in the window's title.
 //!
 //! This runs on the main thread (window systems want their event loop there). It paces itself
 //! to `max_fps` with `ControlFlow::WaitUntil` rather than relying on the swap chain's vsync,
@@ -26,6 +26,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
+use super::gamepad::PadAction;
 use super::physics::{Controls, Mailbox, Pose};
 
 /// Degrees the camera turns per pixel dragged.
@@ -95,6 +96,8 @@ pub(crate) struct Viewer {
     /// Where the right button went down: the drag from there steers.
     steering_from: Option<(f64, f64)>,
     held: Held,
+    /// The gamepad's push [m/s] and twist [rad/s], added to the keys' and the drag's.
+    pad: (f64, f64),
     pending: Vec<PathBuf>,
     /// When the viewer was asked to close: it draws the physics' last state, or gives up
     /// waiting for it after [`CLOSING_WAIT`].
@@ -125,6 +128,7 @@ impl Viewer {
             orbiting: false,
             steering_from: None,
             held: Held::default(),
+            pad: (0.0, 0.0),
             pending: Vec::new(),
             closing: None,
             closing_skips: 0,
@@ -166,7 +170,7 @@ impl Viewer {
         .map_err(|e| e.to_string())
     }
 
-    /// Sets the hand's push and twist from the keys held and the right-button drag.
+    /// Sets the hand's push and twist from the keys held, the right-button drag and the pad.
     fn steer(&self) {
         if !self.setup.steerable {
             return;
@@ -179,8 +183,25 @@ impl Viewer {
             push += ((y0 - self.cursor.1) / DRAG_FULL_PX).clamp(-2.0, 2.0);
             twist += ((self.cursor.0 - x0) / DRAG_FULL_PX).clamp(-2.0, 2.0);
         }
-        self.controls.push.set(push * self.setup.push_speed);
-        self.controls.twist.set(twist * self.setup.twist_rate);
+        self.controls
+            .push
+            .set(push * self.setup.push_speed + self.pad.0);
+        self.controls
+            .twist
+            .set(twist * self.setup.twist_rate + self.pad.1);
+    }
+
+    fn toggle_pause(&self) {
+        self.controls.paused.fetch_xor(true, Relaxed);
+    }
+
+    fn step_once(&self) {
+        self.controls.paused.store(true, Relaxed);
+        self.controls.single_steps.fetch_add(1, Relaxed);
+    }
+
+    fn reset(&self) {
+        self.controls.reset.store(true, Relaxed);
     }
 
     fn key(&mut self, key: &Key, pressed: bool, repeat: bool) {
@@ -189,20 +210,15 @@ impl Viewer {
             Key::Named(NamedKey::ArrowDown) => self.held.pull = pressed,
             Key::Named(NamedKey::ArrowLeft) => self.held.twist_left = pressed,
             Key::Named(NamedKey::ArrowRight) => self.held.twist_right = pressed,
-            Key::Named(NamedKey::Space) if pressed && !repeat => {
-                self.controls.paused.fetch_xor(true, Relaxed);
-            }
+            Key::Named(NamedKey::Space) if pressed && !repeat => self.toggle_pause(),
             Key::Named(NamedKey::Escape) if pressed => self.begin_closing(),
             Key::Character(c) if pressed => match c.as_str() {
                 "w" | "W" => self.held.push = true,
                 "s" | "S" => self.held.pull = true,
                 "a" | "A" => self.held.twist_left = true,
                 "d" | "D" => self.held.twist_right = true,
-                "n" | "N" | "." => {
-                    self.controls.paused.store(true, Relaxed);
-                    self.controls.single_steps.fetch_add(1, Relaxed);
-                }
-                "r" | "R" if !repeat => self.controls.reset.store(true, Relaxed),
+                "n" | "N" | "." => self.step_once(),
+                "r" | "R" if !repeat => self.reset(),
                 "q" | "Q" => self.begin_closing(),
                 "0" | "c" | "C" => {
                     // Back to the camera the viewer opened with.
@@ -373,7 +389,7 @@ fn readout(name: &str, p: &Pose, fps: f64, steerable: bool) -> Vec<String> {
     lines
 }
 
-impl ApplicationHandler for Viewer {
+impl ApplicationHandler<PadAction> for Viewer {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         if self.window.is_some() {
             return;
@@ -466,6 +482,20 @@ impl ApplicationHandler for Viewer {
             }
             WindowEvent::RedrawRequested => self.redraw(event_loop),
             _ => {}
+        }
+    }
+
+    /// The gamepad's actions, sent by its reader thread: the same as the keys'.
+    fn user_event(&mut self, _: &ActiveEventLoop, action: PadAction) {
+        match action {
+            PadAction::Steer { push, twist } => {
+                self.pad = (push, twist);
+                self.steer();
+            }
+            PadAction::TogglePause => self.toggle_pause(),
+            PadAction::Step => self.step_once(),
+            PadAction::Reset => self.reset(),
+            PadAction::Quit => self.begin_closing(),
         }
     }
 
