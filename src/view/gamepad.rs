@@ -27,6 +27,9 @@
 //! where that is larger; beyond the dead zone the speed grows linearly from zero to the full
 //! speed.
 
+// Elsewhere than Linux nothing reads a pad, so the mapping is used by its tests alone.
+#![cfg_attr(not(target_os = "linux"), allow(dead_code))]
+
 /// Dead zone of a stick or trigger, as a fraction of its full deflection (the device's own
 /// `flat` where larger, up to [`MAX_DEAD_ZONE`]).
 pub(crate) const DEAD_ZONE: f64 = 0.1;
@@ -272,6 +275,40 @@ impl Mapper {
     }
 }
 
+/// The reader's loop: fetches the pad's raw events (type, code, value; `fetch` blocks until
+/// some come) and sends the actions they map to, until `send` returns false (the viewer has
+/// closed: `None`) or `fetch` fails (the pad was unplugged: the error, after a last `Steer` of
+/// zero so that the hand does not go on at the last speed the pad asked for). An interrupted
+/// read is tried again.
+#[cfg(any(target_os = "linux", test))]
+fn pump(
+    mut fetch: impl FnMut() -> std::io::Result<Vec<(u16, u16, i32)>>,
+    mapper: &mut Mapper,
+    send: &impl Fn(PadAction) -> bool,
+) -> Option<std::io::Error> {
+    loop {
+        match fetch() {
+            Ok(events) => {
+                for (kind, code, value) in events {
+                    if let Some(action) = mapper.event(kind, code, value)
+                        && !send(action)
+                    {
+                        return None;
+                    }
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => {
+                send(PadAction::Steer {
+                    push: 0.0,
+                    twist: 0.0,
+                });
+                return Some(e);
+            }
+        }
+    }
+}
+
 #[cfg(target_os = "linux")]
 pub(crate) use linux::find;
 
@@ -286,7 +323,7 @@ mod linux {
 
     use evdev::{AbsoluteAxisCode, Device, KeyCode};
 
-    use super::{AxisInfo, Mapper, PadAction};
+    use super::{AxisInfo, Mapper, PadAction, pump};
 
     /// Where the kernel's input devices are.
     const INPUT_DIR: &str = "/dev/input";
@@ -303,6 +340,8 @@ mod linux {
     pub(crate) struct Discovery {
         /// The first gamepad, by device number.
         pub(crate) pad: Option<Pad>,
+        /// Why the directory could not be read (it does not exist in most containers).
+        pub(crate) unreadable: Option<String>,
         /// Character devices named `event*`.
         pub(crate) devices: usize,
         /// Those that could not be opened as evdev devices, with why (the first one's).
@@ -321,12 +360,14 @@ mod linux {
                 pad.path.display()
             ),
             None => {
-                let why = match (found.devices, found.refused, &found.first_refusal) {
-                    (0, _, _) => format!("no input devices under {INPUT_DIR}"),
-                    (n, r, Some(e)) if r > 0 => {
-                        format!("{n} input devices, {r} of them could not be opened: {e}")
-                    }
-                    (n, _, _) => format!("none of {n} input devices is one"),
+                let why = match (&found.unreadable, found.devices, &found.first_refusal) {
+                    (Some(e), _, _) => format!("{INPUT_DIR}: {e}"),
+                    (None, 0, _) => format!("no input devices under {INPUT_DIR}"),
+                    (None, n, Some(e)) => format!(
+                        "{n} input devices, {} of them could not be opened: {e}",
+                        found.refused
+                    ),
+                    (None, n, None) => format!("none of {n} input devices is one"),
                 };
                 eprintln!("gamepad: none found ({why}); keys and mouse steer");
             }
@@ -339,12 +380,17 @@ mod linux {
     pub(crate) fn discover(dir: &Path) -> Discovery {
         let mut found = Discovery {
             pad: None,
+            unreadable: None,
             devices: 0,
             refused: 0,
             first_refusal: None,
         };
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            return found;
+        let entries = match std::fs::read_dir(dir) {
+            Ok(entries) => entries,
+            Err(e) => {
+                found.unreadable = Some(e.to_string());
+                return found;
+            }
         };
         let mut nodes: Vec<(u32, PathBuf)> = entries
             .filter_map(Result::ok)
@@ -437,28 +483,14 @@ mod linux {
             std::thread::Builder::new()
                 .name("gamepad".into())
                 .spawn(move || {
-                    loop {
-                        match device.fetch_events() {
-                            Ok(events) => {
-                                for e in events {
-                                    if let Some(action) =
-                                        mapper.event(e.event_type().0, e.code(), e.value())
-                                        && !send(action)
-                                    {
-                                        return;
-                                    }
-                                }
-                            }
-                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                            Err(e) => {
-                                eprintln!("gamepad: {name}: {e}; it is no longer read");
-                                send(PadAction::Steer {
-                                    push: 0.0,
-                                    twist: 0.0,
-                                });
-                                return;
-                            }
-                        }
+                    let fetch = || {
+                        let events = device.fetch_events()?;
+                        Ok(events
+                            .map(|e| (e.event_type().0, e.code(), e.value()))
+                            .collect())
+                    };
+                    if let Some(e) = pump(fetch, &mut mapper, &send) {
+                        eprintln!("gamepad: {name}: {e}; it is no longer read");
                     }
                 })
                 .map(drop)
@@ -508,6 +540,7 @@ mod linux {
         fn discovery_without_an_input_directory_finds_nothing() {
             let found = discover(Path::new("/nonexistent/cosserat/dev/input"));
             assert!(found.pad.is_none());
+            assert!(found.unreadable.is_some());
             assert_eq!((found.devices, found.refused), (0, 0));
         }
 
@@ -525,6 +558,7 @@ mod linux {
             let found = discover(&dir);
             std::fs::remove_dir_all(&dir).unwrap();
             assert!(found.pad.is_none());
+            assert!(found.unreadable.is_none());
             assert_eq!(
                 found.devices, 1,
                 "only event3 is a character device named event<N>"
@@ -830,6 +864,63 @@ mod tests {
         assert_eq!(m.event(0x00, 0, 0), None);
         assert_eq!(m.event(0x04, 4, 90001), None);
         assert_eq!(Mapper::new(&[], PUSH, TWIST).event(EV_ABS, ABS_Y, 0), None);
+    }
+
+    /// A pad unplugged mid-run: the reader sends what came before, then stops the hand and
+    /// ends with the error (the viewer goes on); an interrupted read is retried.
+    #[test]
+    fn an_unplugged_pad_stops_the_hand_and_ends_the_reader() {
+        use std::io::{Error, ErrorKind};
+        let mut reads: Vec<std::io::Result<Vec<(u16, u16, i32)>>> = vec![
+            Ok(vec![(EV_ABS, ABS_Y, -32768), (0, 0, 0)]),
+            Err(Error::from(ErrorKind::Interrupted)),
+            Ok(vec![(EV_KEY, BTN_SOUTH, 1), (EV_KEY, BTN_SOUTH, 0)]),
+            // What a read of an unplugged evdev device gives.
+            Err(Error::from_raw_os_error(19)),
+            Ok(vec![(EV_KEY, BTN_MODE, 1)]),
+        ];
+        reads.reverse();
+        let sent = std::cell::RefCell::new(Vec::new());
+        let ended = pump(
+            || reads.pop().expect("no read after the error"),
+            &mut xbox(),
+            &|a| {
+                sent.borrow_mut().push(a);
+                true
+            },
+        );
+        assert_eq!(ended.and_then(|e| e.raw_os_error()), Some(19));
+        assert_eq!(
+            sent.into_inner(),
+            [
+                PadAction::Steer {
+                    push: PUSH,
+                    twist: 0.0
+                },
+                PadAction::TogglePause,
+                PadAction::Steer {
+                    push: 0.0,
+                    twist: 0.0
+                },
+            ]
+        );
+        assert_eq!(reads.len(), 1, "the read after the error is not made");
+    }
+
+    /// Once the viewer has closed (the event loop refuses actions) the reader ends.
+    #[test]
+    fn the_reader_ends_when_the_viewer_has_closed() {
+        let mut reads = 0;
+        let ended = pump(
+            || {
+                reads += 1;
+                Ok(vec![(EV_KEY, BTN_EAST, 1), (EV_KEY, BTN_EAST, 0)])
+            },
+            &mut xbox(),
+            &|_| false,
+        );
+        assert!(ended.is_none());
+        assert_eq!(reads, 1);
     }
 
     /// A stick held when the pad was opened counts from its first event on, together with the
