@@ -66,10 +66,12 @@ pub(crate) struct ViewArgs {
     /// Most frames drawn per second.
     #[arg(long, default_value_t = 60.0)]
     max_fps: f64,
-    /// Push speed of the arrow keys and of a full right-button drag [m/s].
+    /// Push speed of the arrow keys, of a full right-button drag and of a gamepad's full stick
+    /// [m/s].
     #[arg(long, default_value_t = 0.05)]
     push_speed: f64,
-    /// Twist rate of the arrow keys and of a full right-button drag [rad/s].
+    /// Twist rate of the arrow keys, of a full right-button drag and of a gamepad's full stick
+    /// [rad/s].
     #[arg(long, default_value_t = 6.0)]
     twist_rate: f64,
     /// Write the run's timings (frames, fps, real-time factor, tick times) as JSON here.
