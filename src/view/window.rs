@@ -239,6 +239,20 @@ impl Viewer {
         self.steer();
     }
 
+    /// A gamepad's action: the same as the keys'; its push and twist add to theirs.
+    fn pad_action(&mut self, action: PadAction) {
+        match action {
+            PadAction::Steer { push, twist } => {
+                self.pad = (push, twist);
+                self.steer();
+            }
+            PadAction::TogglePause => self.toggle_pause(),
+            PadAction::Step => self.step_once(),
+            PadAction::Reset => self.reset(),
+            PadAction::Quit => self.begin_closing(),
+        }
+    }
+
     fn begin_closing(&mut self) {
         self.closing.get_or_insert_with(Instant::now);
         // The physics publishes its last state and stops; the next frame draws it.
@@ -485,18 +499,9 @@ impl ApplicationHandler<PadAction> for Viewer {
         }
     }
 
-    /// The gamepad's actions, sent by its reader thread: the same as the keys'.
+    /// The gamepad's actions, sent by its reader thread.
     fn user_event(&mut self, _: &ActiveEventLoop, action: PadAction) {
-        match action {
-            PadAction::Steer { push, twist } => {
-                self.pad = (push, twist);
-                self.steer();
-            }
-            PadAction::TogglePause => self.toggle_pause(),
-            PadAction::Step => self.step_once(),
-            PadAction::Reset => self.reset(),
-            PadAction::Quit => self.begin_closing(),
-        }
+        self.pad_action(action);
     }
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
@@ -515,6 +520,64 @@ impl ApplicationHandler<PadAction> for Viewer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn viewer(steerable: bool) -> Viewer {
+        let setup = Setup {
+            name: "test".into(),
+            settings: RenderSettings::default(),
+            mesh: None,
+            bounds: Bounds::EMPTY,
+            view: View::Auto,
+            projection: Projection::Orthographic,
+            max_fps: 60.0,
+            frames: None,
+            screenshot: None,
+            push_speed: 0.05,
+            twist_rate: 6.0,
+            steerable,
+        };
+        Viewer::new(setup, Arc::default(), Arc::default())
+    }
+
+    /// The gamepad's actions reach the controls as the keys' do: its push and twist add to the
+    /// keys', its buttons pause, step, reset and quit.
+    #[test]
+    fn pad_actions_drive_the_controls_as_keys_do() {
+        let mut v = viewer(true);
+        let c = v.controls.clone();
+        v.pad_action(PadAction::Steer {
+            push: 0.02,
+            twist: -3.0,
+        });
+        assert_eq!((c.push.get(), c.twist.get()), (0.02, -3.0));
+        v.key(&Key::Named(NamedKey::ArrowUp), true, false);
+        assert!((c.push.get() - 0.07).abs() < 1e-15, "{}", c.push.get());
+        v.key(&Key::Named(NamedKey::ArrowUp), false, false);
+        v.pad_action(PadAction::Steer {
+            push: 0.0,
+            twist: 0.0,
+        });
+        assert_eq!((c.push.get(), c.twist.get()), (0.0, 0.0));
+        v.pad_action(PadAction::TogglePause);
+        assert!(c.paused.load(Relaxed));
+        v.pad_action(PadAction::TogglePause);
+        assert!(!c.paused.load(Relaxed));
+        v.pad_action(PadAction::Step);
+        assert!(c.paused.load(Relaxed));
+        assert_eq!(c.single_steps.load(Relaxed), 1);
+        v.pad_action(PadAction::Reset);
+        assert!(c.reset.load(Relaxed));
+        assert!(!c.quit.load(Relaxed));
+        v.pad_action(PadAction::Quit);
+        assert!(c.quit.load(Relaxed) && v.closing.is_some());
+        // Without a held end the sticks do nothing.
+        let mut v = viewer(false);
+        v.pad_action(PadAction::Steer {
+            push: 0.05,
+            twist: 6.0,
+        });
+        assert_eq!(v.controls.push.get(), 0.0);
+    }
 
     /// The readout says what the hand feels and when the physics is behind or paused.
     #[test]
