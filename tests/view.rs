@@ -112,6 +112,38 @@ fn drawn_pixels(rgba: &[u8]) -> (usize, usize) {
     (drawn.len(), blue)
 }
 
+/// The hand's script in `dir` (push 0.1 m/s for 0.2 s, twist, a screenshot at 0.3 s, quit at
+/// 0.35 s), with the paths of the script, its screenshot and a last picture.
+fn push_script(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let (script, middle, last) = (
+        dir.join("hand.txt"),
+        dir.join("middle.png"),
+        dir.join("last.png"),
+    );
+    std::fs::write(
+        &script,
+        format!(
+            "# the hand\n0.0 push 0.1\n0.2 push 0\n0.2 twist 4\n0.3 screenshot {}\n0.35 quit\n",
+            middle.display()
+        ),
+    )
+    .unwrap();
+    (script, middle, last)
+}
+
+/// That the picture is `size` and shows the rope: pixels that differ from the background,
+/// some of them the rope's blue.
+fn assert_shows_the_rope(picture: &Path, size: (u32, u32)) {
+    let (w, h, rgba) = pixels(picture);
+    assert_eq!((w, h), size, "{}", picture.display());
+    let (drawn, rope) = drawn_pixels(&rgba);
+    assert!(
+        drawn > 50 && rope > 20,
+        "{}: {drawn} pixels differ from the background, {rope} are the rope's blue",
+        picture.display()
+    );
+}
+
 /// The pendulum's rope (16 elements, pinned at its first end) pushed along its axis at
 /// 0.1 m/s for 0.2 s of simulated time, then twisted, photographed, and closed: the command
 /// exits 0, both pictures are the size asked and show the rope, and the summary says the
@@ -123,17 +155,7 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
         return;
     }
     let dir = scratch("push");
-    let script = dir.join("hand.txt");
-    let middle = dir.join("middle.png");
-    let last = dir.join("last.png");
-    std::fs::write(
-        &script,
-        format!(
-            "# the hand\n0.0 push 0.1\n0.2 push 0\n0.2 twist 4\n0.3 screenshot {}\n0.35 quit\n",
-            middle.display()
-        ),
-    )
-    .unwrap();
+    let (script, middle, last) = push_script(&dir);
     let started = std::time::Instant::now();
     let Some((stdout, stderr)) = view_under_xvfb(&[
         "view".as_ref(),
@@ -171,14 +193,7 @@ fn a_scripted_hand_pushes_the_wire_in_a_window() {
         "{line}"
     );
     for picture in [&middle, &last] {
-        let (w, h, rgba) = pixels(picture);
-        assert_eq!((w, h), (320, 200), "{}", picture.display());
-        let (drawn, rope) = drawn_pixels(&rgba);
-        assert!(
-            drawn > 50 && rope > 20,
-            "{}: {drawn} pixels differ from the background, {rope} are the rope's blue",
-            picture.display()
-        );
+        assert_shows_the_rope(picture, (320, 200));
     }
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -319,5 +334,54 @@ fn a_bad_script_names_its_line() {
         stderr.contains("hand.txt:2") && stderr.contains("quickly"),
         "{stderr}"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--offscreen` needs no display: with `DISPLAY` unset, the same scripted push runs, the
+/// frames are drawn offscreen (as many as the pacing allows for 0.35 s of simulated time), the
+/// script's and the last screenshots show the rope at the size asked, the held end moved
+/// 20 mm, and no gamepad is looked for.
+#[test]
+fn offscreen_it_draws_without_a_display() {
+    let dir = scratch("offscreen");
+    let (script, middle, last) = push_script(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["view", "scenes/pendulum.toml", "--elements", "16"])
+        .args(["--width", "320", "--height", "200", "--offscreen"])
+        .arg("--script")
+        .arg(&script)
+        .arg("--screenshot")
+        .arg(&last)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if stderr.contains("no GPU adapter") {
+        assert!(
+            std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "COSSERAT_REQUIRE_GPU=1 but there is no adapter: {stderr}"
+        );
+        eprintln!("skipped: {stderr}");
+        return;
+    }
+    assert!(
+        out.status.success(),
+        "exit {:?}\n{stdout}\n{stderr}",
+        out.status
+    );
+    let summary = summary(&stdout);
+    let line = summary.to_string();
+    let moved = summary["hand_displacement_m"].as_f64().unwrap();
+    assert!((moved - 0.02).abs() < 1e-4, "{line}");
+    assert!(summary["frames"].as_u64().unwrap() >= 2, "{line}");
+    assert!(summary["gamepad"].is_null(), "{line}");
+    assert!(!stderr.contains("gamepad"), "{stderr}");
+    for picture in [&middle, &last] {
+        assert_shows_the_rope(picture, (320, 200));
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -16,6 +16,7 @@
 //! timings; a script (`--script`, [`script`]) makes all of it testable under Xvfb.
 
 mod gamepad;
+mod offscreen;
 mod physics;
 mod script;
 mod window;
@@ -80,6 +81,10 @@ pub(crate) struct ViewArgs {
     /// Do not look for a gamepad (Linux: /dev/input/event*) nor read one.
     #[arg(long)]
     no_gamepad: bool,
+    /// Draw without a window: the frames go to an offscreen picture at up to --max-fps and
+    /// the script steers (no display needed; for measuring a GPU's frame rate).
+    #[arg(long)]
+    offscreen: bool,
 }
 
 /// `cosserat view`: opens the window and runs until it is closed, the script quits or
@@ -168,23 +173,29 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
         }
     });
     // The display is opened before the physics starts: without one, the command stops here
-    // with an error rather than a panic.
-    let event_loop = winit::event_loop::EventLoop::<gamepad::PadAction>::with_user_event()
-        .build()
-        .map_err(|e| {
-        format!(
-            "cosserat view needs a display and found none ({e}); set DISPLAY, or run it under `xvfb-run`"
-        )
-    })?;
-    // The pad's reader hands its actions to the event loop, which wakes to apply them; it ends
-    // when the loop has closed (or the pad is unplugged).
-    let pad = if args.no_gamepad {
+    // with an error rather than a panic. Offscreen, there is no window and no input but the
+    // script.
+    let event_loop = if args.offscreen {
         None
     } else {
-        gamepad::find()
+        Some(
+            winit::event_loop::EventLoop::<gamepad::PadAction>::with_user_event()
+                .build()
+                .map_err(|e| {
+                    format!(
+                        "cosserat view needs a display and found none ({e}); set DISPLAY, run it under `xvfb-run`, or draw with --offscreen"
+                    )
+                })?,
+        )
+    };
+    // The pad's reader hands its actions to the event loop, which wakes to apply them; it ends
+    // when the loop has closed (or the pad is unplugged).
+    let pad = match &event_loop {
+        Some(_) if !args.no_gamepad => gamepad::find(),
+        _ => None,
     };
     let pad_name = pad.as_ref().map(|p| p.name().to_string());
-    if let Some(pad) = pad {
+    if let (Some(pad), Some(event_loop)) = (pad, &event_loop) {
         let proxy = event_loop.create_proxy();
         pad.spawn(args.push_speed, args.twist_rate, move |action| {
             proxy.send_event(action).is_ok()
@@ -217,9 +228,15 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
         twist_rate: args.twist_rate,
         steerable: hand.is_some(),
     };
-    let mut viewer = Viewer::new(setup, controls.clone(), mailbox.clone());
     let started = std::time::Instant::now();
-    let looped = event_loop.run_app(&mut viewer);
+    let (mut window, looped) = match event_loop {
+        Some(event_loop) => {
+            let mut viewer = Viewer::new(setup, controls.clone(), mailbox.clone());
+            let looped = event_loop.run_app(&mut viewer);
+            (viewer.finish(), looped)
+        }
+        None => (offscreen::run(setup, &controls, &mailbox), Ok(())),
+    };
     let wall_s = started.elapsed().as_secs_f64();
     controls
         .quit
@@ -227,7 +244,6 @@ pub(crate) fn view(args: &ViewArgs) -> Result<ExitCode, String> {
     let physics = physics
         .join()
         .map_err(|_| "the physics thread panicked".to_string())?;
-    let mut window = viewer.finish();
     // The physics' very last state, if it came after the last frame drawn.
     if let Some(pose) = mailbox.take() {
         window.last = pose;

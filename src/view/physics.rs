@@ -165,6 +165,21 @@ pub(crate) struct Pose {
     pub(crate) finished: bool,
 }
 
+impl Pose {
+    /// The rods as the renderer draws them.
+    pub(crate) fn rod_poses(&self) -> Vec<cosserat_render::RodPose<'_>> {
+        self.rods
+            .iter()
+            .map(|r| cosserat_render::RodPose {
+                points: &r.points,
+                d1: &r.d1,
+                radius: r.radius,
+                contact_force: (!r.contact_force.is_empty()).then_some(&r.contact_force[..]),
+            })
+            .collect()
+    }
+}
+
 /// Where the physics leaves the latest pose and the window takes it.
 #[derive(Default)]
 pub(crate) struct Mailbox {

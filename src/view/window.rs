@@ -16,8 +16,8 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
 use cosserat_render::{
-    Bounds, Camera, Image, Presented, Projection, RenderSettings, RodPose, SurfaceMesh,
-    SurfaceRenderer, View, write_png,
+    Bounds, Camera, Image, Presented, Projection, RenderSettings, SurfaceMesh, SurfaceRenderer,
+    View, write_png,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -38,7 +38,7 @@ const DRAG_FULL_PX: f64 = 100.0;
 /// Frames drawn to a window that gives no texture before a closing viewer gives up drawing.
 const CLOSING_SKIPS: u32 = 30;
 /// How long a closing viewer waits for the physics' last state.
-const CLOSING_WAIT: Duration = Duration::from_secs(2);
+pub(crate) const CLOSING_WAIT: Duration = Duration::from_secs(2);
 
 /// How the window starts and what it is asked to do.
 pub(crate) struct Setup {
@@ -290,17 +290,7 @@ impl Viewer {
         };
         let lines = readout(&self.setup.name, &self.pose, self.fps, self.setup.steerable);
         renderer.set_overlay(&lines.iter().map(String::as_str).collect::<Vec<_>>());
-        let rods: Vec<RodPose<'_>> = self
-            .pose
-            .rods
-            .iter()
-            .map(|r| RodPose {
-                points: &r.points,
-                d1: &r.d1,
-                radius: r.radius,
-                contact_force: (!r.contact_force.is_empty()).then_some(&r.contact_force[..]),
-            })
-            .collect();
+        let rods = self.pose.rod_poses();
         let shown = renderer.draw(&camera, &rods, capture.then_some(&mut self.capture));
         drop(rods);
         match shown {

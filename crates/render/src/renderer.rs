@@ -262,6 +262,32 @@ impl Renderer {
         rods: &[RodPose<'_>],
         out: &mut Image,
     ) -> Result<(), RenderError> {
+        let mut encoder = self.encode_frame(camera, rods);
+        self.readback.copy(&mut encoder, &self.resolved);
+        self.readback.finish(&self.gpu, encoder, out)
+    }
+
+    /// Draws `rods` (and the mesh) seen by `camera` and waits until the GPU has finished the
+    /// frame, without reading it back: what a frame costs to draw, as a window's frame does
+    /// before it is shown (`cosserat view --offscreen` times its frames this way).
+    ///
+    /// # Errors
+    /// [`RenderError::Device`] if the device reports an error.
+    pub fn draw(&mut self, camera: &Camera, rods: &[RodPose<'_>]) -> Result<(), RenderError> {
+        let encoder = self.encode_frame(camera, rods);
+        let submission = self.gpu.queue.submit([encoder.finish()]);
+        self.gpu
+            .device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: None,
+            })
+            .map_err(|e| RenderError::Device(format!("waiting for the frame: {e}")))?;
+        self.gpu.take_error()
+    }
+
+    /// The commands that draw `rods` (and the mesh) seen by `camera` into the picture.
+    fn encode_frame(&mut self, camera: &Camera, rods: &[RodPose<'_>]) -> wgpu::CommandEncoder {
         self.scene
             .prepare(&self.gpu.device, &self.gpu.queue, camera, rods);
         let mut encoder = self
@@ -278,8 +304,7 @@ impl Renderer {
                 depth: &self.depth,
             },
         );
-        self.readback.copy(&mut encoder, &self.resolved);
-        self.readback.finish(&self.gpu, encoder, out)
+        encoder
     }
 
     /// Draws `rods` (and the mesh) seen by `camera` into a new picture.
