@@ -1153,7 +1153,18 @@ fn solve_step<T: Real>(
         StiffScheme::Direct => {
             // Rounds of the solve: one, and one more each time the contacts change (at most
             // `contact::MAX_ROUNDS` more), continuing from the multipliers reached.
-            for round in 0..=contact::MAX_ROUNDS {
+            // Each round is first solved to `contact::LOOSE_ROUND` times the tolerance; only a
+            // round whose contacts then hold still is finished at the tolerance itself.
+            let loosen = contacts.is_some() || planes_active;
+            let mut loose = loosen;
+            let mut first = true;
+            let mut round = 0;
+            loop {
+                let round_tolerance = if loose {
+                    contact::LOOSE_ROUND * tolerance
+                } else {
+                    tolerance
+                };
                 let (r, u) = direct_solve(
                     stiff,
                     k,
@@ -1162,11 +1173,12 @@ fn solve_step<T: Real>(
                     factor,
                     factor_valid,
                     report,
-                    tolerance,
-                    round == 0,
+                    round_tolerance,
+                    first,
                     contacts.as_deref_mut(),
                     planes_active.then_some(&mut *planes),
                 );
+                first = false;
                 residual = r;
                 used += u;
                 if contacts.is_none() && !planes_active {
@@ -1185,9 +1197,23 @@ fn solve_step<T: Real>(
                     update.resolve |= u.resolve;
                     update.matrix_changed |= u.matrix_changed;
                 }
+                if loose && !update.resolve && r <= tolerance {
+                    break;
+                }
+                if loose && (!update.resolve || round == contact::MAX_ROUNDS) {
+                    // The contacts held still at the loose tolerance (or this is the last
+                    // round): finish the round at the step's own.
+                    loose = false;
+                    if update.matrix_changed {
+                        *factor_valid = false;
+                    }
+                    continue;
+                }
                 if !update.resolve || round == contact::MAX_ROUNDS {
                     break;
                 }
+                round += 1;
+                loose = loosen && round < contact::MAX_ROUNDS;
                 // A round that only changed the kinetic friction (the inertial targets) keeps
                 // the factorisation; the iterations refactorise if they stall.
                 if update.matrix_changed {
