@@ -34,9 +34,9 @@
 // the same array, and every invocation back-substitutes its interior,
 // x_j = P g_j − P C_j x_{j+1} − P G_j x_a, and writes its elements' solutions.
 //
-// Pivots are inverted by a Cholesky factorisation whose non-positive pivots get an inverse of
-// zero, as in `banded_solve.wgsl`: a row no free degree of freedom reaches keeps a zero
-// multiplier.
+// A 6×6 pivot is inverted by its Cholesky factorisation whose non-positive pivots get an
+// inverse of zero (as the cyclic reduction's `cr_inverse` in `banded_solve.wgsl`, taken by 3×3
+// blocks): a row no free degree of freedom reaches keeps a zero multiplier.
 //
 // Rows and right-hand sides are laid out so that a workgroup's loads coalesce: number q of
 // element j of invocation t's slice of rod r sits at `((r · EPT + j) · Q + q) · PT + t` (Q = 48:
@@ -187,10 +187,10 @@ fn add_v(p: V6, q: V6) -> V6 {
     return V6(p.u + q.u, p.v + q.v);
 }
 
-// The inverse of a symmetric positive semidefinite 3×3 block (its lower triangle is read) by
-// Cholesky, a non-positive pivot giving a zero row and column (`inverse_psd` of
-// `banded_solve.wgsl`).
-fn inverse_psd(a: mat3x3<REAL>) -> mat3x3<REAL> {
+// L⁻¹ of the Cholesky factor L of a symmetric positive semidefinite 3×3 block (its lower
+// triangle is read), a non-positive pivot giving a zero row and column (as `inverse_psd` of
+// `banded_solve.wgsl`, which returns L⁻ᵀ L⁻¹).
+fn chol_inv(a: mat3x3<REAL>) -> mat3x3<REAL> {
     // l[j][i]: the lower factor's entry (i, j) holds its inverse pivot on the diagonal.
     var l: mat3x3<REAL>;
     for (var j = 0u; j < 3u; j++) {
@@ -211,7 +211,7 @@ fn inverse_psd(a: mat3x3<REAL>) -> mat3x3<REAL> {
             l[j][i] = s * inv;
         }
     }
-    // m = L⁻¹ column by column, then A⁺ = mᵀ m.
+    // m = L⁻¹ column by column (m[c][i]: entry (i, c)).
     var m: mat3x3<REAL>;
     for (var c = 0u; c < 3u; c++) {
         for (var i = c; i < 3u; i++) {
@@ -222,18 +222,21 @@ fn inverse_psd(a: mat3x3<REAL>) -> mat3x3<REAL> {
             m[c][i] = s * l[i][i];
         }
     }
-    return transpose(m) * m;
+    return m;
 }
 
-// B⁺ of a symmetric positive semidefinite 6×6 block by its 3×3 blocks: the first diagonal
-// block's inverse, then its Schur complement's (`inverse_psd` both: the 6×6 Cholesky with a
-// zero inverse for a non-positive pivot, blockwise).
+// B⁺ of a symmetric positive semidefinite 6×6 block: its Cholesky factorisation taken by 3×3
+// blocks, L = [[L₁, 0], [Wᵀ, L₂]] with W = L₁⁻¹ B₁₂ and L₂ the factor of the Schur complement
+// B₂₂ − Wᵀ W (a Gram product, positive semidefinite as computed), each non-positive pivot
+// giving a zero inverse (the 6×6 Cholesky of the cyclic reduction's `cr_inverse`, blockwise);
+// then L⁻ᵀ L⁻¹ with L⁻¹ = [[M₁, 0], [K, M₂]], K = −M₂ Wᵀ M₁.
 fn pinv(p: M6) -> M6 {
-    let ai = inverse_psd(p.a);
-    let y = ai * p.b;
-    let si = inverse_psd(p.d - transpose(p.b) * y);
-    let b = y * (si * REAL(-1.0));
-    return M6(ai - b * transpose(y), b, transpose(b), si);
+    let m1 = chol_inv(p.a);
+    let w = m1 * p.b;
+    let m2 = chol_inv(p.d - transpose(w) * w);
+    let k = (m2 * transpose(w) * m1) * REAL(-1.0);
+    let b = transpose(k) * m2;
+    return M6(transpose(m1) * m1 + transpose(k) * k, b, transpose(b), transpose(m2) * m2);
 }
 
 // The exchange array as blocks: 3×3 (9 numbers, row-major), 6×6 (36), symmetric 6×6 (a's and
