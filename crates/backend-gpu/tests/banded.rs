@@ -249,8 +249,8 @@ fn solve_chain_systems(b: &mut BandedBatch, precision: Precision, what: &str) {
     // orders of magnitude (frames' inverse inertias against points' inverse masses), with a
     // compliance far below them: the spans the stiff scheme's matrices have.
     // In f32, a long rod's system with a compliance this far below its other terms is as
-    // conditioned as single precision can take: at 256 elements the chain's backward error
-    // reached 0.45 and 0.9 on two of eight such rods, the partitioned solve's 5e-4 and 1e-2 on
+    // ill-conditioned as single precision can take: at 256 elements the chain's backward error
+    // reached 0.45 and 0.9 on two of eight such rods, the partitioned solve's 5e-4 to 1e-2 on
     // one or two (whichever rods its slicing meets badly); those rows take a compliance of 1e-4
     // of the matrix's scale instead (still twelve orders of magnitude between points and frames).
     let compliance = if precision == Precision::F32 && elements > 64 {
