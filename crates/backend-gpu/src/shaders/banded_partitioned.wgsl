@@ -18,8 +18,9 @@
 // while the separator takes B_a −= G_jᵀ P G_j, f_a −= G_jᵀ P g_j (the spike of the partition).
 // What the last step leaves for "element EPT" is the next invocation's separator: its diagonal
 // and right-hand side get −C_jᵀ P C_j and −C_jᵀ P g_j, and G_EPTᵀ is the coupling between the
-// two separators. That is a symmetric permutation of the block LDLᵀ (interiors first,
-// separators last), as stable as the chain's for these positive (semi)definite systems.
+// two separators. That is the block LDLᵀ of a symmetric permutation of the system (interiors
+// first, separators last), backward stable as the chain's is for positive definite systems
+// (which badly conditioned rods an f32 solve loses does depend on the order: `tests/banded.rs`).
 //
 // The reduced system, one 6×6 row per invocation, is block tridiagonal again and is solved by
 // block cyclic reduction (`log₂ PT` levels): at level s each row e ≡ s (mod 2s) is eliminated
@@ -47,7 +48,7 @@
 // arrays of numbers passed around (lavapipe takes half a minute over a kernel written so).
 //
 // Filled in by `banded.rs`: REAL (f64 or f32); prepended: the constants PT (invocations per rod,
-// a power of two), EPT (elements per invocation) and XCH (= 27 · PT, numbers in `xch`).
+// a power of two), EPT (elements per invocation) and XCH (numbers in `xch`: 27 · PT, at least 36).
 
 // [[a, b], [c, d]]: each field the 3×3 block itself (entry (r, c) of `a` is a[c][r]).
 struct M6 {
