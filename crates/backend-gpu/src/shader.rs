@@ -26,6 +26,8 @@ pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wg
 pub(crate) const ROD_CONTACT_WGSL: &str = include_str!("shaders/rod_contact.wgsl");
 /// The stiff scheme's banded factorisation and solve (`banded.rs`).
 pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wgsl");
+/// The stiff scheme's banded solve, one rod per workgroup, partitioned (`banded.rs`).
+pub(crate) const BANDED_PARTITIONED_WGSL: &str = include_str!("shaders/banded_partitioned.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
@@ -347,7 +349,7 @@ fn expand_block(lines: &[&str], ept: u32, unroll: bool, out: &mut String) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::banded::{Precision, source};
+    use crate::banded::{Precision, partitioned_source, source};
 
     #[test]
     fn preprocessor_selects_blocks() {
@@ -697,6 +699,25 @@ mod tests {
                 );
                 for precision in [Precision::F64, Precision::F32] {
                     validate(&format!("{name} {precision:?}"), &source(precision));
+                }
+                continue;
+            }
+            if file
+                .file_name()
+                .is_some_and(|f| f == "banded_partitioned.wgsl")
+            {
+                // Its number type, invocations per rod and elements per invocation filled in.
+                assert_eq!(
+                    text, BANDED_PARTITIONED_WGSL,
+                    "banded_partitioned.wgsl on disk differs from the compiled-in copy"
+                );
+                for precision in [Precision::F64, Precision::F32] {
+                    for (threads, per_thread) in [(1, 1), (1, 5), (2, 1), (64, 4), (256, 2)] {
+                        validate(
+                            &format!("{name} {precision:?} {threads}×{per_thread}"),
+                            &partitioned_source(precision, threads, per_thread),
+                        );
+                    }
                 }
                 continue;
             }
