@@ -48,10 +48,10 @@
 //!    [`NORMAL_CHANGE`](super::pin::NORMAL_CHANGE), the solve continues from its current multipliers, for at most
 //!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
 //!    changed; positions a last change moves onto the wall are not solved again (the next
-//!    step does). Each round is solved first to [`LOOSE_ROUND`] times the step's tolerance;
-//!    steps 3 and 4 run then, and only a round whose contacts hold still is finished at the
-//!    tolerance itself, so the iterations that would converge a round the contacts are about to
-//!    change are not spent.
+//!    step does). Each round after the first is solved first to [`LOOSE_ROUND`] times the
+//!    step's tolerance; steps 3 and 4 run then, and only a round whose contacts hold still is
+//!    finished at the tolerance itself, so the iterations that would converge a round the
+//!    contacts are about to change are not spent.
 
 use super::Consts;
 use super::lanes::V3s;
@@ -68,12 +68,14 @@ use std::sync::Arc;
 /// Largest number of re-solves per step after the active set changed.
 pub(crate) const MAX_ROUNDS: usize = 4;
 
-/// The residual, as a multiple of the step's tolerance, to which a round of the solve is
-/// taken before its contacts are updated. A round that lets points go or catches new ones is
-/// followed by another, which starts where this one stopped; converging it further first would
-/// spend iterations on an active set about to change. Measured on the insertions at 1 ms
-/// (`docs/stiff-solver.md`, "Rounds solved loosely first"): every factor from 10 to 300 took
-/// fewer iterations and left fewer steps above the tolerance than solving each round fully (1).
+/// The residual, as a multiple of the step's tolerance, to which a round of the solve after
+/// the first is taken before its contacts are updated. Once the contacts have changed in a
+/// step they tend to change again (contacts peeling off a bend one layer a round), and each
+/// round starts where the last one stopped, so converging a round further first would spend
+/// iterations on an active set about to change. The first round is solved to the tolerance:
+/// most steps end there, and a step that ends at the tolerance rather than well below it
+/// leaves the next one further to go (measured in `docs/stiff-solver.md`, "Rounds after the
+/// first solved loosely").
 pub(crate) const LOOSE_ROUND: f64 = 30.0;
 
 /// Penetration tolerated without a change of the active set, as a fraction of the rod's radius

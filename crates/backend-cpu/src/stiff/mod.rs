@@ -1153,12 +1153,18 @@ fn solve_step<T: Real>(
         StiffScheme::Direct => {
             // Rounds of the solve: one, and one more each time the contacts change (at most
             // `contact::MAX_ROUNDS` more), continuing from the multipliers reached.
-            // Each round is first solved to `contact::LOOSE_ROUND` times the tolerance; only a
-            // round whose contacts then hold still is finished at the tolerance itself.
+            // Each round after the first is solved to `contact::LOOSE_ROUND` times the
+            // tolerance; only one whose contacts then hold still is finished at the tolerance
+            // itself.
             let loosen = contacts.is_some() || planes_active;
-            let mut loose = loosen;
+            let mut loose = false;
             let mut first = true;
             let mut round = 0;
+            // The residual before the last iteration: a round finished at the tolerance goes
+            // on from the loose one's, so that a factorisation that no longer fits (an
+            // iteration that reduced the residual by less than 4×) is still caught; a new
+            // round starts afresh.
+            let mut previous = f64::INFINITY;
             loop {
                 let round_tolerance = if loose {
                     contact::LOOSE_ROUND * tolerance
@@ -1177,6 +1183,7 @@ fn solve_step<T: Real>(
                     first,
                     contacts.as_deref_mut(),
                     planes_active.then_some(&mut *planes),
+                    &mut previous,
                 );
                 first = false;
                 residual = r;
@@ -1214,6 +1221,7 @@ fn solve_step<T: Real>(
                 }
                 round += 1;
                 loose = loosen && round < contact::MAX_ROUNDS;
+                previous = f64::INFINITY;
                 // A round that only changed the kinetic friction (the inertial targets) keeps
                 // the factorisation; the iterations refactorise if they stall.
                 if update.matrix_changed {
@@ -1253,12 +1261,12 @@ fn direct_solve(
     first: bool,
     mut contacts: Option<&mut StiffContacts>,
     mut planes: Option<&mut RodPlanes>,
+    previous: &mut f64,
 ) -> (f64, usize) {
     let mut used = 0;
     let mut residual = f64::NAN;
     // Whether the last iteration pinned points (the matrix changed).
     let mut pins_changed = false;
-    let mut previous = f64::INFINITY;
     for it in 0..=stiff.iterations {
         let last = it == stiff.iterations;
         if last && stiff.tolerance <= 0.0 {
@@ -1279,13 +1287,13 @@ fn direct_solve(
         // At least one iteration: with λ = 0 the residual `C` of a compliant
         // constraint is its strain, not the imbalance of its force, so a gently
         // bent rod would pass the test without being solved at all.
-        if (residual <= tolerance && it > 0) || last {
+        if (residual <= tolerance && (it > 0 || !first)) || last {
             break;
         }
         // An iteration that reduced the residual by less than 4×: a reused
         // factorisation no longer fits (the multipliers, hence the frames' geometric
         // bound, moved); refactorise with the current ones, as Newton would.
-        if !refactor && residual > 0.25 * previous {
+        if !refactor && residual > 0.25 * *previous {
             w.precondition(k, stiff.geometric, false);
             residual = w.rhs(k).max(tolerance * w.friction_imbalance);
             refactor = true;
@@ -1302,7 +1310,7 @@ fn direct_solve(
             *factor_valid = true;
             report.factorisations += 1;
         }
-        previous = residual;
+        *previous = residual;
         factor.solve(&mut w.rhs);
         let max_move = contacts
             .as_deref()
