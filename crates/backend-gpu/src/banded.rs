@@ -87,6 +87,15 @@ pub enum Strategy {
 /// [`Strategy::CyclicReduction`].
 const WG: u32 = 64;
 
+/// Numbers of an interior element's factors the partitioned solve keeps in an invocation's
+/// private arrays for the way back (`P C`, `P G`, `P g`).
+const PARTITIONED_INTERIOR: usize = 78;
+
+/// The most bytes of those private arrays per invocation: 16 elements in `f64`, 32 in `f32`.
+/// Measured on an NVIDIA H200 (driver 580.159.04): 32 elements per invocation in `f64`
+/// (19 968 bytes) failed to compile there, 16 in `f64` and 32 in `f32` (9 984 bytes each) ran.
+const PARTITIONED_PRIVATE_BYTES: usize = 16 * PARTITIONED_INTERIOR * 8;
+
 /// Numbers the cyclic reduction keeps per element (`CR_STRIDE` of the kernel).
 const CR_STRIDE: usize = 228;
 
@@ -268,9 +277,20 @@ impl BandedBatch {
                     )));
                 }
                 let threads = threads as usize;
+                let per_thread = elements.div_ceil(threads);
+                let private = per_thread * PARTITIONED_INTERIOR * precision.bytes();
+                if private > PARTITIONED_PRIVATE_BYTES {
+                    return Err(GpuError::InvalidInput(format!(
+                        "the partitioned solve of {elements} elements with {threads} invocations \
+                         per rod keeps {per_thread} elements per invocation, {private} bytes of \
+                         private arrays in {precision:?}; at most {PARTITIONED_PRIVATE_BYTES} \
+                         compile everywhere it was tried (an NVIDIA driver refused 32 elements in \
+                         F64): take more invocations per rod"
+                    )));
+                }
                 Layout::Partitioned {
                     threads,
-                    per_thread: elements.div_ceil(threads),
+                    per_thread,
                 }
             }
         };

@@ -424,4 +424,17 @@ fn mismatched_input_is_refused_with_the_sizes() {
         ),
         "{e}"
     );
+    // Slices longer than the private arrays are built for: 32 elements per invocation in F64
+    // (F32 takes them).
+    let e = BandedBatch::new_partitioned(&GpuOptions::default(), Precision::F64, 1, 256, 8)
+        .err()
+        .expect("32 elements per invocation in F64 refused");
+    assert!(
+        e.to_string().contains(
+            "keeps 32 elements per invocation, 19968 bytes of private arrays in F64; at most 9984"
+        ),
+        "{e}"
+    );
+    BandedBatch::new_partitioned(&GpuOptions::default(), Precision::F32, 1, 256, 8)
+        .expect("32 elements per invocation in F32");
 }
