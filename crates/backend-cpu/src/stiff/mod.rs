@@ -1207,9 +1207,9 @@ fn solve_step<T: Real>(
                 if loose && !update.resolve && r <= tolerance {
                     break;
                 }
-                if loose && (!update.resolve || round == contact::MAX_ROUNDS) {
-                    // The contacts held still at the loose tolerance (or this is the last
-                    // round): finish the round at the step's own.
+                if loose && !update.resolve {
+                    // The contacts held still at the loose tolerance: finish the round at the
+                    // step's own. (The last round is never loose.)
                     loose = false;
                     if update.matrix_changed {
                         *factor_valid = false;
