@@ -683,11 +683,15 @@ pub(crate) fn source(precision: Precision) -> String {
         Precision::F64 => ("f64", "1.7976931348623157e308lf"),
         Precision::F32 => ("f32", "3.4028234e38"),
     };
-    crate::shader::BANDED_SOLVE_WGSL
-        .replace("REAL(MAX_REAL)", &format!("{real}({max})"))
-        .replace("REAL", real)
-        .replace("CR_WG", &format!("{WG}u"))
-        .replace("(WG)", &format!("({WG})"))
+    format!(
+        "{}\n{}",
+        crate::shader::CHOLESKY_WGSL,
+        crate::shader::BANDED_SOLVE_WGSL
+    )
+    .replace("REAL(MAX_REAL)", &format!("{real}({max})"))
+    .replace("REAL", real)
+    .replace("CR_WG", &format!("{WG}u"))
+    .replace("(WG)", &format!("({WG})"))
 }
 
 /// The partitioned kernel's source for `precision`, `threads` invocations per rod and
@@ -700,6 +704,11 @@ pub(crate) fn partitioned_source(precision: Precision, threads: u32, per_thread:
     format!(
         "const PT: u32 = {threads}u;\nconst EPT: u32 = {per_thread}u;\nconst XCH: u32 = {}u;\n\n{}",
         partitioned_xch(threads),
-        crate::shader::BANDED_PARTITIONED_WGSL.replace("REAL", real)
+        format!(
+            "{}\n{}",
+            crate::shader::CHOLESKY_WGSL,
+            crate::shader::BANDED_PARTITIONED_WGSL
+        )
+        .replace("REAL", real)
     )
 }

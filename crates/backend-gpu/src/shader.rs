@@ -26,6 +26,8 @@ pub(crate) const WALL_CONTACT_WGSL: &str = include_str!("shaders/wall_contact.wg
 pub(crate) const ROD_CONTACT_WGSL: &str = include_str!("shaders/rod_contact.wgsl");
 /// The stiff scheme's banded factorisation and solve (`banded.rs`).
 pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wgsl");
+/// The Cholesky factor of a 3×3 block, put before either banded solve (`banded.rs`).
+pub(crate) const CHOLESKY_WGSL: &str = include_str!("shaders/cholesky.wgsl");
 /// The stiff scheme's banded solve, one rod per workgroup, partitioned (`banded.rs`).
 pub(crate) const BANDED_PARTITIONED_WGSL: &str = include_str!("shaders/banded_partitioned.wgsl");
 
@@ -689,6 +691,14 @@ mod tests {
                     ..small(vec!["RODC", "FAST", "REGC"])
                 };
                 validate(&name, &cfg.source());
+                continue;
+            }
+            if file.file_name().is_some_and(|f| f == "cholesky.wgsl") {
+                // Put before both banded solves, validated with them below.
+                assert_eq!(
+                    text, CHOLESKY_WGSL,
+                    "cholesky.wgsl on disk differs from the compiled-in copy"
+                );
                 continue;
             }
             if file.file_name().is_some_and(|f| f == "banded_solve.wgsl") {
