@@ -3,46 +3,12 @@
 //! pushed through an introducer into a vessel. Runs on lavapipe in CI
 //! (`COSSERAT_REQUIRE_GPU=1`); without an adapter it is skipped unless required.
 
-use cosserat::scene::parse_scene;
-use cosserat::sim::{Backend, RodHandle, Simulation};
+#[path = "support/pair.rs"]
+mod pair;
+
+use cosserat::sim::{RodHandle, Simulation};
+use pair::{largest_gap, pair};
 use std::path::Path;
-
-fn gpu_required() -> bool {
-    std::env::var("COSSERAT_REQUIRE_GPU").is_ok_and(|v| v == "1")
-}
-
-/// The scene `text` (with `overrides`) built for the CPU and for the GPU; `None` when no GPU
-/// adapter is available and none is required.
-fn pair(text: &str, overrides: &[(&str, &str)]) -> Option<(Simulation, Simulation)> {
-    let overrides: Vec<(String, String)> = overrides
-        .iter()
-        .map(|(k, v)| ((*k).into(), (*v).into()))
-        .collect();
-    let build = |backend| {
-        let (b, _, _) = parse_scene(Path::new("contact.toml"), text, &overrides)
-            .unwrap_or_else(|e| panic!("{e}"));
-        b.backend(backend).build()
-    };
-    let cpu = build(Backend::Cpu).unwrap_or_else(|e| panic!("cpu: {e}"));
-    match build(Backend::Gpu) {
-        Ok(gpu) => Some((cpu, gpu)),
-        Err(e) if !cfg!(feature = "gpu") || e.to_string().contains("adapter") => {
-            assert!(!gpu_required(), "COSSERAT_REQUIRE_GPU=1 but {e}");
-            eprintln!("note: skipping the GPU contact test: {e}");
-            None
-        }
-        Err(e) => panic!("gpu: {e}"),
-    }
-}
-
-fn largest_gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| {
-            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-        })
-        .fold(0.0, f64::max)
-}
 
 /// A rope lying across a floor, one end dragged along it: every point touches, the dragged
 /// part slides (kinetic friction), the far part sticks until the tension reaches it.

@@ -12,8 +12,8 @@ use cosserat_model::{Quat, Real, Vec3};
 use cosserat_problem::divergence::first_too_fast;
 use cosserat_problem::ends::cast_vec;
 use cosserat_problem::stepper::{
-    check_capabilities, check_condition, check_end, check_rod, check_write, condition_needs,
-    read_state_field, read_state_frames, unit_frames,
+    check_capabilities, check_condition, check_end, check_loads, check_rod, check_write,
+    condition_needs, read_state_field, read_state_frames, unit_frames,
 };
 use cosserat_problem::{
     Capabilities, Capability, Clock, CollisionStats, ContactSample, ControlError, CouplingStats,
@@ -278,26 +278,11 @@ impl<T: Real> Scheme<T> for BoundStiff<T> {
 
 /// The stiff solver's reports of all rods together after `steps` steps.
 fn summarise(settings: &StiffSettings, scratch: &[StiffScratch], steps: u64) -> StiffSummary {
-    let mut s = StiffSummary {
-        rod_steps: steps * scratch.len() as u64,
-        max_tolerance: settings.tolerance,
-        ..StiffSummary::default()
-    };
-    for r in scratch.iter().map(StiffScratch::report) {
-        s.iterations += r.total_iterations;
-        s.factorisations += r.factorisations;
-        s.steps_kept += r.steps;
-        s.unconverged_steps += r.unconverged_steps;
-        s.halved_steps += r.halved_steps;
-        s.axial_steps += r.axial_steps;
-        if r.max_residual > s.max_residual {
-            s.max_residual = r.max_residual;
-            s.worst_step = r.worst_step;
-        }
-        s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
-        s.last_unconverged_step = s.last_unconverged_step.max(r.last_unconverged_step);
-    }
-    s
+    StiffSummary::of_reports(
+        scratch.iter().map(StiffScratch::report),
+        steps,
+        settings.tolerance,
+    )
 }
 
 /// The explicit scheme's stepper.
@@ -580,24 +565,7 @@ impl<T: Real, S: Scheme<T>> Stepper for CpuStepper<T, S> {
 
     fn set_loads(&mut self, rod: usize, loads: &[PointLoad<f64>]) -> Result<(), ControlError> {
         let r = self.rod_mut(rod)?;
-        let last = r.elements();
-        if let Some(l) = loads.iter().find(|l| l.point > last) {
-            return Err(ControlError::NoPoint {
-                rod,
-                point: l.point,
-                last,
-            });
-        }
-        if loads
-            .iter()
-            .any(|l| !l.force.iter().chain(l.moment.iter()).all(|x| x.is_finite()))
-        {
-            return Err(ControlError::Value {
-                field: "load",
-                why: "forces and moments must be finite".into(),
-            });
-        }
-        check_capabilities(S::NAME, S::capabilities(), PointLoad::needs(loads), "set")?;
+        check_loads(S::NAME, S::capabilities(), rod, r.elements(), loads)?;
         r.loads.clear();
         r.loads.extend(loads.iter().map(PointLoad::cast));
         Ok(())

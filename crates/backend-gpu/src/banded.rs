@@ -114,7 +114,7 @@ pub fn partitioned_workgroup_bytes(precision: Precision, threads: u32) -> usize 
     partitioned_xch(threads) * precision.bytes()
 }
 
-fn partitioned_xch(threads: u32) -> usize {
+pub(crate) fn partitioned_xch(threads: u32) -> usize {
     // The first separator coupling (36 numbers) goes through it even for one invocation.
     (PARTITIONED_XQ * threads as usize).max(36)
 }
@@ -705,7 +705,8 @@ pub(crate) fn partitioned_source(precision: Precision, threads: u32, per_thread:
         "const PT: u32 = {threads}u;\nconst EPT: u32 = {per_thread}u;\nconst XCH: u32 = {}u;\n\n{}",
         partitioned_xch(threads),
         format!(
-            "{}\n{}",
+            "{}\n{}\n{}",
+            crate::shader::BANDED_PARTITIONED_MAIN_WGSL,
             crate::shader::CHOLESKY_WGSL,
             crate::shader::BANDED_PARTITIONED_WGSL
         )

@@ -46,6 +46,8 @@ mod readback;
 mod shader;
 mod sim;
 mod stepper;
+mod stiff;
+mod stiff_stepper;
 mod variants;
 
 pub use cosserat_problem::{
@@ -56,6 +58,8 @@ pub use device::AdapterSummary;
 pub use readback::{GpuField, GpuSnapshot};
 pub use sim::GpuSimulation;
 pub use stepper::GpuStepper;
+pub use stiff::{GpuStiffRod, GpuStiffSimulation};
+pub use stiff_stepper::{GpuStiffStepper, StiffRodParts};
 #[doc(hidden)]
 pub use variants::KernelVariant;
 

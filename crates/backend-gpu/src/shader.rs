@@ -30,6 +30,12 @@ pub(crate) const BANDED_SOLVE_WGSL: &str = include_str!("shaders/banded_solve.wg
 pub(crate) const CHOLESKY_WGSL: &str = include_str!("shaders/cholesky.wgsl");
 /// The stiff scheme's banded solve, one rod per workgroup, partitioned (`banded.rs`).
 pub(crate) const BANDED_PARTITIONED_WGSL: &str = include_str!("shaders/banded_partitioned.wgsl");
+/// The stiff scheme's whole step, one rod per workgroup, around the partitioned solve
+/// (`stiff.rs`).
+pub(crate) const STIFF_STEP_WGSL: &str = include_str!("shaders/stiff_step.wgsl");
+/// The partitioned solve's buffers and entry point, for the solve alone.
+pub(crate) const BANDED_PARTITIONED_MAIN_WGSL: &str =
+    include_str!("shaders/banded_partitioned_main.wgsl");
 
 /// Every flag `rod_step.wgsl` understands, in a fixed order.
 #[cfg(test)]
@@ -728,6 +734,31 @@ mod tests {
                             &partitioned_source(precision, threads, per_thread),
                         );
                     }
+                }
+                continue;
+            }
+            if file
+                .file_name()
+                .is_some_and(|f| f == "banded_partitioned_main.wgsl")
+            {
+                // Put before `banded_partitioned.wgsl`, validated with it above.
+                assert_eq!(
+                    text, BANDED_PARTITIONED_MAIN_WGSL,
+                    "banded_partitioned_main.wgsl on disk differs from the compiled-in copy"
+                );
+                continue;
+            }
+            if file.file_name().is_some_and(|f| f == "stiff_step.wgsl") {
+                // With the partitioned solve after it, for a few slicings.
+                assert_eq!(
+                    text, STIFF_STEP_WGSL,
+                    "stiff_step.wgsl on disk differs from the compiled-in copy"
+                );
+                for (threads, per_thread) in [(1, 2), (2, 1), (4, 3), (64, 4)] {
+                    validate(
+                        &format!("{name} {threads}×{per_thread}"),
+                        &crate::stiff::source_for(threads, per_thread),
+                    );
                 }
                 continue;
             }

@@ -1020,6 +1020,9 @@ fn cpu_stepper<T: Real>(
 
 #[cfg(feature = "gpu")]
 fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Stepper>, BuildError> {
+    if let Some(stiff) = b.stiff {
+        return gpu_stiff_stepper(b, needs, &stiff);
+    }
     require(
         "gpu explicit",
         cosserat_backend_gpu::GpuStepper::supported(),
@@ -1097,6 +1100,37 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
     let stepper =
         cosserat_backend_gpu::GpuStepper::on_gpus(inputs, &b.settings.cast(), options, b.gpus)
             .map_err(|e| BuildError::Setting(e.to_string()))?;
+    Ok(Box::new(stepper))
+}
+
+/// The stiff scheme on the GPU (`cosserat_backend_gpu::GpuStiffStepper`): rods in `f64`, free
+/// of contacts.
+#[cfg(feature = "gpu")]
+fn gpu_stiff_stepper(
+    b: &SimulationBuilder,
+    needs: Capabilities,
+    stiff: &StiffSettings,
+) -> Result<Box<dyn Stepper>, BuildError> {
+    require(
+        "gpu stiff",
+        cosserat_backend_gpu::GpuStiffStepper::supported(),
+        needs,
+        "use --backend cpu",
+    )?;
+    let rods = cpu_rods::<f64>(b)?;
+    let loads: Vec<Vec<PointLoad<f64>>> = b.rods.iter().map(RodBuilder::point_loads).collect();
+    let rods = rods
+        .into_iter()
+        .map(|r| (r.state, r.params, r.ends))
+        .collect();
+    let stepper = cosserat_backend_gpu::GpuStiffStepper::new(
+        rods,
+        loads,
+        &b.settings,
+        stiff,
+        &cosserat_backend_gpu::GpuOptions::default(),
+    )
+    .map_err(|e| BuildError::Setting(format!("the GPU's stiff scheme: {e}")))?;
     Ok(Box::new(stepper))
 }
 

@@ -29,7 +29,7 @@ pub use ends::{EndCondition, EndKind, EndPath, PrescribedMotion};
 pub use report::{CollisionStats, CouplingStats, EndReaction, StiffReport, StiffSummary};
 pub use settings::{
     Gpus, Integrator, LoadProfile, Ordering, Par, PointLoad, Refactor, SolverSettings, StiffScheme,
-    StiffSettings,
+    StiffSettings, stiff_compliance, stiff_damped_row,
 };
 pub use stepper::{
     ContactSample, ControlError, Snapshot, StateField, StepError, Stepper, StepperInfo,

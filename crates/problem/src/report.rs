@@ -194,6 +194,35 @@ pub struct StiffSummary {
 }
 
 impl StiffSummary {
+    /// The reports of every rod summed, after `steps` steps of them all, with the settings'
+    /// `tolerance` as the least of [`max_tolerance`](Self::max_tolerance).
+    pub fn of_reports(
+        reports: impl IntoIterator<Item = StiffReport>,
+        steps: u64,
+        tolerance: f64,
+    ) -> Self {
+        let mut s = StiffSummary {
+            max_tolerance: tolerance,
+            ..StiffSummary::default()
+        };
+        for r in reports {
+            s.rod_steps += steps;
+            s.iterations += r.total_iterations;
+            s.factorisations += r.factorisations;
+            s.steps_kept += r.steps;
+            s.unconverged_steps += r.unconverged_steps;
+            s.halved_steps += r.halved_steps;
+            s.axial_steps += r.axial_steps;
+            if r.max_residual > s.max_residual {
+                s.max_residual = r.max_residual;
+                s.worst_step = r.worst_step;
+            }
+            s.max_tolerance = s.max_tolerance.max(r.max_tolerance);
+            s.last_unconverged_step = s.last_unconverged_step.max(r.last_unconverged_step);
+        }
+        s
+    }
+
     /// Newton iterations per rod-step (0 before the first step).
     pub fn iterations_per_step(&self) -> f64 {
         self.iterations as f64 / self.rod_steps.max(1) as f64

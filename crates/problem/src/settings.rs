@@ -384,6 +384,28 @@ pub struct StiffSettings {
     pub integrator: Integrator,
 }
 
+/// The compliance `α̃ = α / h²` of a constraint row of the stiff scheme with stiffness
+/// `stiffness` over `length` (`α = 1/(k l)`), at step `h`; a zero stiffness gives a compliance so
+/// large that the row's multiplier stays zero.
+pub fn stiff_compliance(stiffness: f64, length: f64, h: f64) -> f64 {
+    (1.0 / (stiffness * length)).min(1e300) / (h * h)
+}
+
+/// A row of the stiff scheme with compliance `alpha` (`α̃`) and Rayleigh damping `beta` of its
+/// rate, at step `h` (Macklin et al. 2016, eq. 26): `(γ/(1 + γ), α̃/(1 + γ))` with `γ = α̃ h β`,
+/// the damping fraction and the compliance of the row-scaled damped system, finite also for a
+/// row without stiffness (α̃ huge, γ infinite) or an exact constraint (α̃ = 0); `(0, α̃)` without
+/// damping.
+pub fn stiff_damped_row(alpha: f64, beta: f64, h: f64) -> (f64, f64) {
+    if beta > 0.0 {
+        let g = alpha * h * beta;
+        let frac = if g.is_finite() { g / (1.0 + g) } else { 1.0 };
+        (frac, 1.0 / (1.0 / alpha + h * beta))
+    } else {
+        (0.0, alpha)
+    }
+}
+
 impl Default for StiffSettings {
     /// Direct solve, one factorisation per step reused by its later iterations (falling back
     /// to Newton when an iteration contracts poorly, [`Refactor`]), with the geometric bound of

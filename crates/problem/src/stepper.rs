@@ -426,6 +426,34 @@ pub fn check_capabilities(
     })
 }
 
+/// Checks loads given to [`Stepper::set_loads`] for rod `rod` of `last + 1` points: points that
+/// exist, finite forces and moments, and what their profiles and moments need among `has`.
+pub fn check_loads(
+    stepper: &'static str,
+    has: Capabilities,
+    rod: usize,
+    last: usize,
+    loads: &[PointLoad<f64>],
+) -> Result<(), ControlError> {
+    if let Some(l) = loads.iter().find(|l| l.point > last) {
+        return Err(ControlError::NoPoint {
+            rod,
+            point: l.point,
+            last,
+        });
+    }
+    if loads
+        .iter()
+        .any(|l| !l.force.iter().chain(l.moment.iter()).all(|x| x.is_finite()))
+    {
+        return Err(ControlError::Value {
+            field: "load",
+            why: "forces and moments must be finite".into(),
+        });
+    }
+    check_capabilities(stepper, has, PointLoad::needs(loads), "set")
+}
+
 /// The capabilities an end condition needs beyond holding and constant motions.
 pub fn condition_needs(condition: &EndCondition<f64>) -> Capabilities {
     Capabilities::NONE

@@ -347,9 +347,8 @@ impl Consts {
             return;
         }
         let p = &rod.params;
-        let h2 = h * h;
         // A zero stiffness means no constraint: a compliance so large that λ stays zero.
-        let compliance = |k: f64, l: f64| (1.0 / (k * l)).min(1e300) / h2;
+        let compliance = |k: f64, l: f64| cosserat_problem::stiff_compliance(k, l, h);
         self.l0 = p.rest_lengths.iter().map(|l| l.to_f64()).collect();
         self.inv_l0_max = self.l0.iter().fold(0.0, |m, l| m.max(1.0 / l));
         self.lbar = (0..n.saturating_sub(1))
@@ -414,15 +413,7 @@ impl Consts {
         // none).
         // Per row: (γ/(1 + γ), α̃/(1 + γ)) from α̃ and β, finite also for a row without
         // stiffness (α̃ huge, γ infinite) or an exact constraint (α̃ = 0).
-        let damp = |alpha: f64, beta: f64| -> (f64, f64) {
-            if beta > 0.0 {
-                let g = alpha * h * beta;
-                let frac = if g.is_finite() { g / (1.0 + g) } else { 1.0 };
-                (frac, 1.0 / (1.0 / alpha + h * beta))
-            } else {
-                (0.0, alpha)
-            }
-        };
+        let damp = |alpha: f64, beta: f64| cosserat_problem::stiff_damped_row(alpha, beta, h);
         let (mut dg, mut ag) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for j in 0..n {
             let beta = if extensible {

@@ -49,6 +49,10 @@
 //
 // Filled in by `banded.rs`: REAL (f64 or f32); prepended: the constants PT (invocations per rod,
 // a power of two), EPT (elements per invocation) and XCH (numbers in `xch`: 27 · PT, at least 36).
+// The file that includes it declares the buffers `band_rows` (the block rows) and `band_x` (the
+// right-hand sides, overwritten with the solutions) and a uniform `band_part` with the fields
+// `per_thread` (EPT) and `threads` (PT): `banded_partitioned_main.wgsl` for the solve alone,
+// `stiff_step.wgsl` for the stiff step that assembles the rows itself.
 
 // [[a, b], [c, d]]: each field the 3×3 block itself (entry (r, c) of `a` is a[c][r]).
 struct M6 {
@@ -64,34 +68,16 @@ struct V6 {
     v: vec3<REAL>,
 }
 
-// Numbers per element in `rows`: block rows 2j and 2j + 1.
+// Numbers per element in `band_rows`: block rows 2j and 2j + 1.
 const PQ: u32 = 48u;
 // Numbers per invocation in `xch`.
 const XQ: u32 = 27u;
-
-// The loops over a slice's elements and over the reduced system's levels take their bounds from
-// here rather than from the constants, so that compilers keep them as loops instead of copying
-// the whole elimination once per element and level.
-struct Part {
-    // Elements per invocation (EPT).
-    per_thread: u32,
-    // Invocations per rod (PT).
-    threads: u32,
-    pad0: u32,
-    pad1: u32,
-}
-
-@group(0) @binding(0) var<uniform> part: Part;
-// Block rows of every rod, padded and interleaved as above.
-@group(0) @binding(1) var<storage, read> rows: array<REAL>;
-// Right-hand sides (6 per element, same layout), overwritten with the solutions.
-@group(0) @binding(3) var<storage, read_write> x: array<REAL>;
 
 // The reduced system's exchange, then the separators' solutions.
 var<workgroup> xch: array<REAL, XCH>;
 
 fn pr(rod: u32, j: u32, q: u32, t: u32) -> REAL {
-    return rows[((rod * EPT + j) * PQ + q) * PT + t];
+    return band_rows[((rod * EPT + j) * PQ + q) * PT + t];
 }
 
 fn px(rod: u32, j: u32, c: u32, t: u32) -> u32 {
@@ -132,18 +118,18 @@ fn load_c(rod: u32, j: u32, t: u32) -> M6 {
 
 fn load_f(rod: u32, j: u32, t: u32) -> V6 {
     return V6(
-        vec3<REAL>(x[px(rod, j, 0u, t)], x[px(rod, j, 1u, t)], x[px(rod, j, 2u, t)]),
-        vec3<REAL>(x[px(rod, j, 3u, t)], x[px(rod, j, 4u, t)], x[px(rod, j, 5u, t)]),
+        vec3<REAL>(band_x[px(rod, j, 0u, t)], band_x[px(rod, j, 1u, t)], band_x[px(rod, j, 2u, t)]),
+        vec3<REAL>(band_x[px(rod, j, 3u, t)], band_x[px(rod, j, 4u, t)], band_x[px(rod, j, 5u, t)]),
     );
 }
 
 fn store_x(rod: u32, j: u32, t: u32, v: V6) {
-    x[px(rod, j, 0u, t)] = v.u.x;
-    x[px(rod, j, 1u, t)] = v.u.y;
-    x[px(rod, j, 2u, t)] = v.u.z;
-    x[px(rod, j, 3u, t)] = v.v.x;
-    x[px(rod, j, 4u, t)] = v.v.y;
-    x[px(rod, j, 5u, t)] = v.v.z;
+    band_x[px(rod, j, 0u, t)] = v.u.x;
+    band_x[px(rod, j, 1u, t)] = v.u.y;
+    band_x[px(rod, j, 2u, t)] = v.u.z;
+    band_x[px(rod, j, 3u, t)] = v.v.x;
+    band_x[px(rod, j, 4u, t)] = v.v.y;
+    band_x[px(rod, j, 5u, t)] = v.v.z;
 }
 
 // p q.
@@ -276,9 +262,9 @@ fn get_v(at: u32) -> V6 {
     return V6(vec3<REAL>(xch[at], xch[at + 1u], xch[at + 2u]), vec3<REAL>(xch[at + 3u], xch[at + 4u], xch[at + 5u]));
 }
 
-@compute @workgroup_size(PT)
-fn partitioned(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wid: vec3<u32>) {
-    let rod = wid.x;
+// Factorises and solves rod `rod`'s system in `band_rows`, `band_x` (invocation `t` of its
+// workgroup; every invocation calls it, in uniform control flow).
+fn partitioned_solve(rod: u32, t: u32) {
     // The separator, then the interior in order. `dn`, `gn`, `fnext` are what the elements
     // eliminated so far leave for the next one (`gn`: its coupling to the separator).
     var b = load_b(rod, 0u, t);
@@ -291,7 +277,7 @@ fn partitioned(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) w
     var ys: array<M6, EPT>;
     var zs: array<M6, EPT>;
     var ws: array<V6, EPT>;
-    for (var j = 1u; j < part.per_thread; j++) {
+    for (var j = 1u; j < band_part.per_thread; j++) {
         let cj = load_c(rod, j, t);
         let p = pinv(add(load_b(rod, j, t), dn));
         let y = mul(p, cj);
@@ -331,7 +317,7 @@ fn partitioned(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) w
     var level = 0u;
     var db_l = a;
     var db_r = a;
-    for (var s = 1u; s < part.threads; s *= 2u) {
+    for (var s = 1u; s < band_part.threads; s *= 2u) {
         let elim = t % (2u * s) == s;
         let keep = t % (2u * s) == 0u;
         if elim {
@@ -381,7 +367,7 @@ fn partitioned(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) w
         put_v(0u, mul_v(pinv(b), f));
     }
     workgroupBarrier();
-    for (var s = part.threads / 2u; s >= 1u; s /= 2u) {
+    for (var s = band_part.threads / 2u; s >= 1u; s /= 2u) {
         if level == s {
             var v = add_v(f, neg_mul_v(a, get_v(6u * (t - s))));
             if t + s < PT {
@@ -397,8 +383,8 @@ fn partitioned(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) w
     if t + 1u < PT {
         xn = get_v(6u * (t + 1u));
     }
-    for (var i = 1u; i < part.per_thread; i++) {
-        let j = part.per_thread - i;
+    for (var i = 1u; i < band_part.per_thread; i++) {
+        let j = band_part.per_thread - i;
         let v = add_v(ws[j], add_v(neg_mul_v(ys[j], xn), neg_mul_v(zs[j], xa)));
         store_x(rod, j, t, v);
         xn = v;

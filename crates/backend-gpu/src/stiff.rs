@@ -1,0 +1,884 @@
+//! The stiff scheme on the GPU: whole steps of the CPU's stiff solve (backend-cpu `stiff`,
+//! `docs/stiff-solver.md`), many rods and many steps per dispatch (`shaders/stiff_step.wgsl`).
+//!
+//! **Why this shape.** The stiff scheme spends its step in a banded direct solve along each rod.
+//! Measured on an H100/H200 (`docs/benchmarks/stiff-gpu.md`), a solve whose blocks go to and from
+//! global memory between dependent phases is bound by latency: a single rod took longer on the
+//! GPU than on one CPU core. What was fast was the partitioned solve, one rod per workgroup, each
+//! invocation eliminating its own slice of elements (`banded_partitioned.wgsl`). This kernel puts
+//! the rest of the step around that solve in the same workgroup: each invocation owns the same
+//! slice of elements, points and frames for the prediction, the constraint evaluation, the
+//! preconditioner, the right-hand side, the assembly of its block rows, the update and the
+//! velocities, so a whole step (and many steps) runs without the host: one dispatch per batch of
+//! steps, the workgroup's barriers between the passes. The passes are the CPU's, formula for
+//! formula, in `f64`; the CPU's stiff stepper is the oracle (`tests/stiff_gpu.rs` at the
+//! repository root).
+//!
+//! **What it runs**: the direct solve with its refactorisation policies, implicit Euler, the
+//! geometric bound of the frames, internal damping, drag, gravity and constant point loads,
+//! free, pinned and clamped ends driven by their prescribed motions (constant velocities,
+//! timed moves, keyframed paths: the host evaluates each held end's velocities over each step, as
+//! the CPU does, and uploads them with the batch), and the divergence test. **What it leaves
+//! out** (refused by [`GpuStiffSimulation::new`] or by the stepper's capabilities): contacts,
+//! guides, bindings, rod contact, sliding and hinged ends, varying loads and moments, BDF2, the
+//! Gauss–Seidel variant; and, of the CPU's safety nets, the retake of an unconverged inextensible
+//! step with the axial compliance and the retake of a diverged step in halves: an unconverged step
+//! is counted (`StiffReport::unconverged_steps`) and a diverged one stops the rod with its
+//! element and step.
+
+use crate::device::Gpu;
+use crate::{GpuError, GpuOptions};
+use cosserat_model::{Quat, RodParams, RodState, Vec3};
+use cosserat_problem::{
+    DivergedQuantity, Divergence, EndCondition, Integrator, Refactor, SolverSettings, StiffReport,
+    StiffScheme, StiffSettings, stiff_compliance, stiff_damped_row,
+};
+
+/// One rod for the GPU's stiff scheme: the pieces `cosserat_backend_cpu::CpuRod::new` takes, in
+/// `f64` (the stiff scheme's state is kept in `f64`).
+#[derive(Clone, Debug)]
+pub struct GpuStiffRod {
+    /// Initial state.
+    pub state: RodState<f64>,
+    /// Parameters (inverse masses of held end points are zeroed here, as on the CPU).
+    pub params: RodParams<f64>,
+    /// Conditions at the first and last end.
+    pub ends: [EndCondition<f64>; 2],
+    /// Constant point forces: `(point, force)`.
+    pub loads: Vec<(usize, [f64; 3])>,
+}
+
+/// Invocations per rod: the partitioned solve's default (64), fewer for short rods.
+const THREADS: u32 = crate::banded::PARTITIONED_THREADS;
+
+/// Steps per dispatch on a hardware adapter (the held ends' motions of a batch are uploaded per
+/// step), and on a software one, which stops a shader's loops after 65 535 iterations in all.
+const STEPS_PER_DISPATCH: u64 = 64;
+const STEPS_PER_DISPATCH_SOFTWARE: u64 = 1;
+
+/// Numbers per held-end motion entry (v, 0, ω, 0).
+const MOTION: usize = 8;
+
+/// The offsets of the columns of one rod's block in a buffer, and the block's length.
+#[derive(Clone, Debug, Default)]
+struct Columns {
+    named: Vec<(&'static str, usize)>,
+    len: usize,
+}
+
+impl Columns {
+    fn add(&mut self, name: &'static str, len: usize) -> usize {
+        let at = self.len;
+        self.named.push((name, at));
+        self.len += len;
+        at
+    }
+
+    fn at(&self, name: &str) -> usize {
+        self.named
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, a)| *a)
+            .unwrap_or_else(|| panic!("no column {name}"))
+    }
+
+    fn wgsl(&self, stride: &str) -> String {
+        let mut s: String = self
+            .named
+            .iter()
+            .map(|(n, a)| format!("const {n}: u32 = {a}u;\n"))
+            .collect();
+        s.push_str(&format!("const {stride}: u32 = {}u;\n", self.len));
+        s
+    }
+}
+
+/// Where everything of a rod sits: `np` element slots (the invocations' slices), `np + 1` points.
+#[derive(Clone, Debug)]
+struct StiffLayout {
+    threads: usize,
+    per_thread: usize,
+    kc: Columns,
+    st: Columns,
+    wk: Columns,
+}
+
+/// Numbers of the per-rod scalars in `kc` (`K_ROD`): elements, drag rate, damped, whether each
+/// end holds its point, clamps, two spare, then 12 per clamp.
+const ROD_SCALARS: usize = 32;
+/// Numbers of the per-rod counters in `wk` (`W_STATS`, `ST_*` of the kernel).
+const STATS: usize = 16;
+
+impl StiffLayout {
+    fn new(threads: usize, per_thread: usize) -> Self {
+        let np = threads * per_thread;
+        let npt = np + 1;
+        let mut kc = Columns::default();
+        kc.add("K_IM", npt);
+        kc.add("K_IL", np);
+        kc.add("K_ILB", np);
+        kc.add("K_LB", np);
+        kc.add("K_RU", 3 * np);
+        kc.add("K_IN", 3 * np);
+        kc.add("K_IIO", 3 * np);
+        kc.add("K_FREE", np);
+        kc.add("K_AG", 3 * np);
+        kc.add("K_AO", 3 * np);
+        kc.add("K_DG", 3 * np);
+        kc.add("K_DO", 3 * np);
+        kc.add("K_F", 3 * npt);
+        kc.add("K_ROD", ROD_SCALARS);
+        let mut st = Columns::default();
+        st.add("S_X", 3 * npt);
+        st.add("S_V", 3 * npt);
+        st.add("S_Q", 4 * np);
+        st.add("S_OMEGA", 3 * np);
+        st.add("S_CLAMP", 8);
+        st.add("S_X_PRED", 3 * npt);
+        let mut wk = Columns::default();
+        wk.add("W_X_OLD", 3 * npt);
+        wk.add("W_UX", 3 * npt);
+        wk.add("W_Q_OLD", 4 * np);
+        wk.add("W_Q_PRED", 4 * np);
+        for name in [
+            "W_UTH",
+            "W_DTHETA",
+            "W_INV_K",
+            "W_GAMMA",
+            "W_D0",
+            "W_D1",
+            "W_D2",
+            "W_OMEGA_C",
+            "W_LAM_G",
+            "W_LAM_O",
+            "W_LAMP_G",
+            "W_LAMP_O",
+            "W_COLD_G",
+            "W_COLD_O",
+        ] {
+            wk.add(name, 3 * np);
+        }
+        wk.add("W_REL", 4 * np);
+        wk.add("W_CLAMP_W", 18);
+        wk.add("W_CLAMP_K", 6);
+        wk.add("W_CLAMP_FRAME", 8);
+        wk.add("W_CLAMP_START", 6);
+        wk.add("W_STATS", STATS);
+        Self {
+            threads,
+            per_thread,
+            kc,
+            st,
+            wk,
+        }
+    }
+
+    fn slots(&self) -> usize {
+        self.threads * self.per_thread
+    }
+
+    fn source(&self) -> String {
+        let head = format!(
+            "const PT: u32 = {}u;\nconst EPT: u32 = {}u;\nconst XCH: u32 = {}u;\nconst NP: u32 = {}u;\nconst NPT: u32 = {}u;\n{}{}{}",
+            self.threads,
+            self.per_thread,
+            crate::banded::partitioned_xch(self.threads as u32),
+            self.slots(),
+            self.slots() + 1,
+            self.kc.wgsl("KS"),
+            self.st.wgsl("SS"),
+            self.wk.wgsl("WS"),
+        );
+        format!(
+            "{head}\n{}\n{}\n{}",
+            crate::shader::STIFF_STEP_WGSL,
+            crate::shader::CHOLESKY_WGSL,
+            crate::shader::BANDED_PARTITIONED_WGSL
+        )
+        .replace("REAL", "f64")
+    }
+}
+
+/// Rods stepped by the stiff scheme on the GPU.
+pub struct GpuStiffSimulation {
+    gpu: Gpu,
+    layout: StiffLayout,
+    pipeline: wgpu::ComputePipeline,
+    group: wgpu::BindGroup,
+    shape: wgpu::Buffer,
+    glob: wgpu::Buffer,
+    kc: wgpu::Buffer,
+    st: wgpu::Buffer,
+    wk: wgpu::Buffer,
+    motion: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    stats_staging: wgpu::Buffer,
+    rods: Vec<GpuStiffRod>,
+    settings: SolverSettings<f64>,
+    stiff: StiffSettings,
+    steps_per_dispatch: u64,
+    /// Steps taken.
+    step: u64,
+}
+
+/// A slice of `f64` as bytes.
+fn bytes(v: &[f64]) -> &[u8] {
+    bytemuck::cast_slice(v)
+}
+
+impl GpuStiffSimulation {
+    /// Uploads `rods` (any lengths; every rod gets as many element slots as the longest) with
+    /// the solver settings `settings` (its `dt`, gravity, mode and divergence strain) and the
+    /// stiff scheme's `stiff`, on a device of its own.
+    pub fn new(
+        rods: Vec<GpuStiffRod>,
+        settings: &SolverSettings<f64>,
+        stiff: &StiffSettings,
+        options: &GpuOptions,
+    ) -> Result<Self, GpuError> {
+        let mut rods = rods;
+        check_input(&mut rods, stiff)?;
+        let gpu = Gpu::acquire(options)?;
+        if !gpu.device.features().contains(wgpu::Features::SHADER_F64) {
+            return Err(GpuError::NoAdapter(format!(
+                "adapter `{}` has no double-precision shaders (SHADER_F64), which the stiff \
+                 scheme needs",
+                gpu.adapter.name
+            )));
+        }
+        let longest = rods.iter().map(|r| r.state.elements()).max().unwrap_or(1);
+        let storage = gpu.limits.max_compute_workgroup_storage_size as usize;
+        let invocations = gpu
+            .limits
+            .max_compute_invocations_per_workgroup
+            .min(gpu.limits.max_compute_workgroup_size_x);
+        let mut threads = THREADS.min((longest as u32).next_power_of_two());
+        // The exchange of the banded solve and this kernel's reduction (8 bytes per invocation).
+        let need = |t: u32| {
+            crate::banded::partitioned_workgroup_bytes(crate::banded::Precision::F64, t)
+                + 8 * t as usize
+                + 16
+        };
+        while threads > 1 && (threads > invocations || need(threads) > storage) {
+            threads /= 2;
+        }
+        let per_thread = longest.div_ceil(threads as usize);
+        let layout = StiffLayout::new(threads as usize, per_thread);
+        let device = &gpu.device;
+        let n_rods = rods.len();
+        let buffer = |label: &str, len: usize, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (len as u64 * 8).max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let storage_usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let copy_out = storage_usage | wgpu::BufferUsages::COPY_SRC;
+        let slots = layout.slots();
+        let rows = buffer(
+            "stiff rows",
+            n_rods * slots * 48,
+            wgpu::BufferUsages::STORAGE,
+        );
+        let x = buffer("stiff rhs", n_rods * slots * 6, wgpu::BufferUsages::STORAGE);
+        let glob = buffer("stiff globals", 16, storage_usage);
+        let kc = buffer("stiff constants", n_rods * layout.kc.len, storage_usage);
+        let st = buffer("stiff state", n_rods * layout.st.len, copy_out);
+        let wk = buffer("stiff work", n_rods * layout.wk.len, copy_out);
+        let steps_per_dispatch = if gpu.adapter.software {
+            STEPS_PER_DISPATCH_SOFTWARE
+        } else {
+            STEPS_PER_DISPATCH
+        };
+        let motion = buffer(
+            "stiff end motions",
+            steps_per_dispatch as usize * n_rods * 2 * MOTION,
+            storage_usage,
+        );
+        let staging = buffer(
+            "stiff state staging",
+            n_rods * layout.st.len,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let stats_staging = buffer(
+            "stiff stats staging",
+            n_rods * layout.wk.len,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let shape = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("stiff shape"),
+            size: 32,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("stiff_step.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(layout.source().into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("stiff_step"),
+            layout: None,
+            module: &module,
+            entry_point: Some("stiff_step"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let entries: Vec<_> = [
+            (0, &shape),
+            (1, &rows),
+            (3, &x),
+            (4, &glob),
+            (5, &kc),
+            (6, &st),
+            (7, &wk),
+            (8, &motion),
+        ]
+        .into_iter()
+        .map(|(binding, b)| wgpu::BindGroupEntry {
+            binding,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("stiff_step"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Wgpu(format!("compiling the stiff step: {e}")));
+        }
+        let mut sim = Self {
+            gpu,
+            layout,
+            pipeline,
+            group,
+            shape,
+            glob,
+            kc,
+            st,
+            wk,
+            motion,
+            staging,
+            stats_staging,
+            rods,
+            settings: *settings,
+            stiff: *stiff,
+            steps_per_dispatch,
+            step: 0,
+        };
+        for rod in 0..n_rods {
+            sim.upload_rod(rod)?;
+        }
+        Ok(sim)
+    }
+
+    /// Invocations per rod and elements per invocation.
+    pub fn partition(&self) -> (usize, usize) {
+        (self.layout.threads, self.layout.per_thread)
+    }
+
+    /// The adapter.
+    pub fn adapter(&self) -> &crate::AdapterSummary {
+        &self.gpu.adapter
+    }
+
+    /// Rods.
+    pub fn rods(&self) -> usize {
+        self.rods.len()
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+
+    /// The rod as given (its state as last uploaded or read back).
+    pub fn rod(&self, rod: usize) -> &GpuStiffRod {
+        &self.rods[rod]
+    }
+
+    /// Uploads rod `rod`'s constants and state (from `self.rods[rod]`) and clears its work,
+    /// counters and factorisation.
+    fn upload_rod(&mut self, rod: usize) -> Result<(), GpuError> {
+        let h = self.settings.dt;
+        let kc = constants(
+            &self.rods[rod],
+            &self.layout,
+            h,
+            self.settings.extensible,
+            self.stiff.inertia_floor,
+        );
+        let st = state_block(&self.rods[rod].state, &self.layout);
+        let q = &self.gpu.queue;
+        q.write_buffer(&self.kc, (rod * self.layout.kc.len * 8) as u64, bytes(&kc));
+        q.write_buffer(&self.st, (rod * self.layout.st.len * 8) as u64, bytes(&st));
+        let mut wk = vec![0.0; self.layout.wk.len];
+        // No step above the tolerance yet.
+        wk[self.layout.wk.at("W_STATS") + 5] = -1.0;
+        // The previous step's multipliers of the first step are zero; identity quaternions
+        // where the kernel would read an unset one.
+        q.write_buffer(&self.wk, (rod * self.layout.wk.len * 8) as u64, bytes(&wk));
+        Ok(())
+    }
+
+    /// Replaces rod `rod`'s state (its constants stay; a clamp keeps the clamp frame the state
+    /// carries) and forgets its factorisation and any divergence.
+    pub fn write_state(&mut self, rod: usize, state: RodState<f64>) -> Result<(), GpuError> {
+        self.check_rod(rod)?;
+        let keep = self.counters(rod)?;
+        self.rods[rod].state = state;
+        self.upload_rod(rod)?;
+        self.restore_counters(rod, &keep);
+        Ok(())
+    }
+
+    /// Replaces rod `rod` whole (its ends, parameters, loads and state: what a change of how an
+    /// end is held or of the loads changes), keeping its counters and forgetting its
+    /// factorisation and any divergence.
+    pub fn replace_rod(&mut self, rod: usize, new: GpuStiffRod) -> Result<(), GpuError> {
+        self.check_rod(rod)?;
+        if new.state.elements() != self.rods[rod].state.elements() {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod} has {} elements; a replacement must have as many",
+                self.rods[rod].state.elements()
+            )));
+        }
+        let keep = self.counters(rod)?;
+        let mut one = vec![new];
+        check_input(&mut one, &self.stiff)?;
+        self.rods[rod] = one.pop().expect("one rod");
+        self.upload_rod(rod)?;
+        self.restore_counters(rod, &keep);
+        Ok(())
+    }
+
+    fn check_rod(&self, rod: usize) -> Result<(), GpuError> {
+        if rod >= self.rods.len() {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod}: the simulation has {} rods",
+                self.rods.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Rod `rod`'s counters (iterations … largest residual), to carry over a re-upload.
+    fn counters(&self, rod: usize) -> Result<[f64; 6], GpuError> {
+        let all = self.read_work_stats()?;
+        let s = &all[rod];
+        Ok([s[0], s[1], s[2], s[3], s[4], s[5]])
+    }
+
+    fn restore_counters(&self, rod: usize, keep: &[f64; 6]) {
+        let at = rod * self.layout.wk.len + self.layout.wk.at("W_STATS");
+        self.gpu
+            .queue
+            .write_buffer(&self.wk, (at * 8) as u64, bytes(keep));
+    }
+
+    /// Takes `steps` steps (in dispatches of many steps each) and waits for them. A rod that
+    /// diverges stops at that step and is reported with its element and step; the others go on
+    /// to the end of the batch.
+    pub fn step(&mut self, steps: u64) -> Result<(), GpuError> {
+        let mut left = steps;
+        while left > 0 {
+            let k = left.min(self.steps_per_dispatch);
+            self.dispatch(k);
+            left -= k;
+        }
+        self.gpu.wait_idle()?;
+        self.check_divergence()
+    }
+
+    /// Submits `k` steps (without waiting).
+    fn dispatch(&mut self, k: u64) {
+        let h = self.settings.dt;
+        let n_rods = self.rods.len();
+        let mut motion = vec![0.0; k as usize * n_rods * 2 * MOTION];
+        for s in 0..k as usize {
+            let t = (self.step + s as u64) as f64 * h;
+            for (r, rod) in self.rods.iter().enumerate() {
+                for (e, end) in rod.ends.iter().enumerate() {
+                    if !(end.holds_point() || end.holds_frame()) {
+                        continue;
+                    }
+                    let (v, w) = end.velocities_over(t, h);
+                    let b = ((s * n_rods + r) * 2 + e) * MOTION;
+                    motion[b..b + 3].copy_from_slice(&[v.x, v.y, v.z]);
+                    motion[b + 4..b + 7].copy_from_slice(&[w.x, w.y, w.z]);
+                }
+            }
+        }
+        let q = &self.gpu.queue;
+        q.write_buffer(&self.motion, 0, bytes(&motion));
+        let refactor = match self.stiff.refactor {
+            Refactor::EveryStep => 0u32,
+            Refactor::EveryIteration => 1,
+            Refactor::Lagged => 2,
+        };
+        let shape = [
+            self.layout.per_thread as u32,
+            self.layout.threads as u32,
+            k as u32,
+            self.stiff.iterations as u32,
+            refactor,
+            n_rods as u32,
+            0,
+            0,
+        ];
+        q.write_buffer(&self.shape, 0, bytemuck::cast_slice(&shape));
+        let limit = self.settings.divergence_strain;
+        let g = self.settings.gravity;
+        let glob = [
+            h,
+            self.stiff.tolerance,
+            self.stiff.geometric,
+            g.x,
+            g.y,
+            g.z,
+            (1.0 + limit).powi(2),
+            (1.0 - limit).max(0.0).powi(2),
+            self.step as f64,
+        ];
+        q.write_buffer(&self.glob, 0, bytes(&glob));
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.group, &[]);
+            pass.dispatch_workgroups(n_rods as u32, 1, 1);
+        }
+        q.submit([encoder.finish()]);
+        self.step += k;
+    }
+
+    /// Copies `src` (rod blocks of `len` numbers) through `staging` to the host.
+    fn read_back(
+        &self,
+        src: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        len: usize,
+    ) -> Result<Vec<f64>, GpuError> {
+        let size = (self.rods.len() * len * 8) as u64;
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        encoder.copy_buffer_to_buffer(src, 0, staging, 0, size);
+        self.gpu.queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, ..size, |_| {});
+        self.gpu.wait_idle()?;
+        let out = {
+            let view = staging
+                .get_mapped_range(..size)
+                .map_err(|e| GpuError::Wgpu(format!("mapping the stiff state: {e}")))?;
+            bytemuck::cast_slice::<u8, f64>(&view).to_vec()
+        };
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// The counters of every rod (`W_STATS`, `STATS` numbers each).
+    fn read_work_stats(&self) -> Result<Vec<[f64; STATS]>, GpuError> {
+        let all = self.read_back(&self.wk, &self.stats_staging, self.layout.wk.len)?;
+        let at = self.layout.wk.at("W_STATS");
+        Ok((0..self.rods.len())
+            .map(|r| {
+                let b = r * self.layout.wk.len + at;
+                let mut s = [0.0; STATS];
+                s.copy_from_slice(&all[b..b + STATS]);
+                s
+            })
+            .collect())
+    }
+
+    /// The first divergence of any rod (the earliest step, then the lowest rod).
+    fn check_divergence(&self) -> Result<(), GpuError> {
+        let stats = self.read_work_stats()?;
+        let mut first: Option<Divergence> = None;
+        for (rod, s) in stats.iter().enumerate() {
+            let kind = s[9] as u32;
+            if kind == 0 {
+                continue;
+            }
+            let value = s[10];
+            let quantity = match kind {
+                1 => DivergedQuantity::NonFiniteFrame,
+                4 => DivergedQuantity::NonFinitePosition,
+                3 => DivergedQuantity::Unconverged(value),
+                _ => DivergedQuantity::Strain((value - 1.0).abs()),
+            };
+            let d = Divergence {
+                rod,
+                element: s[8] as usize,
+                step: s[7] as u64,
+                quantity,
+            };
+            if first.as_ref().is_none_or(|f| d.step < f.step) {
+                first = Some(d);
+            }
+        }
+        first.map_or(Ok(()), |d| Err(GpuError::Diverged(d)))
+    }
+
+    /// Every rod's state as it is now (reads the device).
+    pub fn read_state(&mut self) -> Result<Vec<RodState<f64>>, GpuError> {
+        let all = self.read_back(&self.st, &self.staging, self.layout.st.len)?;
+        let l = &self.layout.st;
+        let (sx, sv, sq, so, sc) = (
+            l.at("S_X"),
+            l.at("S_V"),
+            l.at("S_Q"),
+            l.at("S_OMEGA"),
+            l.at("S_CLAMP"),
+        );
+        let states: Vec<RodState<f64>> = self
+            .rods
+            .iter()
+            .enumerate()
+            .map(|(r, rod)| {
+                let b = r * l.len;
+                let n = rod.state.elements();
+                let v3 = |col: usize, i: usize| {
+                    let a = b + col + 3 * i;
+                    Vec3::new(all[a], all[a + 1], all[a + 2])
+                };
+                let q4 = |col: usize, i: usize| {
+                    let a = b + col + 4 * i;
+                    Quat::new(all[a + 3], all[a], all[a + 1], all[a + 2])
+                };
+                let mut s = rod.state.clone();
+                s.positions = (0..=n).map(|i| v3(sx, i)).collect();
+                s.velocities = (0..=n).map(|i| v3(sv, i)).collect();
+                s.frames = (0..n).map(|j| q4(sq, j)).collect();
+                s.angular_velocities = (0..n).map(|j| v3(so, j)).collect();
+                s.clamp_frames = [q4(sc, 0), q4(sc, 1)];
+                s
+            })
+            .collect();
+        for (rod, s) in self.rods.iter_mut().zip(&states) {
+            rod.state = s.clone();
+        }
+        Ok(states)
+    }
+
+    /// What the stiff solve did so far, per rod (`steps`: all of them kept; the GPU retakes
+    /// no step, `halved_steps` and `axial_steps` stay zero).
+    pub fn report(&self) -> Result<Vec<StiffReport>, GpuError> {
+        Ok(self
+            .read_work_stats()?
+            .iter()
+            .map(|s| StiffReport {
+                total_iterations: s[0] as u64,
+                factorisations: s[1] as u64,
+                unconverged_steps: s[2] as u64,
+                max_residual: s[3],
+                worst_step: s[4] as u64,
+                last_unconverged_step: (s[5] >= 0.0).then_some(s[5] as u64),
+                steps: self.step,
+                max_tolerance: self.stiff.tolerance,
+                ..StiffReport::default()
+            })
+            .collect())
+    }
+}
+
+/// The kernel's source for `threads` invocations per rod and `per_thread` elements each (shader
+/// validation).
+#[cfg(test)]
+pub(crate) fn source_for(threads: usize, per_thread: usize) -> String {
+    StiffLayout::new(threads, per_thread).source()
+}
+
+/// Refuses what the kernel does not run, naming it, and zeroes the inverse masses of held end
+/// points (as `CpuRod::new`).
+fn check_input(rods: &mut [GpuStiffRod], stiff: &StiffSettings) -> Result<(), GpuError> {
+    if rods.is_empty() {
+        return Err(GpuError::InvalidInput("no rods".into()));
+    }
+    if stiff.scheme != StiffScheme::Direct {
+        return Err(GpuError::InvalidInput(
+            "the stiff scheme on the GPU runs the direct solver only (scheme = \"direct\")".into(),
+        ));
+    }
+    if stiff.integrator != Integrator::ImplicitEuler {
+        return Err(GpuError::InvalidInput(
+            "the stiff scheme on the GPU runs implicit Euler only (integrator = \"implicit-euler\"); BDF2 runs on the CPU".into(),
+        ));
+    }
+    for (i, rod) in rods.iter_mut().enumerate() {
+        let n = rod.state.elements();
+        if n < 2 {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {i} has {n} element(s); the stiff scheme on the GPU needs at least 2"
+            )));
+        }
+        for (e, end) in rod.ends.iter().enumerate() {
+            if end.slide_axis().is_some() || end.hinge_axis().is_some() {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {i}, end {e}: sliding and hinged ends run on the CPU only"
+                )));
+            }
+            if end.holds_point() {
+                rod.params.inv_masses[if e == 0 { 0 } else { n }] = 0.0;
+            }
+        }
+        for &(p, f) in &rod.loads {
+            if p > n || f.iter().any(|x| !x.is_finite()) {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {i}: a load at point {p} of {} with force {f:?}",
+                    n + 1
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The constants of one rod (`kc`'s block), as the CPU's `Consts::rebuild`.
+fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor: f64) -> Vec<f64> {
+    let p = &rod.params;
+    let n = rod.state.elements();
+    let np = l.slots();
+    let c = &l.kc;
+    let mut k = vec![0.0; c.len];
+    let compliance = |stiffness: f64, len: f64| stiff_compliance(stiffness, len, h);
+    let damp = |alpha: f64, beta: f64| stiff_damped_row(alpha, beta, h);
+    let put3 = |k: &mut Vec<f64>, col: &str, j: usize, v: [f64; 3]| {
+        let a = c.at(col) + 3 * j;
+        k[a..a + 3].copy_from_slice(&v);
+    };
+    let (im, il, ilb, lb, free) = (
+        c.at("K_IM"),
+        c.at("K_IL"),
+        c.at("K_ILB"),
+        c.at("K_LB"),
+        c.at("K_FREE"),
+    );
+    k[im..=im + n].copy_from_slice(&p.inv_masses[..=n]);
+    let clamped = |j: usize| {
+        (j == 0 && rod.ends[0].holds_frame()) || (j == n - 1 && rod.ends[1].holds_frame())
+    };
+    let mut damped = false;
+    for j in 0..np {
+        if j >= n {
+            k[il + j] = 1.0;
+            k[ilb + j] = 1.0;
+            put3(&mut k, "K_IN", j, [1.0; 3]);
+            put3(&mut k, "K_IIO", j, [1.0; 3]);
+            continue;
+        }
+        let l0 = p.rest_lengths[j];
+        k[il + j] = 1.0 / l0;
+        let own = p.inertias[j];
+        let r = p.radius;
+        let bar = floor * own.x * 4.0 / (r * r) * l0 * l0 / 12.0;
+        let inertia = [own.x.max(bar), own.y.max(bar), own.z.max(bar)];
+        put3(&mut k, "K_IN", j, inertia);
+        put3(&mut k, "K_IIO", j, inertia.map(|x| 1.0 / x));
+        k[free + j] = if clamped(j) { 0.0 } else { 1.0 };
+        let kp = p.parallel_stiffness[j];
+        let stretch = if extensible {
+            compliance(p.stretch_stiffness[j], l0)
+        } else {
+            0.0
+        };
+        let beta = if extensible {
+            p.stretch_damping[j] * l0
+        } else {
+            0.0
+        };
+        let (f, m) = damp(stretch, beta);
+        damped |= f > 0.0;
+        put3(
+            &mut k,
+            "K_AG",
+            j,
+            [compliance(kp, l0), compliance(kp, l0), m],
+        );
+        put3(&mut k, "K_DG", j, [0.0, 0.0, f]);
+        if j + 1 < n {
+            let lbar = p.node_length(j);
+            k[lb + j] = lbar;
+            k[ilb + j] = 1.0 / lbar;
+            let u = p.rest_darboux[j];
+            put3(&mut k, "K_RU", j, [u.x, u.y, u.z]);
+            let s = p.bend_twist_stiffness[j];
+            let beta = p.bend_damping[j] * lbar;
+            let rows = [s.x, s.y, s.z].map(|s| damp(compliance(s, lbar), beta));
+            damped |= rows.iter().any(|r| r.0 > 0.0);
+            put3(&mut k, "K_AO", j, rows.map(|r| r.1));
+            put3(&mut k, "K_DO", j, rows.map(|r| r.0));
+        } else {
+            k[ilb + j] = 1.0;
+        }
+    }
+    for &(point, f) in &rod.loads {
+        let a = c.at("K_F") + 3 * point;
+        for (slot, v) in k[a..a + 3].iter_mut().zip(f) {
+            *slot += v;
+        }
+    }
+    let s = c.at("K_ROD");
+    k[s] = n as f64;
+    k[s + 1] = p.drag;
+    k[s + 2] = if damped { 1.0 } else { 0.0 };
+    k[s + 3] = if rod.ends[0].holds_point() { 1.0 } else { 0.0 };
+    k[s + 4] = if rod.ends[1].holds_point() { 1.0 } else { 0.0 };
+    let mut clamps = 0;
+    for (end, frame) in [(0, 0), (1, n - 1)] {
+        if rod.ends[end].holds_frame() {
+            let node = &p.end_nodes[end];
+            let b = s + 8 + 12 * clamps;
+            k[b] = frame as f64;
+            k[b + 1] = end as f64;
+            k[b + 2..b + 5].copy_from_slice(&[
+                node.stiffness.x,
+                node.stiffness.y,
+                node.stiffness.z,
+            ]);
+            k[b + 5..b + 8].copy_from_slice(&[
+                node.rest_darboux.x,
+                node.rest_darboux.y,
+                node.rest_darboux.z,
+            ]);
+            k[b + 8] = node.damping;
+            k[b + 9] = p.end_node_length(end);
+            clamps += 1;
+        }
+    }
+    k[s + 5] = clamps as f64;
+    k
+}
+
+/// One rod's state block (`st`), padded with identity frames.
+fn state_block(s: &RodState<f64>, l: &StiffLayout) -> Vec<f64> {
+    let c = &l.st;
+    let mut out = vec![0.0; c.len];
+    for (i, (x, v)) in s.positions.iter().zip(&s.velocities).enumerate() {
+        let a = c.at("S_X") + 3 * i;
+        out[a..a + 3].copy_from_slice(&[x.x, x.y, x.z]);
+        let a = c.at("S_V") + 3 * i;
+        out[a..a + 3].copy_from_slice(&[v.x, v.y, v.z]);
+    }
+    for j in 0..l.slots() {
+        let q = s.frames.get(j).copied().unwrap_or_else(Quat::identity);
+        let a = c.at("S_Q") + 4 * j;
+        out[a..a + 4].copy_from_slice(&[q.i, q.j, q.k, q.w]);
+    }
+    for (j, w) in s.angular_velocities.iter().enumerate() {
+        let a = c.at("S_OMEGA") + 3 * j;
+        out[a..a + 3].copy_from_slice(&[w.x, w.y, w.z]);
+    }
+    for (e, q) in s.clamp_frames.iter().enumerate() {
+        let a = c.at("S_CLAMP") + 4 * e;
+        out[a..a + 4].copy_from_slice(&[q.i, q.j, q.k, q.w]);
+    }
+    out
+}

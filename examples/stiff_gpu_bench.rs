@@ -1,0 +1,152 @@
+//! The benchmark behind the "stiff step on the GPU" section of `docs/benchmarks/stiff-gpu.md`:
+//! a real guidewire (the `nitinol` preset, 256 elements over 0.5 m) stepped by the stiff scheme
+//! at 0.1 ms, its clamped hand end moving sideways and twisting under gravity, in free space (the
+//! GPU's stiff scheme has no contacts yet), run as a user runs it through the facade (wall clock,
+//! everything included).
+//!
+//! - one copy as a 1 kHz haptic loop would call it: ten 0.1 ms steps and the tip read back per
+//!   tick, on the GPU and on the CPU (one core) of the same machine, with the tips compared;
+//! - batches of copies (`[batch] copies`): steps per second of every copy, and the largest
+//!   distance between any copy's tip and the first copy's (they start alike, so it is zero when
+//!   every copy is stepped alike).
+//!
+//! `cargo run --release --example stiff_gpu_bench -- [--ticks N] [--copies 1,64,1024,4096]
+//! [--steps N] [--elements N] [--dt S]`. Prints one JSON object per line.
+
+use cosserat::scene::parse_scene;
+use cosserat::sim::{Backend, RodHandle, Simulation};
+use std::path::Path;
+use std::time::Instant;
+
+fn scene(elements: usize, dt: f64) -> String {
+    format!(
+        r#"
+[solver]
+scheme = "stiff"
+dt = {dt:e}
+precision = "f64"
+mode = "inextensible"
+gravity = [0.0, 0.0, -9.81]
+
+[[rod]]
+elements = {elements}
+shape = {{ kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = 0.5 }}
+material = {{ preset = "nitinol" }}
+damping = {{ drag = 5.0 }}
+start = {{ kind = "clamped", velocity = [0.0, 0.2, 0.0], angular_velocity = [6.0, 0.0, 0.0], end_time = 10.0 }}
+"#
+    )
+}
+
+fn build(text: &str, backend: Backend, copies: usize) -> Simulation {
+    let overrides = [("batch.copies".to_string(), copies.to_string())];
+    let (b, _, _) = parse_scene(Path::new("stiff-gpu-bench.toml"), text, &overrides)
+        .unwrap_or_else(|e| panic!("{e}"));
+    b.backend(backend)
+        .build()
+        .unwrap_or_else(|e| panic!("{backend:?}: {e}"))
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+/// `ticks` ticks of `per_tick` steps, each with the tip read back: (median, p99, largest) in µs,
+/// and the tip at the end.
+fn ticks(sim: &mut Simulation, ticks: usize, per_tick: u64) -> ([f64; 3], [f64; 3]) {
+    let mut times = Vec::with_capacity(ticks);
+    let mut tip = [0.0; 3];
+    for _ in 0..ticks {
+        let t = Instant::now();
+        sim.run(per_tick).unwrap_or_else(|e| panic!("{e}"));
+        tip = *sim.positions(RodHandle(0)).last().expect("points");
+        times.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    times.sort_by(f64::total_cmp);
+    (
+        [
+            quantile(&times, 0.5),
+            quantile(&times, 0.99),
+            *times.last().expect("ticks"),
+        ],
+        tip,
+    )
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let value = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let n_ticks: usize = value("--ticks").map_or(500, |v| v.parse().expect("--ticks N"));
+    let steps: u64 = value("--steps").map_or(2000, |v| v.parse().expect("--steps N"));
+    let elements: usize = value("--elements").map_or(256, |v| v.parse().expect("--elements N"));
+    let dt: f64 = value("--dt").map_or(1e-4, |v| v.parse().expect("--dt S"));
+    let copies: Vec<usize> = value("--copies").map_or(vec![1, 64, 1024, 4096], |v| {
+        v.split(',').map(|c| c.parse().expect("--copies N,N")).collect()
+    });
+    let text = scene(elements, dt);
+    let per_tick = (1e-3 / dt).round().max(1.0) as u64;
+    let mut gpu = build(&text, Backend::Gpu, 1);
+    let mut cpu = build(&text, Backend::Cpu, 1);
+    let (g, gtip) = ticks(&mut gpu, n_ticks, per_tick);
+    let (c, ctip) = ticks(&mut cpu, n_ticks, per_tick);
+    let gap = (0..3).map(|k| (gtip[k] - ctip[k]).powi(2)).sum::<f64>().sqrt();
+    let summary = |s: &Simulation| {
+        let st = s.stiff_summary().expect("stiff");
+        (st.iterations_per_step(), st.unconverged_steps)
+    };
+    println!(
+        "{}",
+        serde_json::json!({
+            "case": "tick",
+            "elements": elements,
+            "dt": dt,
+            "steps_per_tick": per_tick,
+            "ticks": n_ticks,
+            "gpu_us": {"median": g[0], "p99": g[1], "max": g[2]},
+            "cpu_us": {"median": c[0], "p99": c[1], "max": c[2]},
+            "tip_gap_m": gap,
+            "gpu_iterations_per_step": summary(&gpu).0,
+            "cpu_iterations_per_step": summary(&cpu).0,
+            "gpu_unconverged": summary(&gpu).1,
+            "cpu_unconverged": summary(&cpu).1,
+        })
+    );
+    drop(gpu);
+    for &n in &copies {
+        let mut sim = build(&text, Backend::Gpu, n);
+        // Warm-up (pipeline, first dispatch).
+        sim.run(per_tick).unwrap_or_else(|e| panic!("{e}"));
+        let t = Instant::now();
+        sim.run(steps).unwrap_or_else(|e| panic!("{e}"));
+        let wall = t.elapsed().as_secs_f64();
+        let first = *sim.positions(RodHandle(0)).last().expect("points");
+        let spread = (0..n)
+            .map(|r| {
+                let p = *sim.positions(RodHandle(r)).last().expect("points");
+                (0..3).map(|k| (p[k] - first[k]).powi(2)).sum::<f64>().sqrt()
+            })
+            .fold(0.0, f64::max);
+        let (its, unconverged) = summary(&sim);
+        println!(
+            "{}",
+            serde_json::json!({
+                "case": "batch",
+                "copies": n,
+                "elements": elements,
+                "dt": dt,
+                "steps": steps,
+                "wall_s": wall,
+                "steps_per_s_each": steps as f64 / wall,
+                "element_steps_per_s": (steps as f64 * (n * elements) as f64) / wall,
+                "iterations_per_step": its,
+                "unconverged_steps": unconverged,
+                "tip_spread_m": spread,
+            })
+        );
+    }
+}
