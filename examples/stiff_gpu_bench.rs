@@ -54,6 +54,8 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 /// `ticks` ticks of `per_tick` steps, each with the tip read back: (median, p99, largest) in µs,
 /// and the tip at the end.
 fn ticks(sim: &mut Simulation, ticks: usize, per_tick: u64) -> ([f64; 3], [f64; 3]) {
+    // One tick first (the pipeline's compilation, the first dispatch).
+    sim.run(per_tick).unwrap_or_else(|e| panic!("{e}"));
     let mut times = Vec::with_capacity(ticks);
     let mut tip = [0.0; 3];
     for _ in 0..ticks {
