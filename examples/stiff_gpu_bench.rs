@@ -88,7 +88,9 @@ fn main() {
     let elements: usize = value("--elements").map_or(256, |v| v.parse().expect("--elements N"));
     let dt: f64 = value("--dt").map_or(1e-4, |v| v.parse().expect("--dt S"));
     let copies: Vec<usize> = value("--copies").map_or(vec![1, 64, 1024, 4096], |v| {
-        v.split(',').map(|c| c.parse().expect("--copies N,N")).collect()
+        v.split(',')
+            .map(|c| c.parse().expect("--copies N,N"))
+            .collect()
     });
     let text = scene(elements, dt);
     let per_tick = (1e-3 / dt).round().max(1.0) as u64;
@@ -96,7 +98,10 @@ fn main() {
     let mut cpu = build(&text, Backend::Cpu, 1);
     let (g, gtip) = ticks(&mut gpu, n_ticks, per_tick);
     let (c, ctip) = ticks(&mut cpu, n_ticks, per_tick);
-    let gap = (0..3).map(|k| (gtip[k] - ctip[k]).powi(2)).sum::<f64>().sqrt();
+    let gap = (0..3)
+        .map(|k| (gtip[k] - ctip[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
     let summary = |s: &Simulation| {
         let st = s.stiff_summary().expect("stiff");
         (st.iterations_per_step(), st.unconverged_steps)
@@ -130,7 +135,10 @@ fn main() {
         let spread = (0..n)
             .map(|r| {
                 let p = *sim.positions(RodHandle(r)).last().expect("points");
-                (0..3).map(|k| (p[k] - first[k]).powi(2)).sum::<f64>().sqrt()
+                (0..3)
+                    .map(|k| (p[k] - first[k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
             })
             .fold(0.0, f64::max);
         let (its, unconverged) = summary(&sim);

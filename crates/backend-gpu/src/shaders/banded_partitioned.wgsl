@@ -191,21 +191,23 @@ fn pinv(p: M6) -> M6 {
 // The exchange array as blocks: 3×3 (9 numbers, row-major), 6×6 (36), symmetric 6×6 (a's and
 // d's upper triangles and b: 21) and 6-vectors.
 fn put3(at: u32, m: mat3x3<REAL>) {
-    for (var r = 0u; r < 3u; r++) {
-        for (var c = 0u; c < 3u; c++) {
-            xch[at + 3u * r + c] = m[c][r];
-        }
-    }
+    xch[at] = m[0][0];
+    xch[at + 1u] = m[1][0];
+    xch[at + 2u] = m[2][0];
+    xch[at + 3u] = m[0][1];
+    xch[at + 4u] = m[1][1];
+    xch[at + 5u] = m[2][1];
+    xch[at + 6u] = m[0][2];
+    xch[at + 7u] = m[1][2];
+    xch[at + 8u] = m[2][2];
 }
 
 fn get3(at: u32) -> mat3x3<REAL> {
-    var m: mat3x3<REAL>;
-    for (var r = 0u; r < 3u; r++) {
-        for (var c = 0u; c < 3u; c++) {
-            m[c][r] = xch[at + 3u * r + c];
-        }
-    }
-    return m;
+    return transpose(mat3x3<REAL>(
+        vec3<REAL>(xch[at], xch[at + 1u], xch[at + 2u]),
+        vec3<REAL>(xch[at + 3u], xch[at + 4u], xch[at + 5u]),
+        vec3<REAL>(xch[at + 6u], xch[at + 7u], xch[at + 8u]),
+    ));
 }
 
 fn put_sym3(at: u32, m: mat3x3<REAL>) {

@@ -5,36 +5,27 @@
 // triangle is read), a non-positive pivot giving a zero row and column (`inverse_spd` of the
 // CPU's `stiff/direct.rs` takes the same pivots).
 fn chol_inv(a: mat3x3<REAL>) -> mat3x3<REAL> {
-    // l[j][i]: the lower factor's entry (i, j) holds its inverse pivot on the diagonal.
-    var l: mat3x3<REAL>;
-    for (var j = 0u; j < 3u; j++) {
-        var d = a[j][j];
-        for (var k = 0u; k < j; k++) {
-            d -= l[k][j] * l[k][j];
-        }
-        var inv = REAL(0.0);
-        if d > REAL(0.0) {
-            inv = REAL(1.0) / sqrt(d);
-        }
-        l[j][j] = inv;
-        for (var i = j + 1u; i < 3u; i++) {
-            var s = a[j][i];
-            for (var k = 0u; k < j; k++) {
-                s -= l[k][i] * l[k][j];
-            }
-            l[j][i] = s * inv;
-        }
-    }
-    // m = L⁻¹ column by column (m[c][i]: entry (i, c)).
-    var m: mat3x3<REAL>;
-    for (var c = 0u; c < 3u; c++) {
-        for (var i = c; i < 3u; i++) {
-            var s = select(REAL(0.0), REAL(1.0), i == c);
-            for (var k = c; k < i; k++) {
-                s -= l[k][i] * m[c][k];
-            }
-            m[c][i] = s * l[i][i];
-        }
-    }
-    return m;
+    // Written out rather than as loops over the entries: a loop index into a private matrix
+    // puts it in local memory on NVIDIA GPUs. L(i, k) below the diagonal, inverse pivots on it.
+    let zero = REAL(0.0);
+    let d0 = a[0][0];
+    let i0 = select(zero, REAL(1.0) / sqrt(d0), d0 > zero);
+    let l10 = a[0][1] * i0;
+    let l20 = a[0][2] * i0;
+    let d1 = a[1][1] - l10 * l10;
+    let i1 = select(zero, REAL(1.0) / sqrt(d1), d1 > zero);
+    let l21 = (a[1][2] - l20 * l10) * i1;
+    let d2 = a[2][2] - l20 * l20 - l21 * l21;
+    let i2 = select(zero, REAL(1.0) / sqrt(d2), d2 > zero);
+    // L⁻¹ column by column (forward substitution of the unit vectors).
+    let m00 = i0;
+    let m10 = (zero - l10 * m00) * i1;
+    let m20 = (zero - l20 * m00 - l21 * m10) * i2;
+    let m11 = i1;
+    let m21 = (zero - l21 * m11) * i2;
+    return mat3x3<REAL>(
+        vec3<REAL>(m00, m10, m20),
+        vec3<REAL>(zero, m11, m21),
+        vec3<REAL>(zero, zero, i2),
+    );
 }

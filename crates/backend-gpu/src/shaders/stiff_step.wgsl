@@ -121,7 +121,8 @@ fn put_w4(rod: u32, col: u32, j: u32, v: vec4<f64>) {
     wk[b + 2u] = v.z;
     wk[b + 3u] = v.w;
 }
-// A 3×3 matrix in `wk` (9 numbers, column by column).
+// A 3×3 matrix in `wk` (9 numbers, column by column; written out: a loop index into a private
+// matrix puts it in local memory on NVIDIA GPUs).
 fn wm3(rod: u32, col: u32, j: u32) -> mat3x3<f64> {
     let b = rod * WS + col + 9u * j;
     return mat3x3<f64>(
@@ -131,12 +132,9 @@ fn wm3(rod: u32, col: u32, j: u32) -> mat3x3<f64> {
     );
 }
 fn put_wm3(rod: u32, col: u32, j: u32, m: mat3x3<f64>) {
-    let b = rod * WS + col + 9u * j;
-    for (var c = 0u; c < 3u; c++) {
-        wk[b + 3u * c] = m[c].x;
-        wk[b + 3u * c + 1u] = m[c].y;
-        wk[b + 3u * c + 2u] = m[c].z;
-    }
+    put_w3(rod, col + 9u * j, 0u, m[0]);
+    put_w3(rod, col + 9u * j + 3u, 0u, m[1]);
+    put_w3(rod, col + 9u * j + 6u, 0u, m[2]);
 }
 // The step's held-end motion: end `e` of `rod` at step `s` of the dispatch (v, ω).
 fn end_velocity(s: u32, rod: u32, e: u32) -> vec3<f64> {
@@ -301,10 +299,25 @@ struct Clamp {
     damping: f64,
     length: f64,
 }
+// The rod's clamps, copied into workgroup memory at the start of a dispatch
+// (`load_clamps`): the passes look them up for every frame.
+var<workgroup> wg_clamps: array<Clamp, 2>;
+var<workgroup> wg_clamp_count: u32;
 fn clamp_count(rod: u32) -> u32 {
-    return u32(kx(rod, K_ROD + 5u));
+    return wg_clamp_count;
 }
 fn clamp_of(rod: u32, c: u32) -> Clamp {
+    return wg_clamps[c];
+}
+fn load_clamps(rod: u32, t: u32) {
+    if t == 0u {
+        wg_clamp_count = u32(kx(rod, K_ROD + 5u));
+        wg_clamps[0] = stored_clamp(rod, 0u);
+        wg_clamps[1] = stored_clamp(rod, 1u);
+    }
+    workgroupBarrier();
+}
+fn stored_clamp(rod: u32, c: u32) -> Clamp {
     let b = K_ROD + 8u + 12u * c;
     return Clamp(
         u32(kx(rod, b)),
@@ -614,12 +627,16 @@ fn put_rows_sym(rod: u32, e: u32, t: u32, q0: u32, m: mat3x3<f64>) {
 }
 // A block row-major into the rows at number q0.
 fn put_rows_block(rod: u32, e: u32, t: u32, q0: u32, m: mat3x3<f64>) {
-    let b = (rod * EPT + e) * PQ;
-    for (var r = 0u; r < 3u; r++) {
-        for (var c = 0u; c < 3u; c++) {
-            band_rows[(b + q0 + 3u * r + c) * PT + t] = m[c][r];
-        }
-    }
+    let b = (rod * EPT + e) * PQ + q0;
+    band_rows[b * PT + t] = m[0][0];
+    band_rows[(b + 1u) * PT + t] = m[1][0];
+    band_rows[(b + 2u) * PT + t] = m[2][0];
+    band_rows[(b + 3u) * PT + t] = m[0][1];
+    band_rows[(b + 4u) * PT + t] = m[1][1];
+    band_rows[(b + 5u) * PT + t] = m[2][1];
+    band_rows[(b + 6u) * PT + t] = m[0][2];
+    band_rows[(b + 7u) * PT + t] = m[1][2];
+    band_rows[(b + 8u) * PT + t] = m[2][2];
 }
 
 // `assemble` (with `clamp_blocks`): `J K⁻¹ Jᵀ + α̃` of the slice's elements, identity rows for
@@ -718,7 +735,8 @@ fn assemble(rod: u32, t: u32, n: u32) {
 }
 
 // `apply`: `Δx = u + M⁻¹ Jᵀ Δλ`, `Δθ = u_θ + K_θ⁻¹ J_θᵀ Δλ` (the clamped frames' through `W`),
-// `λ += Δλ`.
+// `λ += Δλ`. It reads its neighbours' increments from the solve's vector and writes only its
+// own slice.
 fn apply(rod: u32, t: u32, n: u32) {
     for (var e = 0u; e <= EPT; e++) {
         if !own_point(t, e, n) {
@@ -742,17 +760,7 @@ fn apply(rod: u32, t: u32, n: u32) {
         }
         let q = s4(rod, S_Q, j);
         put_s4(rod, S_Q, j, qnormalise(qmul(q, vec4<f64>(th * 0.5lf, 1.0lf))));
-    }
-}
-
-// The multipliers' increments, after `apply` has read them (a pass of its own: `apply` reads
-// its neighbours' increments).
-fn add_increments(rod: u32, t: u32, n: u32) {
-    for (var e = 0u; e < EPT; e++) {
-        let j = first_of(t) + e;
-        if j >= n {
-            break;
-        }
+        // The element's own multipliers (no pass of this one reads them).
         let x = solution(rod, j);
         put_w3(rod, W_LAM_G, j, w3(rod, W_LAM_G, j) + x.u);
         if j + 1u < n {
@@ -803,6 +811,7 @@ const ST_DVAL: u32 = 10u;
 @compute @workgroup_size(PT)
 fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let rod = wid.x;
+    load_clamps(rod, t);
     let n = elements(rod);
     let h = glob[0];
     let tolerance = glob[1];
@@ -902,13 +911,13 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             if last && tolerance <= 0.0lf {
                 break;
             }
-            constraints(rod, t, n);
-            sync();
             var refactor = !factor_valid || band_part.refactor == 1u || (band_part.refactor == 0u && it == 0u);
+            constraints(rod, t, n);
             if refactor && !last {
+                // Its own slice's constraints only: no barrier between the two.
                 precondition(rod, t, n, it == 0u, h);
-                sync();
             }
+            sync();
             rhs_updates(rod, t, n, lambda_zero, h);
             sync();
             residual = workgroup_max(t, rhs_rows(rod, t, n));
@@ -937,8 +946,6 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             partitioned_solve(rod, t);
             sync();
             apply(rod, t, n);
-            sync();
-            add_increments(rod, t, n);
             lambda_zero = false;
             used += 1u;
             sync();
