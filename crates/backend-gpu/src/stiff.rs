@@ -177,6 +177,28 @@ impl StiffLayout {
         self.threads * self.per_thread
     }
 
+    /// Where number `c` of entry `j` of a column of `width` numbers per entry sits in it
+    /// (`at_entry` of the kernel): coalesced over the invocations' slices.
+    fn at_entry(&self, j: usize, c: usize, width: usize) -> usize {
+        let np = self.slots();
+        if j >= np {
+            return width * np + c;
+        }
+        (c * self.per_thread + j % self.per_thread) * self.threads + j / self.per_thread
+    }
+
+    /// Puts `v` at entry `j` of the column at `col` of `block`.
+    fn put(&self, block: &mut [f64], col: usize, j: usize, v: &[f64]) {
+        for (c, x) in v.iter().enumerate() {
+            block[col + self.at_entry(j, c, v.len())] = *x;
+        }
+    }
+
+    /// Entry `j` of the column at `col` of `block`, `N` numbers.
+    fn get<const N: usize>(&self, block: &[f64], col: usize, j: usize) -> [f64; N] {
+        std::array::from_fn(|c| block[col + self.at_entry(j, c, N)])
+    }
+
     fn source(&self) -> String {
         let head = format!(
             "const PT: u32 = {}u;\nconst EPT: u32 = {}u;\nconst XCH: u32 = {}u;\nconst NP: u32 = {}u;\nconst NPT: u32 = {}u;\n{}{}{}",
@@ -643,22 +665,27 @@ impl GpuStiffSimulation {
             .iter()
             .enumerate()
             .map(|(r, rod)| {
-                let b = r * l.len;
+                let block = &all[r * l.len..(r + 1) * l.len];
                 let n = rod.state.elements();
+                let layout = &self.layout;
                 let v3 = |col: usize, i: usize| {
-                    let a = b + col + 3 * i;
-                    Vec3::new(all[a], all[a + 1], all[a + 2])
+                    let [x, y, z] = layout.get(block, col, i);
+                    Vec3::new(x, y, z)
                 };
                 let q4 = |col: usize, i: usize| {
-                    let a = b + col + 4 * i;
-                    Quat::new(all[a + 3], all[a], all[a + 1], all[a + 2])
+                    let [x, y, z, w] = layout.get(block, col, i);
+                    Quat::new(w, x, y, z)
+                };
+                let clamp = |e: usize| {
+                    let a = sc + 4 * e;
+                    Quat::new(block[a + 3], block[a], block[a + 1], block[a + 2])
                 };
                 let mut s = rod.state.clone();
                 s.positions = (0..=n).map(|i| v3(sx, i)).collect();
                 s.velocities = (0..=n).map(|i| v3(sv, i)).collect();
                 s.frames = (0..n).map(|j| q4(sq, j)).collect();
                 s.angular_velocities = (0..n).map(|j| v3(so, j)).collect();
-                s.clamp_frames = [q4(sc, 0), q4(sc, 1)];
+                s.clamp_frames = [clamp(0), clamp(1)];
                 s
             })
             .collect();
@@ -750,10 +777,8 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
     let mut k = vec![0.0; c.len];
     let compliance = |stiffness: f64, len: f64| stiff_compliance(stiffness, len, h);
     let damp = |alpha: f64, beta: f64| stiff_damped_row(alpha, beta, h);
-    let put3 = |k: &mut Vec<f64>, col: &str, j: usize, v: [f64; 3]| {
-        let a = c.at(col) + 3 * j;
-        k[a..a + 3].copy_from_slice(&v);
-    };
+    let put3 = |k: &mut Vec<f64>, col: &str, j: usize, v: [f64; 3]| l.put(k, c.at(col), j, &v);
+    let put1 = |k: &mut Vec<f64>, col: usize, j: usize, v: f64| l.put(k, col, j, &[v]);
     let (im, il, ilb, lb, free) = (
         c.at("K_IM"),
         c.at("K_IL"),
@@ -761,28 +786,30 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
         c.at("K_LB"),
         c.at("K_FREE"),
     );
-    k[im..=im + n].copy_from_slice(&p.inv_masses[..=n]);
+    for (i, w) in p.inv_masses.iter().enumerate() {
+        put1(&mut k, im, i, *w);
+    }
     let clamped = |j: usize| {
         (j == 0 && rod.ends[0].holds_frame()) || (j == n - 1 && rod.ends[1].holds_frame())
     };
     let mut damped = false;
     for j in 0..np {
         if j >= n {
-            k[il + j] = 1.0;
-            k[ilb + j] = 1.0;
+            put1(&mut k, il, j, 1.0);
+            put1(&mut k, ilb, j, 1.0);
             put3(&mut k, "K_IN", j, [1.0; 3]);
             put3(&mut k, "K_IIO", j, [1.0; 3]);
             continue;
         }
         let l0 = p.rest_lengths[j];
-        k[il + j] = 1.0 / l0;
+        put1(&mut k, il, j, 1.0 / l0);
         let own = p.inertias[j];
         let r = p.radius;
         let bar = floor * own.x * 4.0 / (r * r) * l0 * l0 / 12.0;
         let inertia = [own.x.max(bar), own.y.max(bar), own.z.max(bar)];
         put3(&mut k, "K_IN", j, inertia);
         put3(&mut k, "K_IIO", j, inertia.map(|x| 1.0 / x));
-        k[free + j] = if clamped(j) { 0.0 } else { 1.0 };
+        put1(&mut k, free, j, if clamped(j) { 0.0 } else { 1.0 });
         let kp = p.parallel_stiffness[j];
         let stretch = if extensible {
             compliance(p.stretch_stiffness[j], l0)
@@ -805,8 +832,8 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
         put3(&mut k, "K_DG", j, [0.0, 0.0, f]);
         if j + 1 < n {
             let lbar = p.node_length(j);
-            k[lb + j] = lbar;
-            k[ilb + j] = 1.0 / lbar;
+            put1(&mut k, lb, j, lbar);
+            put1(&mut k, ilb, j, 1.0 / lbar);
             let u = p.rest_darboux[j];
             put3(&mut k, "K_RU", j, [u.x, u.y, u.z]);
             let s = p.bend_twist_stiffness[j];
@@ -816,14 +843,12 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
             put3(&mut k, "K_AO", j, rows.map(|r| r.1));
             put3(&mut k, "K_DO", j, rows.map(|r| r.0));
         } else {
-            k[ilb + j] = 1.0;
+            put1(&mut k, ilb, j, 1.0);
         }
     }
     for &(point, f) in &rod.loads {
-        let a = c.at("K_F") + 3 * point;
-        for (slot, v) in k[a..a + 3].iter_mut().zip(f) {
-            *slot += v;
-        }
+        let had: [f64; 3] = l.get(&k, c.at("K_F"), point);
+        put3(&mut k, "K_F", point, [0, 1, 2].map(|i| had[i] + f[i]));
     }
     let s = c.at("K_ROD");
     k[s] = n as f64;
@@ -862,20 +887,17 @@ fn state_block(s: &RodState<f64>, l: &StiffLayout) -> Vec<f64> {
     let c = &l.st;
     let mut out = vec![0.0; c.len];
     for (i, (x, v)) in s.positions.iter().zip(&s.velocities).enumerate() {
-        let a = c.at("S_X") + 3 * i;
-        out[a..a + 3].copy_from_slice(&[x.x, x.y, x.z]);
-        let a = c.at("S_V") + 3 * i;
-        out[a..a + 3].copy_from_slice(&[v.x, v.y, v.z]);
+        l.put(&mut out, c.at("S_X"), i, &[x.x, x.y, x.z]);
+        l.put(&mut out, c.at("S_V"), i, &[v.x, v.y, v.z]);
     }
     for j in 0..l.slots() {
         let q = s.frames.get(j).copied().unwrap_or_else(Quat::identity);
-        let a = c.at("S_Q") + 4 * j;
-        out[a..a + 4].copy_from_slice(&[q.i, q.j, q.k, q.w]);
+        l.put(&mut out, c.at("S_Q"), j, &[q.i, q.j, q.k, q.w]);
     }
     for (j, w) in s.angular_velocities.iter().enumerate() {
-        let a = c.at("S_OMEGA") + 3 * j;
-        out[a..a + 3].copy_from_slice(&[w.x, w.y, w.z]);
+        l.put(&mut out, c.at("S_OMEGA"), j, &[w.x, w.y, w.z]);
     }
+    // The clamp frames: two quaternions, contiguous.
     for (e, q) in s.clamp_frames.iter().enumerate() {
         let a = c.at("S_CLAMP") + 4 * e;
         out[a..a + 4].copy_from_slice(&[q.i, q.j, q.k, q.w]);

@@ -20,7 +20,7 @@
 // Prepended by `stiff.rs`: PT, EPT, XCH (as the banded solve), NP = PT·EPT (element slots per
 // rod), NPT = NP + 1, and the offsets of the columns of `kc` (K_*), `st` (S_*) and `wk` (W_*) with
 // their strides per rod (KS, SS, WS). Columns of vectors hold 3 numbers per entry, of
-// quaternions 4 ((x, y, z, w): vector part, then scalar).
+// quaternions 4 ((x, y, z, w): vector part, then scalar), laid out by `at_entry`.
 
 struct StiffShape {
     // Elements per invocation (EPT) and invocations per rod (PT), read by the banded solve.
@@ -63,78 +63,117 @@ const HUGE: f64 = 1.0e300lf;
 // ---------------------------------------------------------------------------------------------
 // Storage access.
 
+// Columns indexed by element or point are laid out as the banded solve's rows are: number `c`
+// of entry `j` (slot `e` of invocation `t`'s slice) at `(c · EPT + e) · PT + t`, so that the
+// invocations of a workgroup, each at the same slot of its own slice, read one coalesced run;
+// the point past the last slot, in the point columns only, follows at `width · NP + c`.
+fn at_entry(j: u32, c: u32, width: u32) -> u32 {
+    if j >= NP {
+        return width * NP + c;
+    }
+    return (c * EPT + j % EPT) * PT + j / EPT;
+}
+
 fn kx(rod: u32, at: u32) -> f64 {
     return kc[rod * KS + at];
 }
 fn k3(rod: u32, col: u32, j: u32) -> vec3<f64> {
-    let b = rod * KS + col + 3u * j;
-    return vec3<f64>(kc[b], kc[b + 1u], kc[b + 2u]);
+    let b = rod * KS + col;
+    return vec3<f64>(kc[b + at_entry(j, 0u, 3u)], kc[b + at_entry(j, 1u, 3u)], kc[b + at_entry(j, 2u, 3u)]);
 }
 fn k1(rod: u32, col: u32, j: u32) -> f64 {
-    return kc[rod * KS + col + j];
+    return kc[rod * KS + col + at_entry(j, 0u, 1u)];
 }
 fn s3(rod: u32, col: u32, j: u32) -> vec3<f64> {
-    let b = rod * SS + col + 3u * j;
-    return vec3<f64>(st[b], st[b + 1u], st[b + 2u]);
+    let b = rod * SS + col;
+    return vec3<f64>(st[b + at_entry(j, 0u, 3u)], st[b + at_entry(j, 1u, 3u)], st[b + at_entry(j, 2u, 3u)]);
 }
 fn put_s3(rod: u32, col: u32, j: u32, v: vec3<f64>) {
-    let b = rod * SS + col + 3u * j;
-    st[b] = v.x;
-    st[b + 1u] = v.y;
-    st[b + 2u] = v.z;
+    let b = rod * SS + col;
+    st[b + at_entry(j, 0u, 3u)] = v.x;
+    st[b + at_entry(j, 1u, 3u)] = v.y;
+    st[b + at_entry(j, 2u, 3u)] = v.z;
 }
 fn s4(rod: u32, col: u32, j: u32) -> vec4<f64> {
-    let b = rod * SS + col + 4u * j;
-    return vec4<f64>(st[b], st[b + 1u], st[b + 2u], st[b + 3u]);
+    let b = rod * SS + col;
+    return vec4<f64>(st[b + at_entry(j, 0u, 4u)], st[b + at_entry(j, 1u, 4u)], st[b + at_entry(j, 2u, 4u)], st[b + at_entry(j, 3u, 4u)]);
 }
 fn put_s4(rod: u32, col: u32, j: u32, v: vec4<f64>) {
-    let b = rod * SS + col + 4u * j;
-    st[b] = v.x;
-    st[b + 1u] = v.y;
-    st[b + 2u] = v.z;
-    st[b + 3u] = v.w;
+    let b = rod * SS + col;
+    st[b + at_entry(j, 0u, 4u)] = v.x;
+    st[b + at_entry(j, 1u, 4u)] = v.y;
+    st[b + at_entry(j, 2u, 4u)] = v.z;
+    st[b + at_entry(j, 3u, 4u)] = v.w;
 }
+fn w3(rod: u32, col: u32, j: u32) -> vec3<f64> {
+    let b = rod * WS + col;
+    return vec3<f64>(wk[b + at_entry(j, 0u, 3u)], wk[b + at_entry(j, 1u, 3u)], wk[b + at_entry(j, 2u, 3u)]);
+}
+fn put_w3(rod: u32, col: u32, j: u32, v: vec3<f64>) {
+    let b = rod * WS + col;
+    wk[b + at_entry(j, 0u, 3u)] = v.x;
+    wk[b + at_entry(j, 1u, 3u)] = v.y;
+    wk[b + at_entry(j, 2u, 3u)] = v.z;
+}
+fn w4(rod: u32, col: u32, j: u32) -> vec4<f64> {
+    let b = rod * WS + col;
+    return vec4<f64>(wk[b + at_entry(j, 0u, 4u)], wk[b + at_entry(j, 1u, 4u)], wk[b + at_entry(j, 2u, 4u)], wk[b + at_entry(j, 3u, 4u)]);
+}
+fn put_w4(rod: u32, col: u32, j: u32, v: vec4<f64>) {
+    let b = rod * WS + col;
+    wk[b + at_entry(j, 0u, 4u)] = v.x;
+    wk[b + at_entry(j, 1u, 4u)] = v.y;
+    wk[b + at_entry(j, 2u, 4u)] = v.z;
+    wk[b + at_entry(j, 3u, 4u)] = v.w;
+}
+// The counters and the clamps' columns, indexed by counter or clamp: contiguous.
 fn w1(rod: u32, col: u32, j: u32) -> f64 {
     return wk[rod * WS + col + j];
 }
 fn put_w1(rod: u32, col: u32, j: u32, v: f64) {
     wk[rod * WS + col + j] = v;
 }
-fn w3(rod: u32, col: u32, j: u32) -> vec3<f64> {
-    let b = rod * WS + col + 3u * j;
+fn c3(rod: u32, col: u32, k: u32) -> vec3<f64> {
+    let b = rod * WS + col + 3u * k;
     return vec3<f64>(wk[b], wk[b + 1u], wk[b + 2u]);
 }
-fn put_w3(rod: u32, col: u32, j: u32, v: vec3<f64>) {
-    let b = rod * WS + col + 3u * j;
+fn put_c3(rod: u32, col: u32, k: u32, v: vec3<f64>) {
+    let b = rod * WS + col + 3u * k;
     wk[b] = v.x;
     wk[b + 1u] = v.y;
     wk[b + 2u] = v.z;
 }
-fn w4(rod: u32, col: u32, j: u32) -> vec4<f64> {
-    let b = rod * WS + col + 4u * j;
+fn c4(rod: u32, col: u32, k: u32) -> vec4<f64> {
+    let b = rod * WS + col + 4u * k;
     return vec4<f64>(wk[b], wk[b + 1u], wk[b + 2u], wk[b + 3u]);
 }
-fn put_w4(rod: u32, col: u32, j: u32, v: vec4<f64>) {
-    let b = rod * WS + col + 4u * j;
+fn put_c4(rod: u32, col: u32, k: u32, v: vec4<f64>) {
+    let b = rod * WS + col + 4u * k;
     wk[b] = v.x;
     wk[b + 1u] = v.y;
     wk[b + 2u] = v.z;
     wk[b + 3u] = v.w;
 }
-// A 3×3 matrix in `wk` (9 numbers, column by column; written out: a loop index into a private
-// matrix puts it in local memory on NVIDIA GPUs).
-fn wm3(rod: u32, col: u32, j: u32) -> mat3x3<f64> {
-    let b = rod * WS + col + 9u * j;
-    return mat3x3<f64>(
-        vec3<f64>(wk[b], wk[b + 1u], wk[b + 2u]),
-        vec3<f64>(wk[b + 3u], wk[b + 4u], wk[b + 5u]),
-        vec3<f64>(wk[b + 6u], wk[b + 7u], wk[b + 8u]),
-    );
+fn sc4(rod: u32, col: u32, k: u32) -> vec4<f64> {
+    let b = rod * SS + col + 4u * k;
+    return vec4<f64>(st[b], st[b + 1u], st[b + 2u], st[b + 3u]);
 }
-fn put_wm3(rod: u32, col: u32, j: u32, m: mat3x3<f64>) {
-    put_w3(rod, col + 9u * j, 0u, m[0]);
-    put_w3(rod, col + 9u * j + 3u, 0u, m[1]);
-    put_w3(rod, col + 9u * j + 6u, 0u, m[2]);
+fn put_sc4(rod: u32, col: u32, k: u32, v: vec4<f64>) {
+    let b = rod * SS + col + 4u * k;
+    st[b] = v.x;
+    st[b + 1u] = v.y;
+    st[b + 2u] = v.z;
+    st[b + 3u] = v.w;
+}
+// A clamp's 3×3 matrix in `wk` (9 numbers, column by column; written out: a loop index into a
+// private matrix puts it in local memory on NVIDIA GPUs).
+fn wm3(rod: u32, col: u32, k: u32) -> mat3x3<f64> {
+    return mat3x3<f64>(c3(rod, col + 9u * k, 0u), c3(rod, col + 9u * k + 3u, 0u), c3(rod, col + 9u * k + 6u, 0u));
+}
+fn put_wm3(rod: u32, col: u32, k: u32, m: mat3x3<f64>) {
+    put_c3(rod, col + 9u * k, 0u, m[0]);
+    put_c3(rod, col + 9u * k + 3u, 0u, m[1]);
+    put_c3(rod, col + 9u * k + 6u, 0u, m[2]);
 }
 // The step's held-end motion: end `e` of `rod` at step `s` of the dispatch (v, ω).
 fn end_velocity(s: u32, rod: u32, e: u32) -> vec3<f64> {
@@ -352,10 +391,10 @@ fn clamp_node(c: Clamp, cf: vec4<f64>, q: vec4<f64>) -> Node {
 }
 // The clamp's torque on its end frame at the current iterate (body axes).
 fn clamp_torque(rod: u32, ci: u32, c: Clamp, q: vec4<f64>, h: f64) -> vec3<f64> {
-    let node = clamp_node(c, w4(rod, W_CLAMP_FRAME, ci), q);
+    let node = clamp_node(c, c4(rod, W_CLAMP_FRAME, ci), q);
     var f = c.stiffness * node.value;
     if c.damping > 0.0lf {
-        f += (node.value - w3(rod, W_CLAMP_START, ci)) * (c.damping / h);
+        f += (node.value - c3(rod, W_CLAMP_START, ci)) * (c.damping / h);
     }
     return -(transpose(node.jac) * f) * c.length;
 }
@@ -457,13 +496,13 @@ fn precondition(rod: u32, t: u32, n: u32, previous: bool, h: f64) {
             for (var di = 0u; di < clamp_count(rod); di++) {
                 let dc = clamp_of(rod, di);
                 if dc.frame == j {
-                    let node = clamp_node(dc, w4(rod, W_CLAMP_FRAME, di), q);
+                    let node = clamp_node(dc, c4(rod, W_CLAMP_FRAME, di), q);
                     let stiff = dc.stiffness + vec3<f64>(1.0lf, 1.0lf, 1.0lf) * (dc.damping / h);
                     m += transpose(node.jac) * diag_m(stiff) * node.jac * (dc.length * h * h);
                 }
             }
             put_wm3(rod, W_CLAMP_W, ci, inverse3(m));
-            put_w3(rod, W_CLAMP_K, ci, d);
+            put_c3(rod, W_CLAMP_K, ci, d);
         }
     }
 }
@@ -559,7 +598,7 @@ fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) {
         var u = to_target + dth * w3(rod, W_INV_K, j);
         let ci = clamp_on(rod, j);
         if ci < 2u {
-            var r = w3(rod, W_CLAMP_K, ci) * to_target + dth;
+            var r = c3(rod, W_CLAMP_K, ci) * to_target + dth;
             for (var di = 0u; di < clamp_count(rod); di++) {
                 let dc = clamp_of(rod, di);
                 if dc.frame == j {
@@ -844,14 +883,14 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             // The clamp frames at the end of the step, and the nodes at its start (damping).
             for (var ci = 0u; ci < clamp_count(rod); ci++) {
                 let c = clamp_of(rod, ci);
-                let base = s4(rod, S_CLAMP, c.end);
+                let base = sc4(rod, S_CLAMP, c.end);
                 let frame = qnormalise(qmul(exp_rotation(end_spin(step, rod, c.end) * h), base));
-                put_w4(rod, W_CLAMP_FRAME, ci, frame);
+                put_c4(rod, W_CLAMP_FRAME, ci, frame);
                 var start = vec3<f64>();
                 if c.damping > 0.0lf {
                     start = clamp_node(c, base, s4(rod, S_Q, c.frame)).value;
                 }
-                put_w3(rod, W_CLAMP_START, ci, start);
+                put_c3(rod, W_CLAMP_START, ci, start);
             }
         }
         // (The end frames are read above before the prediction turns them.)
@@ -964,7 +1003,7 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
                 put_w1(rod, W_STATS, ST_WORST, global_step);
             }
             for (var ci = 0u; ci < clamp_count(rod); ci++) {
-                put_s4(rod, S_CLAMP, clamp_of(rod, ci).end, w4(rod, W_CLAMP_FRAME, ci));
+                put_sc4(rod, S_CLAMP, clamp_of(rod, ci).end, c4(rod, W_CLAMP_FRAME, ci));
             }
             atomicStore(&fail_element, NO_FAIL);
         }
