@@ -75,6 +75,10 @@ fn steppers() -> Vec<(&'static str, SimulationBuilder)> {
         ),
         ("gpu explicit", explicit().backend(Backend::Gpu)),
         (
+            "gpu stiff",
+            stiff().with_rod(wire(0.0)).backend(Backend::Gpu),
+        ),
+        (
             "gpu rod contact",
             explicit()
                 .with_rod(wire(0.015))

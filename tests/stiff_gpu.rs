@@ -50,6 +50,37 @@ fn agree(cpu: &mut Simulation, gpu: &mut Simulation, batches: u64, steps: u64, t
         assert!(turn < tol, "rod {rod}: frames differ by {turn:e} rad");
         eprintln!("rod {rod}: positions within {gap:.1e} m, frames within {turn:.1e} rad");
     }
+    // The held ends' filtered reactions (force and torque).
+    for rod in 0..cpu.stepper().rod_count() {
+        for end in 0..2 {
+            let (c, g) = (
+                cpu.end_reaction(RodHandle(rod), end),
+                gpu.end_reaction(RodHandle(rod), end),
+            );
+            assert_eq!(c.is_some(), g.is_some(), "rod {rod} end {end}");
+            let (Some(c), Some(g)) = (c, g) else { continue };
+            let scale = c
+                .force
+                .iter()
+                .chain(&c.torque)
+                .fold(1e-9, |m: f64, x| m.max(x.abs()));
+            let gap = (0..3)
+                .map(|k| {
+                    (c.force[k] - g.force[k])
+                        .abs()
+                        .max((c.torque[k] - g.torque[k]).abs())
+                })
+                .fold(0.0, f64::max);
+            assert!(
+                gap < 1e-7 * scale,
+                "rod {rod} end {end}: reactions differ by {gap:e} (cpu {c:?}, gpu {g:?})"
+            );
+            eprintln!(
+                "rod {rod} end {end}: reaction within {:.1e} of {scale:.2e}",
+                gap
+            );
+        }
+    }
     let (sc, sg) = (
         cpu.stiff_summary().expect("cpu summary"),
         gpu.stiff_summary().expect("gpu summary"),

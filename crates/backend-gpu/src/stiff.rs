@@ -104,10 +104,15 @@ struct StiffLayout {
 }
 
 /// Numbers of the per-rod scalars in `kc` (`K_ROD`): elements, drag rate, damped, whether each
-/// end holds its point, clamps, two spare, then 12 per clamp.
+/// end holds its point, clamps, the masses of the two end points, then 12 per clamp.
 const ROD_SCALARS: usize = 32;
-/// Numbers of the per-rod counters in `wk` (`W_STATS`, `ST_*` of the kernel).
-const STATS: usize = 16;
+/// Numbers of the per-rod report (`rep`): the counters (`ST_*` of the kernel), then per end the
+/// raw and the filtered reaction (`RE`, `RE_END`), then the largest filtered force (`RE_MAX`).
+const REPORT: usize = 48;
+/// Where the reactions start in a rod's report, and numbers per end.
+const RE: usize = 16;
+const RE_END: usize = 12;
+const RE_MAX: usize = 40;
 
 impl StiffLayout {
     fn new(threads: usize, per_thread: usize) -> Self {
@@ -137,6 +142,7 @@ impl StiffLayout {
         st.add("S_X_PRED", 3 * npt);
         let mut wk = Columns::default();
         wk.add("W_X_OLD", 3 * npt);
+        wk.add("W_V_START", 3 * npt);
         wk.add("W_UX", 3 * npt);
         wk.add("W_Q_OLD", 4 * np);
         wk.add("W_Q_PRED", 4 * np);
@@ -163,7 +169,6 @@ impl StiffLayout {
         wk.add("W_CLAMP_K", 6);
         wk.add("W_CLAMP_FRAME", 8);
         wk.add("W_CLAMP_START", 6);
-        wk.add("W_STATS", STATS);
         Self {
             threads,
             per_thread,
@@ -210,7 +215,7 @@ impl StiffLayout {
             self.kc.wgsl("KS"),
             self.st.wgsl("SS"),
             self.wk.wgsl("WS"),
-        );
+        ) + &format!("const RS: u32 = {REPORT}u;\n");
         format!(
             "{head}\n{}\n{}\n{}",
             crate::shader::STIFF_STEP_WGSL,
@@ -233,13 +238,29 @@ pub struct GpuStiffSimulation {
     st: wgpu::Buffer,
     wk: wgpu::Buffer,
     motion: wgpu::Buffer,
+    rows: wgpu::Buffer,
+    rep: wgpu::Buffer,
     staging: wgpu::Buffer,
-    stats_staging: wgpu::Buffer,
+    rep_staging: wgpu::Buffer,
     rods: Vec<GpuStiffRod>,
+    /// Every rod's report as last read back (`REPORT` numbers each).
+    reports: Vec<[f64; REPORT]>,
     settings: SolverSettings<f64>,
     stiff: StiffSettings,
+    /// The cut-off of the reactions' low-pass filter [Hz].
+    reaction_cutoff_hz: f64,
     steps_per_dispatch: u64,
     /// Steps taken.
+    step: u64,
+}
+
+/// A [`GpuStiffSimulation`]'s whole state, to return to ([`GpuStiffSimulation::restore`]): copies
+/// of its buffers on the device (the state, the working values with the multipliers the next step
+/// starts from, the factorisation's rows, the report) and what the host keeps.
+pub struct GpuStiffSnapshot {
+    buffers: [wgpu::Buffer; 4],
+    rods: Vec<GpuStiffRod>,
+    reports: Vec<[f64; REPORT]>,
     step: u64,
 }
 
@@ -299,11 +320,7 @@ impl GpuStiffSimulation {
         let storage_usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let copy_out = storage_usage | wgpu::BufferUsages::COPY_SRC;
         let slots = layout.slots();
-        let rows = buffer(
-            "stiff rows",
-            n_rods * slots * 48,
-            wgpu::BufferUsages::STORAGE,
-        );
+        let rows = buffer("stiff rows", n_rods * slots * 48, copy_out);
         let x = buffer("stiff rhs", n_rods * slots * 6, wgpu::BufferUsages::STORAGE);
         let glob = buffer("stiff globals", 16, storage_usage);
         let kc = buffer("stiff constants", n_rods * layout.kc.len, storage_usage);
@@ -324,9 +341,10 @@ impl GpuStiffSimulation {
             n_rods * layout.st.len,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
-        let stats_staging = buffer(
-            "stiff stats staging",
-            n_rods * layout.wk.len,
+        let rep = buffer("stiff report", n_rods * REPORT, copy_out);
+        let rep_staging = buffer(
+            "stiff report staging",
+            n_rods * REPORT,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
         let shape = device.create_buffer(&wgpu::BufferDescriptor {
@@ -357,6 +375,7 @@ impl GpuStiffSimulation {
             (6, &st),
             (7, &wk),
             (8, &motion),
+            (9, &rep),
         ]
         .into_iter()
         .map(|(binding, b)| wgpu::BindGroupEntry {
@@ -383,15 +402,21 @@ impl GpuStiffSimulation {
             st,
             wk,
             motion,
+            rows,
+            rep,
             staging,
-            stats_staging,
+            rep_staging,
             rods,
+            reports: vec![[0.0; REPORT]; n_rods],
             settings: *settings,
             stiff: *stiff,
+            reaction_cutoff_hz: cosserat_problem::report::DEFAULT_CUTOFF_HZ,
             steps_per_dispatch,
             step: 0,
         };
         for rod in 0..n_rods {
+            // No step above the tolerance yet.
+            sim.reports[rod][5] = -1.0;
             sim.upload_rod(rod)?;
         }
         Ok(sim)
@@ -437,24 +462,54 @@ impl GpuStiffSimulation {
         let q = &self.gpu.queue;
         q.write_buffer(&self.kc, (rod * self.layout.kc.len * 8) as u64, bytes(&kc));
         q.write_buffer(&self.st, (rod * self.layout.st.len * 8) as u64, bytes(&st));
-        let mut wk = vec![0.0; self.layout.wk.len];
-        // No step above the tolerance yet.
-        wk[self.layout.wk.at("W_STATS") + 5] = -1.0;
-        // The previous step's multipliers of the first step are zero; identity quaternions
-        // where the kernel would read an unset one.
+        // The previous step's multipliers of the first step are zero.
+        let wk = vec![0.0; self.layout.wk.len];
         q.write_buffer(&self.wk, (rod * self.layout.wk.len * 8) as u64, bytes(&wk));
+        // The counters and reactions go on; the factorisation and any divergence are
+        // forgotten.
+        let report = &mut self.reports[rod];
+        report[6..11].fill(0.0);
+        q.write_buffer(&self.rep, (rod * REPORT * 8) as u64, bytes(&report[..]));
         Ok(())
+    }
+
+    /// Sets the cut-off of the reactions' low-pass filter [Hz] (`reaction_filter_weights`;
+    /// not finite or not positive: no filter).
+    pub fn set_reaction_cutoff(&mut self, hz: f64) {
+        self.reaction_cutoff_hz = hz;
+    }
+
+    /// The filtered reaction at end `end` of rod `rod` after the last step (the holder's force
+    /// and torque on the rod, world frame), `None` for an end that holds nothing.
+    pub fn end_reaction(&self, rod: usize, end: usize) -> Option<cosserat_problem::EndReaction> {
+        let r = self.rods.get(rod)?;
+        if end > 1 || !r.ends[end].holds_point() {
+            return None;
+        }
+        let b = RE + RE_END * end + 6;
+        let rep = &self.reports[rod];
+        Some(cosserat_problem::EndReaction {
+            force: [rep[b], rep[b + 1], rep[b + 2]],
+            torque: [rep[b + 3], rep[b + 4], rep[b + 5]],
+        })
+    }
+
+    /// The largest filtered reaction force of any held end so far [N], `None` without one.
+    pub fn max_reaction_force(&self) -> Option<f64> {
+        self.rods
+            .iter()
+            .zip(&self.reports)
+            .filter(|(r, _)| r.ends.iter().any(EndCondition::holds_point))
+            .map(|(_, rep)| rep[RE_MAX])
+            .reduce(f64::max)
     }
 
     /// Replaces rod `rod`'s state (its constants stay; a clamp keeps the clamp frame the state
     /// carries) and forgets its factorisation and any divergence.
     pub fn write_state(&mut self, rod: usize, state: RodState<f64>) -> Result<(), GpuError> {
         self.check_rod(rod)?;
-        let keep = self.counters(rod)?;
         self.rods[rod].state = state;
-        self.upload_rod(rod)?;
-        self.restore_counters(rod, &keep);
-        Ok(())
+        self.upload_rod(rod)
     }
 
     /// Replaces rod `rod` whole (its ends, parameters, loads and state: what a change of how an
@@ -468,12 +523,30 @@ impl GpuStiffSimulation {
                 self.rods[rod].state.elements()
             )));
         }
-        let keep = self.counters(rod)?;
         let mut one = vec![new];
         check_input(&mut one, &self.stiff)?;
         self.rods[rod] = one.pop().expect("one rod");
-        self.upload_rod(rod)?;
-        self.restore_counters(rod, &keep);
+        self.upload_rod(rod)
+    }
+
+    /// Replaces the condition at end `end` of rod `rod` by one held the same way (a new motion:
+    /// the host evaluates each step's velocities from it).
+    pub fn set_end_motion(
+        &mut self,
+        rod: usize,
+        end: usize,
+        condition: EndCondition<f64>,
+    ) -> Result<(), GpuError> {
+        self.check_rod(rod)?;
+        let old = &self.rods[rod].ends[end.min(1)];
+        if old.kind != condition.kind {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod}, end {end}: a new motion must hold the end as before ({:?}, not {:?}); \
+                 replace the rod to change how it is held",
+                old.kind, condition.kind
+            )));
+        }
+        self.rods[rod].ends[end.min(1)] = condition;
         Ok(())
     }
 
@@ -485,20 +558,6 @@ impl GpuStiffSimulation {
             )));
         }
         Ok(())
-    }
-
-    /// Rod `rod`'s counters (iterations … largest residual), to carry over a re-upload.
-    fn counters(&self, rod: usize) -> Result<[f64; 6], GpuError> {
-        let all = self.read_work_stats()?;
-        let s = &all[rod];
-        Ok([s[0], s[1], s[2], s[3], s[4], s[5]])
-    }
-
-    fn restore_counters(&self, rod: usize, keep: &[f64; 6]) {
-        let at = rod * self.layout.wk.len + self.layout.wk.at("W_STATS");
-        self.gpu
-            .queue
-            .write_buffer(&self.wk, (at * 8) as u64, bytes(keep));
     }
 
     /// Takes `steps` steps (in dispatches of many steps each) and waits for them. A rod that
@@ -554,6 +613,8 @@ impl GpuStiffSimulation {
         q.write_buffer(&self.shape, 0, bytemuck::cast_slice(&shape));
         let limit = self.settings.divergence_strain;
         let g = self.settings.gravity;
+        let (keep, from_old, from_new) =
+            cosserat_problem::report::reaction_filter_weights(self.reaction_cutoff_hz, h);
         let glob = [
             h,
             self.stiff.tolerance,
@@ -564,6 +625,9 @@ impl GpuStiffSimulation {
             (1.0 + limit).powi(2),
             (1.0 - limit).max(0.0).powi(2),
             self.step as f64,
+            keep,
+            from_old,
+            from_new,
         ];
         q.write_buffer(&self.glob, 0, bytes(&glob));
         let mut encoder = self
@@ -606,25 +670,20 @@ impl GpuStiffSimulation {
         Ok(out)
     }
 
-    /// The counters of every rod (`W_STATS`, `STATS` numbers each).
-    fn read_work_stats(&self) -> Result<Vec<[f64; STATS]>, GpuError> {
-        let all = self.read_back(&self.wk, &self.stats_staging, self.layout.wk.len)?;
-        let at = self.layout.wk.at("W_STATS");
-        Ok((0..self.rods.len())
-            .map(|r| {
-                let b = r * self.layout.wk.len + at;
-                let mut s = [0.0; STATS];
-                s.copy_from_slice(&all[b..b + STATS]);
-                s
-            })
-            .collect())
+    /// Reads every rod's report (counters, reactions) back into `reports`.
+    fn read_reports(&mut self) -> Result<(), GpuError> {
+        let all = self.read_back(&self.rep, &self.rep_staging, REPORT)?;
+        for (r, chunk) in self.reports.iter_mut().zip(all.chunks_exact(REPORT)) {
+            r.copy_from_slice(chunk);
+        }
+        Ok(())
     }
 
     /// The first divergence of any rod (the earliest step, then the lowest rod).
-    fn check_divergence(&self) -> Result<(), GpuError> {
-        let stats = self.read_work_stats()?;
+    fn check_divergence(&mut self) -> Result<(), GpuError> {
+        self.read_reports()?;
         let mut first: Option<Divergence> = None;
-        for (rod, s) in stats.iter().enumerate() {
+        for (rod, s) in self.reports.iter().enumerate() {
             let kind = s[9] as u32;
             if kind == 0 {
                 continue;
@@ -647,6 +706,78 @@ impl GpuStiffSimulation {
             }
         }
         first.map_or(Ok(()), |d| Err(GpuError::Diverged(d)))
+    }
+
+    /// The whole state, kept on the device ([`restore`](Self::restore) returns to it): stepping
+    /// on from a restored snapshot repeats the steps that followed it bit for bit.
+    pub fn snapshot(&self) -> GpuStiffSnapshot {
+        let device = &self.gpu.device;
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("stiff snapshot"),
+        });
+        let buffers = [&self.st, &self.wk, &self.rows, &self.rep].map(|b| {
+            let copy = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("stiff snapshot"),
+                size: b.size(),
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            encoder.copy_buffer_to_buffer(b, 0, &copy, 0, b.size());
+            copy
+        });
+        self.gpu.queue.submit([encoder.finish()]);
+        GpuStiffSnapshot {
+            buffers,
+            rods: self.rods.clone(),
+            reports: self.reports.clone(),
+            step: self.step,
+        }
+    }
+
+    /// Returns to `snapshot` (taken from this simulation): state, multipliers, factorisation,
+    /// counters and reactions, the rods' ends and loads, and the step count. The constants are
+    /// uploaded again from the rods as they were then.
+    pub fn restore(&mut self, snapshot: &GpuStiffSnapshot) -> Result<(), GpuError> {
+        if snapshot.rods.len() != self.rods.len() {
+            return Err(GpuError::InvalidInput(format!(
+                "a snapshot of {} rods given to a simulation of {}",
+                snapshot.rods.len(),
+                self.rods.len()
+            )));
+        }
+        self.rods.clone_from(&snapshot.rods);
+        self.reports.clone_from(&snapshot.reports);
+        self.step = snapshot.step;
+        let h = self.settings.dt;
+        for rod in 0..self.rods.len() {
+            let kc = constants(
+                &self.rods[rod],
+                &self.layout,
+                h,
+                self.settings.extensible,
+                self.stiff.inertia_floor,
+            );
+            self.gpu.queue.write_buffer(
+                &self.kc,
+                (rod * self.layout.kc.len * 8) as u64,
+                bytes(&kc),
+            );
+        }
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("stiff restore"),
+            });
+        for (copy, b) in snapshot
+            .buffers
+            .iter()
+            .zip([&self.st, &self.wk, &self.rows, &self.rep])
+        {
+            encoder.copy_buffer_to_buffer(copy, 0, b, 0, b.size());
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+        self.gpu.wait_idle()
     }
 
     /// Every rod's state as it is now (reads the device).
@@ -697,9 +828,8 @@ impl GpuStiffSimulation {
 
     /// What the stiff solve did so far, per rod (`steps`: all of them kept; the GPU retakes
     /// no step, `halved_steps` and `axial_steps` stay zero).
-    pub fn report(&self) -> Result<Vec<StiffReport>, GpuError> {
-        Ok(self
-            .read_work_stats()?
+    pub fn report(&self) -> Vec<StiffReport> {
+        self.reports
             .iter()
             .map(|s| StiffReport {
                 total_iterations: s[0] as u64,
@@ -712,7 +842,7 @@ impl GpuStiffSimulation {
                 max_tolerance: self.stiff.tolerance,
                 ..StiffReport::default()
             })
-            .collect())
+            .collect()
     }
 }
 
@@ -879,6 +1009,8 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
         }
     }
     k[s + 5] = clamps as f64;
+    k[s + 6] = p.masses[0];
+    k[s + 7] = p.masses[n];
     k
 }
 

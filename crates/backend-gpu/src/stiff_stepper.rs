@@ -14,6 +14,7 @@ use cosserat_problem::{
     StepError, Stepper, StepperInfo, StiffSettings, StiffSummary,
 };
 
+use crate::stiff::GpuStiffSnapshot;
 use crate::{GpuError, GpuOptions, GpuStiffRod, GpuStiffSimulation};
 
 const NAME: &str = "gpu stiff";
@@ -35,9 +36,12 @@ pub struct GpuStiffStepper {
     clock: Clock,
 }
 
-/// A [`GpuStiffStepper`]'s snapshot: the host copy is the whole state.
+/// A [`GpuStiffStepper`]'s snapshot: the device's (state, multipliers, factorisation, report)
+/// and the host copies.
 struct Saved {
+    device: GpuStiffSnapshot,
     states: Vec<RodState<f64>>,
+    params: Vec<RodParams<f64>>,
     ends: Vec<[EndCondition<f64>; 2]>,
     loads: Vec<Vec<PointLoad<f64>>>,
     clock: Clock,
@@ -67,12 +71,14 @@ fn forces(loads: &[PointLoad<f64>]) -> Vec<(usize, [f64; 3])> {
 }
 
 impl GpuStiffStepper {
-    /// Uploads `rods` (state, parameters, ends, constant loads) to a device of its own.
+    /// Uploads `rods` (state, parameters, ends, constant loads) to a device of its own; the held
+    /// ends' reactions are low-pass filtered at `reaction_cutoff_hz`.
     pub fn new(
         rods: Vec<StiffRodParts>,
         loads: Vec<Vec<PointLoad<f64>>>,
         settings: &SolverSettings<f64>,
         stiff: &StiffSettings,
+        reaction_cutoff_hz: f64,
         options: &GpuOptions,
     ) -> Result<Self, GpuError> {
         let inputs: Vec<GpuStiffRod> = rods
@@ -85,7 +91,8 @@ impl GpuStiffStepper {
                 loads: forces(l),
             })
             .collect();
-        let sim = GpuStiffSimulation::new(inputs, settings, stiff, options)?;
+        let mut sim = GpuStiffSimulation::new(inputs, settings, stiff, options)?;
+        sim.set_reaction_cutoff(reaction_cutoff_hz);
         Ok(Self {
             states: rods.iter().map(|r| r.0.clone()).collect(),
             masses: rods.iter().map(|r| r.1.masses.clone()).collect(),
@@ -99,13 +106,14 @@ impl GpuStiffStepper {
         })
     }
 
-    /// What the GPU's stiff stepper runs besides free rods: keyframed end paths, double
-    /// precision (its state is `f64` whatever the scene's precision).
+    /// What the GPU's stiff stepper runs besides free rods: keyframed end paths, the held ends'
+    /// reactions, double precision (its state is `f64` whatever the scene's precision).
     pub fn supported() -> Capabilities {
         Capabilities::of(&[
             Capability::StiffScheme,
             Capability::DoublePrecision,
             Capability::EndPaths,
+            Capability::Reactions,
         ])
     }
 
@@ -265,7 +273,10 @@ impl Stepper for GpuStiffStepper {
         let new = &self.ends[rod][end];
         if old.kind == new.kind {
             // A new motion: the kernel takes each step's velocities from the host.
-            return Ok(());
+            return self
+                .sim
+                .set_end_motion(rod, end, new.clone())
+                .map_err(to_control);
         }
         // How the end is held changed: its point's mass, the clamp (closing on the end frame
         // where it is), the constants.
@@ -289,12 +300,12 @@ impl Stepper for GpuStiffStepper {
         self.replace(rod)
     }
 
-    fn end_reaction(&self, _rod: usize, _end: usize) -> Option<EndReaction> {
-        None
+    fn end_reaction(&self, rod: usize, end: usize) -> Option<EndReaction> {
+        self.sim.end_reaction(rod, end)
     }
 
     fn max_reaction_force(&self) -> Option<f64> {
-        None
+        self.sim.max_reaction_force()
     }
 
     fn contacts(&self, rod: usize, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {
@@ -312,7 +323,7 @@ impl Stepper for GpuStiffStepper {
     }
 
     fn stiff_summary(&self) -> Option<StiffSummary> {
-        let reports = self.sim.report().ok()?;
+        let reports = self.sim.report();
         Some(StiffSummary::of_reports(
             reports,
             self.clock.step,
@@ -350,7 +361,9 @@ impl Stepper for GpuStiffStepper {
             NAME,
             self.clock,
             Box::new(Saved {
+                device: self.sim.snapshot(),
                 states: self.states.clone(),
+                params: self.params.clone(),
                 ends: self.ends.clone(),
                 loads: self.loads.clone(),
                 clock: self.clock,
@@ -365,21 +378,13 @@ impl Stepper for GpuStiffStepper {
                 snapshot.stepper()
             )));
         };
+        self.sim
+            .restore(&saved.device)
+            .map_err(|e| ControlError::Snapshot(e.to_string()))?;
         self.states.clone_from(&saved.states);
+        self.params.clone_from(&saved.params);
+        self.ends.clone_from(&saved.ends);
         self.loads.clone_from(&saved.loads);
-        for rod in 0..self.states.len() {
-            for end in 0..2 {
-                let n = self.states[rod].elements();
-                let point = if end == 0 { 0 } else { n };
-                self.ends[rod][end] = saved.ends[rod][end].clone();
-                self.params[rod].inv_masses[point] = if self.ends[rod][end].holds_point() {
-                    0.0
-                } else {
-                    1.0 / self.masses[rod][point]
-                };
-            }
-            self.replace(rod)?;
-        }
         self.clock = saved.clock;
         Ok(())
     }

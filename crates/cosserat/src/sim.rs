@@ -1128,6 +1128,8 @@ fn gpu_stiff_stepper(
         loads,
         &b.settings,
         stiff,
+        b.reaction_cutoff_hz
+            .unwrap_or(cosserat_problem::report::DEFAULT_CUTOFF_HZ),
         &cosserat_backend_gpu::GpuOptions::default(),
     )
     .map_err(|e| BuildError::Setting(format!("the GPU's stiff scheme: {e}")))?;

@@ -19,7 +19,7 @@
 //
 // Prepended by `stiff.rs`: PT, EPT, XCH (as the banded solve), NP = PT·EPT (element slots per
 // rod), NPT = NP + 1, and the offsets of the columns of `kc` (K_*), `st` (S_*) and `wk` (W_*) with
-// their strides per rod (KS, SS, WS). Columns of vectors hold 3 numbers per entry, of
+// their strides per rod (KS, SS, WS), and the report's stride RS. Columns of vectors hold 3 numbers per entry, of
 // quaternions 4 ((x, y, z, w): vector part, then scalar), laid out by `at_entry`.
 
 struct StiffShape {
@@ -49,6 +49,8 @@ struct StiffShape {
 // Per step of the dispatch, rod and end: the held end's velocity and angular velocity over the
 // step (8 numbers: v, 0, ω, 0), as the CPU's `velocities_over`.
 @group(0) @binding(8) var<storage, read> motion: array<f64>;
+// Per rod, RS numbers: the counters (`ST_*`), then the held ends' reactions (`RE_*`).
+@group(0) @binding(9) var<storage, read_write> rep: array<f64>;
 
 // The workgroup's reductions and decisions.
 var<workgroup> red: array<f64, PT>;
@@ -126,13 +128,24 @@ fn put_w4(rod: u32, col: u32, j: u32, v: vec4<f64>) {
     wk[b + at_entry(j, 2u, 4u)] = v.z;
     wk[b + at_entry(j, 3u, 4u)] = v.w;
 }
-// The counters and the clamps' columns, indexed by counter or clamp: contiguous.
-fn w1(rod: u32, col: u32, j: u32) -> f64 {
-    return wk[rod * WS + col + j];
+// The report's numbers (`rep`).
+fn r1(rod: u32, at: u32) -> f64 {
+    return rep[rod * RS + at];
 }
-fn put_w1(rod: u32, col: u32, j: u32, v: f64) {
-    wk[rod * WS + col + j] = v;
+fn put_r1(rod: u32, at: u32, v: f64) {
+    rep[rod * RS + at] = v;
 }
+fn r3(rod: u32, at: u32) -> vec3<f64> {
+    let b = rod * RS + at;
+    return vec3<f64>(rep[b], rep[b + 1u], rep[b + 2u]);
+}
+fn put_r3(rod: u32, at: u32, v: vec3<f64>) {
+    let b = rod * RS + at;
+    rep[b] = v.x;
+    rep[b + 1u] = v.y;
+    rep[b + 2u] = v.z;
+}
+// The clamps' columns, indexed by clamp: contiguous.
 fn c3(rod: u32, col: u32, k: u32) -> vec3<f64> {
     let b = rod * WS + col + 3u * k;
     return vec3<f64>(wk[b], wk[b + 1u], wk[b + 2u]);
@@ -808,6 +821,45 @@ fn apply(rod: u32, t: u32, n: u32) {
     }
 }
 
+// The reactions at the held ends after an accepted step (the CPU's `record_reactions`): the held
+// point's momentum balance `F = m (v − v_start)/h − m g − f_load − J_rᵀ λ / h²` and, for a clamped
+// end, the clamp's torque on the end frame in world axes; each filtered as `Reactions::finish`
+// does (weights `keep`, `from_old`, `from_new` of `reaction_filter_weights` in `glob`).
+fn record_reactions(rod: u32, n: u32, h: f64, holds: vec2<bool>, gravity: vec3<f64>) {
+    let keep = glob[9];
+    let from_old = glob[10];
+    let from_new = glob[11];
+    for (var e = 0u; e < 2u; e++) {
+        if !holds[e] {
+            continue;
+        }
+        let point = select(n, 0u, e == 0u);
+        let m = kx(rod, K_ROD + 6u + e);
+        let lam = point_term(rod, W_LAM_G, i32(point) - 1, n, false) - point_term(rod, W_LAM_G, i32(point), n, false);
+        let force = gravity * m + k3(rod, K_F, point) + lam / (h * h);
+        let v_start = w3(rod, W_V_START, point);
+        let raw_f = (s3(rod, S_V, point) - v_start) * (m / h) - force;
+        var raw_t = vec3<f64>();
+        for (var ci = 0u; ci < clamp_count(rod); ci++) {
+            let c = clamp_of(rod, ci);
+            if c.end == e {
+                let q = s4(rod, S_Q, c.frame);
+                raw_t = directors(q) * clamp_torque(rod, ci, c, q, h);
+            }
+        }
+        let b = RE + RE_END * e;
+        let old_f = r3(rod, b);
+        let old_t = r3(rod, b + 3u);
+        let f = r3(rod, b + 6u) * keep + old_f * from_old + raw_f * from_new;
+        let tq = r3(rod, b + 9u) * keep + old_t * from_old + raw_t * from_new;
+        put_r3(rod, b, raw_f);
+        put_r3(rod, b + 3u, raw_t);
+        put_r3(rod, b + 6u, f);
+        put_r3(rod, b + 9u, tq);
+        put_r1(rod, RE_MAX, max(r1(rod, RE_MAX), norm3(f)));
+    }
+}
+
 // The largest of `v` over the workgroup (every invocation calls it).
 fn workgroup_max(t: u32, v: f64) -> f64 {
     red[t] = v;
@@ -830,7 +882,7 @@ fn sync() {
     workgroupBarrier();
 }
 
-// The per-rod counters in `wk` (`W_STATS`): iterations, factorisations, steps above the
+// The per-rod counters in `rep`: iterations, factorisations, steps above the
 // tolerance, the largest residual, the step it was met at, the last step above the tolerance
 // (−1: none), whether the factorisation in `band_rows` fits (1), and a divergence: step,
 // element, kind (1 frame not finite, 2 strain, 3 residual not finite, 4 position not finite;
@@ -846,6 +898,11 @@ const ST_DSTEP: u32 = 7u;
 const ST_DEL: u32 = 8u;
 const ST_DKIND: u32 = 9u;
 const ST_DVAL: u32 = 10u;
+// Then per end (RE_END numbers each from RE): the raw force and torque of the last step, the
+// filtered force and torque; then the largest filtered force so far.
+const RE: u32 = 16u;
+const RE_END: u32 = 12u;
+const RE_MAX: u32 = 40u;
 
 @compute @workgroup_size(PT)
 fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wid: vec3<u32>) {
@@ -865,7 +922,7 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
     // and whether the rod stopped at a divergence (nothing more is stepped until the host
     // writes a state).
     if t == 0u {
-        fail_word = u32(w1(rod, W_STATS, ST_VALID)) | select(0u, 2u, w1(rod, W_STATS, ST_DKIND) != 0.0lf);
+        fail_word = u32(r1(rod, ST_VALID)) | select(0u, 2u, r1(rod, ST_DKIND) != 0.0lf);
     }
     let word = workgroupUniformLoad(&fail_word);
     var factor_valid = (word & 1u) != 0u;
@@ -903,6 +960,7 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             let x = s3(rod, S_X, i);
             var v = s3(rod, S_V, i);
             put_w3(rod, W_X_OLD, i, x);
+            put_w3(rod, W_V_START, i, v);
             put_s3(rod, S_X, i, x + v * h);
             let w = k1(rod, K_IM, i);
             if w > 0.0lf {
@@ -977,7 +1035,7 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
                 assemble(rod, t, n);
                 factor_valid = true;
                 if t == 0u {
-                    put_w1(rod, W_STATS, ST_FACT, w1(rod, W_STATS, ST_FACT) + 1.0lf);
+                    put_r1(rod, ST_FACT, r1(rod, ST_FACT) + 1.0lf);
                 }
             }
             previous = residual;
@@ -993,14 +1051,14 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
         let global_step = first_step + f64(step);
         let unconverged = tolerance > 0.0lf && !(residual <= tolerance);
         if t == 0u {
-            put_w1(rod, W_STATS, ST_ITER, w1(rod, W_STATS, ST_ITER) + f64(used));
+            put_r1(rod, ST_ITER, r1(rod, ST_ITER) + f64(used));
             if unconverged {
-                put_w1(rod, W_STATS, ST_UNCONV, w1(rod, W_STATS, ST_UNCONV) + 1.0lf);
-                put_w1(rod, W_STATS, ST_LASTUN, global_step);
+                put_r1(rod, ST_UNCONV, r1(rod, ST_UNCONV) + 1.0lf);
+                put_r1(rod, ST_LASTUN, global_step);
             }
-            if residual > w1(rod, W_STATS, ST_MAXRES) {
-                put_w1(rod, W_STATS, ST_MAXRES, residual);
-                put_w1(rod, W_STATS, ST_WORST, global_step);
+            if residual > r1(rod, ST_MAXRES) {
+                put_r1(rod, ST_MAXRES, residual);
+                put_r1(rod, ST_WORST, global_step);
             }
             for (var ci = 0u; ci < clamp_count(rod); ci++) {
                 put_sc4(rod, S_CLAMP, clamp_of(rod, ci).end, c4(rod, W_CLAMP_FRAME, ci));
@@ -1034,6 +1092,10 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             }
         }
         workgroupBarrier();
+        storageBarrier();
+        if t == 0u {
+            record_reactions(rod, n, h, holds, gravity);
+        }
         if t == 0u {
             fail_word = atomicLoad(&fail_element);
             if residual >= HUGE && fail_word == NO_FAIL {
@@ -1056,17 +1118,17 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
                     kind = 3.0lf;
                     value = residual;
                 }
-                put_w1(rod, W_STATS, ST_DSTEP, global_step);
-                put_w1(rod, W_STATS, ST_DEL, f64(failed));
-                put_w1(rod, W_STATS, ST_DVAL, value);
-                put_w1(rod, W_STATS, ST_DKIND, kind);
-                put_w1(rod, W_STATS, ST_VALID, 0.0lf);
+                put_r1(rod, ST_DSTEP, global_step);
+                put_r1(rod, ST_DEL, f64(failed));
+                put_r1(rod, ST_DVAL, value);
+                put_r1(rod, ST_DKIND, kind);
+                put_r1(rod, ST_VALID, 0.0lf);
             }
             return;
         }
         sync();
     }
     if t == 0u {
-        put_w1(rod, W_STATS, ST_VALID, select(0.0lf, 1.0lf, factor_valid));
+        put_r1(rod, ST_VALID, select(0.0lf, 1.0lf, factor_valid));
     }
 }
