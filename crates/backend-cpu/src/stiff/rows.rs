@@ -195,15 +195,18 @@ impl ContactRows {
 }
 
 /// `argmin ½ yᵀ S y + cᵀ y` over `y ≥ 0` for a symmetric positive definite `S`, from the
-/// feasible `start`: a primal active set (Lawson & Hanson's NNLS iteration). Each pass solves
-/// the unconstrained problem on the free set by Cholesky; a solution with a negative entry is
-/// approached only as far as the first bound it meets, which joins the bound set; otherwise
-/// the bound entry whose gradient is most negative is freed. Stops at a KKT point or after
+/// feasible `start`: a primal active set (Lawson & Hanson's NNLS iteration), every entry free
+/// at first. Each pass solves the unconstrained problem on the free set by Cholesky; a
+/// solution with a negative entry is approached only as far as the first bound it meets, and
+/// the entries that reach zero there on their way down join the bound set; otherwise the
+/// bound entry whose gradient is most negative is freed. Stops at a KKT point or after
 /// `4 m + 8` passes (the last feasible iterate).
 fn nonnegative_qp(s: &DMatrix<f64>, c: &DVector<f64>, start: &DVector<f64>) -> DVector<f64> {
     let m = c.len();
     let mut y = start.map(|v| v.max(0.0));
-    let mut free: Vec<bool> = y.iter().map(|&v| v > 0.0).collect();
+    // Every entry free at first: where all contacts push (the common case) one Cholesky
+    // solves it, and the first step back drops every entry that would pull at once.
+    let mut free = vec![true; m];
     let scale = c.amax().max(1e-300);
     let tol = 1e-12 * scale;
     for _ in 0..4 * m + 8 {
@@ -251,7 +254,7 @@ fn nonnegative_qp(s: &DMatrix<f64>, c: &DVector<f64>, start: &DVector<f64>) -> D
             }
             for &i in &idx {
                 y[i] += alpha * (z[i] - y[i]);
-                if y[i] <= 0.0 || (z[i] <= 0.0 && y[i] <= 1e-14 * (1.0 + z[i].abs())) {
+                if z[i] <= 0.0 && y[i] <= 1e-14 * (1.0 + z[i].abs()) {
                     y[i] = 0.0;
                     free[i] = false;
                 }
