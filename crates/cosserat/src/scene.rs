@@ -402,6 +402,9 @@ pub struct StiffSection {
     /// of a step from its last query (default true; `false` queries every point every time;
     /// `cosserat_backend_cpu::StiffSettings::reuse_contact_queries`).
     pub reuse_contact_queries: Option<bool>,
+    /// Contacts as unilateral rows of the Newton system instead of pins (default false;
+    /// `cosserat_backend_cpu::StiffSettings::contact_rows`).
+    pub contact_rows: Option<bool>,
     /// Residual above which a step still unconverged after `iterations` is retaken in halves
     /// (default: never; `cosserat_backend_cpu::StiffSettings::halve_above`).
     pub halve_above: Option<f64>,
@@ -1160,6 +1163,9 @@ impl Checker<'_> {
                     }
                     if let Some(r) = x.reuse_contact_queries {
                         st.reuse_contact_queries = r;
+                    }
+                    if let Some(r) = x.contact_rows {
+                        st.contact_rows = r;
                     }
                     if let Some(h) = x.halve_above {
                         st.halve_above = self.positive("solver.stiff.halve_above", h)?;

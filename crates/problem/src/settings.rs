@@ -380,6 +380,14 @@ pub struct StiffSettings {
     /// (`docs/benchmarks/stiff-insertion.md`). `false` queries every point every time, for
     /// checking.
     pub reuse_contact_queries: bool,
+    /// Contacts with the mesh and rod contacts' planes as unilateral rows of the Newton system,
+    /// with normal impulses of their own (`stiff/rows.rs`): each iteration solves the banded
+    /// system with the contact points' full normal mobility and, through the Schur complement
+    /// on the contact rows (one banded solve per contact at each factorisation), the
+    /// complementarity of gaps and impulses. `false` holds contact points as pins of projected
+    /// inverse mass `w (I − n nᵀ)` whose walls may pull within a round, let go between rounds.
+    /// Measured in `docs/stiff-solver.md` ("Contacts as rows of the solve").
+    pub contact_rows: bool,
     /// Time integration: implicit Euler (the default) or BDF2 ([`Integrator`]).
     pub integrator: Integrator,
 }
@@ -427,6 +435,7 @@ impl Default for StiffSettings {
             halve_above: f64::INFINITY,
             axial_fallback: true,
             reuse_contact_queries: true,
+            contact_rows: false,
             integrator: Integrator::ImplicitEuler,
         }
     }

@@ -472,9 +472,10 @@ impl StiffContacts {
                 changed = true;
             }
             if !(pn > 0.0) {
-                // The wall would have to pull: let go.
+                // The wall would have to pull: let go. A contact row the solve already left
+                // free (no impulse, no friction) changes nothing by going.
+                released |= !w.quietly_free(&p);
                 p.point = usize::MAX;
-                released = true;
                 w.pinned[s] = p;
                 continue;
             }
@@ -483,10 +484,10 @@ impl StiffContacts {
             matrix_changed |= rebuild;
             w.pinned[s] = p;
         }
-        if released {
+        if w.pinned.iter().any(|p| p.point == usize::MAX) {
             w.pinned.retain(|p| p.point != usize::MAX);
             self.reindex(w);
-            changed = true;
+            changed |= released;
         }
         let caught = self.catch_penetrations(w, k, reuse);
         Update {

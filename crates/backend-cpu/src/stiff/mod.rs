@@ -61,6 +61,7 @@ mod direct;
 mod lanes;
 mod pin;
 mod rod_contact;
+mod rows;
 mod work;
 mod xpbd;
 
@@ -1134,6 +1135,8 @@ fn solve_step<T: Real>(
         planes.begin_step(w, k, h);
     }
     // 2. Constraint solve.
+    w.contact_rows = stiff.contact_rows && direct;
+    w.rows.valid = false;
     for c in &mut w.lambda {
         c.fill_zero();
     }
@@ -1303,9 +1306,24 @@ fn direct_solve(
             factor.factor(assembled);
             *factor_valid = true;
             report.factorisations += 1;
+            if w.contact_rows {
+                let mut rows = std::mem::take(&mut w.rows);
+                rows.build(w, k, factor);
+                w.rows = rows;
+            }
         }
         *previous = residual;
         factor.solve(&mut w.rhs);
+        if w.contact_rows {
+            // The contacts' impulses and `Δλ` together (`rows.rs`); rows built for other pins
+            // (a round changed them without a new factorisation) are built again first.
+            let mut rows = std::mem::take(&mut w.rows);
+            if !rows.fits(w, k) {
+                rows.build(w, k, factor);
+            }
+            rows.solve(w);
+            w.rows = rows;
+        }
         let max_move = contacts
             .as_deref()
             .map_or(f64::INFINITY, |c| c.max_iteration_move())

@@ -34,6 +34,15 @@ pub(crate) struct Pinned {
     /// Coulomb friction against its motion along the wall (`None`: frictionless, as a guide's
     /// or a binding's line).
     pub(crate) friction: Option<PinFriction>,
+    /// With contact rows (`rows.rs`): its normal impulse as a multiplier of the solve (times
+    /// the step, as `pn`), its increment of the last iteration, and the plane it was put on
+    /// (`n · x ≥ row_offset` for `row_normal`, taken again whenever the contacts move the point
+    /// or turn its normal, i.e. the point was last put at `row_x`).
+    pub(crate) mult: f64,
+    pub(crate) dmult: f64,
+    pub(crate) row_offset: f64,
+    pub(crate) row_normal: Vec3<f64>,
+    pub(crate) row_x: Vec3<f64>,
 }
 
 /// Coulomb friction of a pinned point, as a force of the step's own equations rather than a
@@ -238,6 +247,11 @@ impl Pinned {
             rod: false,
             pn: 0.0,
             friction: None,
+            mult: 0.0,
+            dmult: 0.0,
+            row_offset: 0.0,
+            row_normal: Vec3::zeros(),
+            row_x: Vec3::zeros(),
         }
     }
 
@@ -258,6 +272,11 @@ impl Pinned {
             rod,
             pn,
             friction,
+            mult: 0.0,
+            dmult: 0.0,
+            row_offset: 0.0,
+            row_normal: Vec3::zeros(),
+            row_x: Vec3::zeros(),
         }
     }
 

@@ -361,9 +361,10 @@ impl RodPlanes {
             // A rod-contact pin is on one plane (no crease, see `second_plane`).
             let pn = p.normal.dot(&g);
             if !(pn > 0.0) {
+                // As the mesh's: a contact row left free by the solve goes quietly.
+                released |= !w.quietly_free(&p);
                 p.point = usize::MAX;
                 w.pinned[s] = p;
-                released = true;
                 continue;
             }
             // As the mesh's points (`contact.rs`): solved again for a new normal impulse.
@@ -373,9 +374,9 @@ impl RodPlanes {
             matrix_changed |= rebuild;
             w.pinned[s] = p;
         }
-        if released {
+        if w.pinned.iter().any(|p| p.point == usize::MAX) {
             w.pinned.retain(|p| p.point != usize::MAX);
-            changed = true;
+            changed |= released;
         }
         let caught = self.catch_penetrations(w, k);
         Update {

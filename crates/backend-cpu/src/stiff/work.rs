@@ -89,6 +89,11 @@ pub(crate) struct Work {
     /// frame: generalised forces of the frames' implicit equations (see [`rhs`](Self::rhs)).
     /// Empty without point moments.
     pub(crate) torques: Vec<(usize, Vec3<f64>)>,
+    /// Whether contacts on one plane are rows of the solve with multipliers of their own
+    /// (`StiffSettings::contact_rows`, `rows.rs`) rather than pins of projected inverse mass.
+    pub(crate) contact_rows: bool,
+    /// Their Schur complement at the last factorisation.
+    pub(crate) rows: super::rows::ContactRows,
 }
 
 /// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
@@ -111,6 +116,27 @@ fn for_lanes(bits: u32, j: usize, end: usize, mut f: impl FnMut(usize)) {
 }
 
 impl Work {
+    /// Whether pin `p` is a contact row (`rows.rs`): contact rows are on, and it is held on one
+    /// plane (not a line or a crease).
+    #[inline]
+    pub(crate) fn is_row(&self, p: &Pinned) -> bool {
+        self.contact_rows && !p.line && p.crease.is_none()
+    }
+
+    /// Whether letting go of pin `p` leaves the solve as it is: a contact row whose impulse
+    /// the solve left at zero and whose friction has no normal impulse to act with.
+    pub(crate) fn quietly_free(&self, p: &Pinned) -> bool {
+        self.is_row(p) && p.mult == 0.0 && (p.friction.is_none() || p.pn == 0.0)
+    }
+
+    /// Per pin: `n · u` of its point (the normal part of its correction), for `rows.rs`.
+    pub(crate) fn pin_normal_u(&self) -> Vec<f64> {
+        self.pinned
+            .iter()
+            .map(|p| p.normal.dot(&self.u_x.get(p.point)))
+            .collect()
+    }
+
     /// Sizes the columns for `n` elements (a new state; nothing is kept) unless they already
     /// are.
     pub(crate) fn resize(&mut self, n: usize) {
@@ -513,6 +539,15 @@ impl Work {
         for i in chunks(n + 1) {
             self.x.store(i, self.x.load(i) + self.u_x.load(i).scale(fs));
         }
+        if self.contact_rows {
+            for p in &mut self.pinned {
+                if !p.line && p.crease.is_none() {
+                    p.mult += scale * p.dmult;
+                    p.dmult = 0.0;
+                    p.row_x = self.x.get(p.point);
+                }
+            }
+        }
         let half = F::splat(0.5);
         for j in chunks(n) {
             let th = (self.u_th.load(j) + self.dtheta.load(j).mul(self.inv_k.load(j))).scale(fs);
@@ -638,23 +673,32 @@ impl Work {
         let mut imbalance = 0.0_f64;
         for p in &self.pinned {
             let i = p.point;
-            let u = self.u_x.get(i);
             let w = k.inv_mass[i];
-            let u = match (p.friction, p.slip(&self.x.get(i))) {
-                (Some(f), Some(slip)) if w > 0.0 => {
-                    let imbalance_impulse = p.sliding_part(&(u / w + f.impulse(&slip, p.pn)));
-                    let correction = imbalance_impulse.norm() / (1.0 / w + f.tangent(&slip, p.pn));
-                    let u = p.mobility_times(w, &imbalance_impulse);
-                    let il = [i.checked_sub(1), (i < self.n).then_some(i)]
-                        .into_iter()
-                        .flatten()
-                        .fold(0.0_f64, |m, j| m.max(k.cols.inv_l0[j]));
-                    worst = worst.max(u.norm() * il);
-                    imbalance = imbalance.max(correction / f.stick_slip);
-                    u
-                }
-                _ => p.sliding_part(&u),
+            // A contact row keeps its normal part, with the normal impulse it carries.
+            let row = self.contact_rows && !p.line && p.crease.is_none() && w > 0.0;
+            let u = self.u_x.get(i) + p.normal * (if row { w * p.mult } else { 0.0 });
+            let normal = if row {
+                p.normal * p.normal.dot(&u)
+            } else {
+                Vec3::zeros()
             };
+            let u = normal
+                + match (p.friction, p.slip(&self.x.get(i))) {
+                    (Some(f), Some(slip)) if w > 0.0 => {
+                        let imbalance_impulse = p.sliding_part(&(u / w + f.impulse(&slip, p.pn)));
+                        let correction =
+                            imbalance_impulse.norm() / (1.0 / w + f.tangent(&slip, p.pn));
+                        let u = p.mobility_times(w, &imbalance_impulse);
+                        let il = [i.checked_sub(1), (i < self.n).then_some(i)]
+                            .into_iter()
+                            .flatten()
+                            .fold(0.0_f64, |m, j| m.max(k.cols.inv_l0[j]));
+                        worst = worst.max(u.norm() * il);
+                        imbalance = imbalance.max(correction / f.stick_slip);
+                        u
+                    }
+                    _ => p.sliding_part(&u),
+                };
             self.u_x.set(i, &u);
         }
         self.friction_imbalance = imbalance;
@@ -672,6 +716,11 @@ impl Work {
                 p.mobility_times(w, &(added / w))
             } else {
                 p.sliding_part(&added)
+            };
+            let d = if self.contact_rows && !p.line && p.crease.is_none() && w > 0.0 {
+                d + p.normal * (p.normal.dot(&added) + w * p.dmult)
+            } else {
+                d
             };
             self.u_x.set(i, &(u + d));
         }
@@ -715,7 +764,9 @@ impl Work {
             if w == 0.0 {
                 continue;
             }
-            let held = if p.line {
+            let held = if self.is_row(p) {
+                [Vec3::zeros(), Vec3::zeros()]
+            } else if p.line {
                 perpendiculars(&p.normal)
             } else if let Some(t) = p.crease_direction() {
                 perpendiculars(&t)
@@ -999,7 +1050,7 @@ fn put(emit: &mut impl FnMut(usize, [F; 4]), entry: usize, m: M, mask: F) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::stepper::CpuRod;
     use crate::stiff::constraints::{BendTwist, StretchShear, bend_twist, stretch_shear};
@@ -1014,7 +1065,7 @@ mod tests {
     /// A curved, twisted rod of `n` elements (not a multiple of four, so that the last chunk
     /// is partial) with a clamped start and a free end, its constants, and a working state
     /// whose points and frames are perturbed so that every constraint is violated.
-    fn setup(n: usize) -> (Consts, Work) {
+    pub(crate) fn setup(n: usize) -> (Consts, Work) {
         let pts: Vec<[f64; 3]> = (0..=n)
             .map(|i| {
                 let t = i as f64 * 0.01;
