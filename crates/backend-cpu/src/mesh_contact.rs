@@ -34,6 +34,14 @@
 //! can touch is in the list, which is tested in leaf order, so the contacts and the response are
 //! exactly those of the tree query. The skin is half the query radius: a wire sliding at
 //! 0.2 m/s with steps of a few microseconds remakes its lists every few hundred steps.
+//!
+//! At a haptic step of 1 ms the same wire moves 0.2 mm a step, more than that skin (0.14 mm for
+//! the `nitinol` preset), and nearly every element near a wall remade its list every step, a
+//! tree walk each. An element's list is therefore remade from a second, wider list of its own
+//! (the triangles within [`OUTER_SKIN`] query radii more, remade by the tree when an end has
+//! moved that much) instead of the tree: the same list, in the same order, without the walk.
+//! A larger skin for the near lists themselves would do the same walks less often, but every
+//! query would then test the longer lists.
 
 use cosserat_collide::{Contact, Crossing, MeshCollider, Shape};
 use cosserat_constraints::{ContactSet, Friction, PointContact};
@@ -159,6 +167,14 @@ pub const CLEARANCE_LOOKAHEAD: f64 = 2e-3;
 /// The skin of a point's near list as a fraction of the query radius (see the module docs).
 const NEAR_SKIN: f64 = 0.5;
 
+/// The skin of an element's wider list (see the module docs) as a multiple of the query
+/// radius.
+const OUTER_SKIN: f64 = 4.0;
+
+/// The wider lists are made this much (relatively) wider still, so that rounding in the
+/// distances never leaves out a triangle the near list must hold.
+const OUTER_ROUNDING: f64 = 1e-9;
+
 /// A point is swept (tested for walls crossed over the step) when it moves more than this
 /// fraction of its query radius: one that moves less ends within reach of any wall it could
 /// have crossed, which its sphere query then sees.
@@ -212,6 +228,11 @@ pub(crate) struct RodMeshContact<T: Real> {
     seg_near: Vec<Vec<u32>>,
     seg_anchor: Vec<[[f64; 3]; 2]>,
     seg_has_near: Vec<bool>,
+    /// Per element, the wider list its near list is remade from (the triangles within
+    /// `reach + skin + OUTER_SKIN · reach` of it at `seg_outer_anchor`), and whether it exists.
+    seg_outer: Vec<Vec<u32>>,
+    seg_outer_anchor: Vec<[[f64; 3]; 2]>,
+    seg_has_outer: Vec<bool>,
     /// Scratch: each point's gap from its own contact (the margin without one), and its
     /// clearance beyond the reach (0 when unknown).
     own_gap: Vec<f64>,
@@ -268,6 +289,9 @@ impl<T: Real> RodMeshContact<T> {
             seg_near: Vec::new(),
             seg_anchor: Vec::new(),
             seg_has_near: Vec::new(),
+            seg_outer: Vec::new(),
+            seg_outer_anchor: Vec::new(),
+            seg_has_outer: Vec::new(),
             own_gap: Vec::new(),
             clearance: Vec::new(),
             contacts: ContactSet::new(),
@@ -761,7 +785,11 @@ impl<T: Real> RodMeshContact<T> {
             self.seg_near = vec![Vec::new(); n - 1];
             self.seg_anchor = vec![[[0.0; 3]; 2]; n - 1];
             self.seg_has_near = vec![false; n - 1];
+            self.seg_outer = vec![Vec::new(); n - 1];
+            self.seg_outer_anchor = vec![[[0.0; 3]; 2]; n - 1];
+            self.seg_has_outer = vec![false; n - 1];
         }
+        let outer = OUTER_SKIN * reach;
         for j in 0..n - 1 {
             let (a, b) = (at(j), at(j + 1));
             let clear = self.clearance[j] + self.clearance[j + 1];
@@ -782,11 +810,29 @@ impl<T: Real> RodMeshContact<T> {
                 || (a - Vec3::from(from)).norm() > skin
                 || (b - Vec3::from(to)).norm() > skin
             {
-                collider.segment_near_slots(
+                // From the wider list, itself remade when an end has moved more than its
+                // skin: the same list as the tree's, without its walk.
+                let [from, to] = self.seg_outer_anchor[j];
+                if !self.seg_has_outer[j]
+                    || (a - Vec3::from(from)).norm() > outer
+                    || (b - Vec3::from(to)).norm() > outer
+                {
+                    collider.segment_near_slots(
+                        &a.into(),
+                        &b.into(),
+                        (reach + skin + outer) * (1.0 + OUTER_ROUNDING),
+                        true,
+                        &mut self.seg_outer[j],
+                    );
+                    self.seg_outer_anchor[j] = [a.into(), b.into()];
+                    self.seg_has_outer[j] = true;
+                }
+                collider.segment_near_slots_among(
                     &a.into(),
                     &b.into(),
                     reach + skin,
                     true,
+                    &self.seg_outer[j],
                     &mut self.seg_near[j],
                 );
                 self.seg_anchor[j] = [a.into(), b.into()];
