@@ -38,10 +38,12 @@
 //! At a haptic step of 1 ms the same wire moves 0.2 mm a step, more than that skin (0.14 mm for
 //! the `nitinol` preset), and nearly every element near a wall remade its list every step, a
 //! tree walk each. An element's list is therefore remade from a second, wider list of its own
-//! (the triangles within [`OUTER_SKIN`] query radii more, remade by the tree when an end has
-//! moved that much) instead of the tree: the same list, in the same order, without the walk.
-//! A larger skin for the near lists themselves would do the same walks less often, but every
-//! query would then test the longer lists.
+//! instead of the tree: the same list, in the same order, without the walk. A wire slides along
+//! itself, so the wider list is that of the element lengthened by [`OUTER_ALONG`] of its length
+//! at both ends, with [`OUTER_SKIN`] query radii more; it is remade by the tree when an end
+//! has left that much of the lengthened element (every point of the element is then as near to
+//! it, the distance to a segment being convex). A larger skin for the near lists themselves
+//! would do the same walks less often, but every query would then test the longer lists.
 
 use cosserat_collide::sweep::AMONG_SLACK;
 use cosserat_collide::{Contact, Crossing, MeshCollider, Shape};
@@ -168,9 +170,14 @@ pub const CLEARANCE_LOOKAHEAD: f64 = 2e-3;
 /// The skin of a point's near list as a fraction of the query radius (see the module docs).
 const NEAR_SKIN: f64 = 0.5;
 
-/// The skin of an element's wider list (see the module docs) as a multiple of the query
-/// radius.
-const OUTER_SKIN: f64 = 4.0;
+/// How far an element's wider list reaches beyond its ends, along it, as a fraction of its
+/// length (see the module docs): a wire sliding along itself keeps such a list while it slides
+/// that far.
+const OUTER_ALONG: f64 = 1.0;
+
+/// How far an element's ends may leave the line of its wider list before the list is remade,
+/// as a multiple of the query radius.
+const OUTER_SKIN: f64 = 1.0;
 
 /// The wider lists are made this much (relatively) wider still, so that rounding in the
 /// distances never leaves out a triangle the near list must hold.
@@ -230,7 +237,9 @@ pub(crate) struct RodMeshContact<T: Real> {
     seg_anchor: Vec<[[f64; 3]; 2]>,
     seg_has_near: Vec<bool>,
     /// Per element, the wider list its near list is remade from (the triangles within
-    /// `reach + skin + OUTER_SKIN · reach` of it at `seg_outer_anchor`), and whether it exists.
+    /// `reach + skin + OUTER_SKIN · reach` of the segment `seg_outer_anchor`, the element
+    /// lengthened by [`OUTER_ALONG`] at both ends where the list was made), and whether it
+    /// exists.
     seg_outer: Vec<Vec<u32>>,
     seg_outer_anchor: Vec<[[f64; 3]; 2]>,
     seg_has_outer: Vec<bool>,
@@ -691,6 +700,18 @@ impl<T: Real> RodMeshContact<T> {
     }
 }
 
+/// The distance from `p` to the segment `a → b`.
+fn off_segment(p: &Vec3<f64>, a: &Vec3<f64>, b: &Vec3<f64>) -> f64 {
+    let d = b - a;
+    let len2 = d.norm_squared();
+    let s = if len2 > 0.0 {
+        ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + d * s)).norm()
+}
+
 /// `f` in the precision `T`.
 fn cast_friction<T: Real>(f: &Friction<f64>) -> Friction<T> {
     Friction {
@@ -813,19 +834,20 @@ impl<T: Real> RodMeshContact<T> {
             {
                 // From the wider list, itself remade when an end has moved more than its
                 // skin: the same list as the tree's, without its walk.
-                let [from, to] = self.seg_outer_anchor[j];
+                let [from, to] = self.seg_outer_anchor[j].map(Vec3::from);
                 if !self.seg_has_outer[j]
-                    || (a - Vec3::from(from)).norm() > outer
-                    || (b - Vec3::from(to)).norm() > outer
+                    || off_segment(&a, &from, &to) > outer
+                    || off_segment(&b, &from, &to) > outer
                 {
+                    let (from, to) = (a - (b - a) * OUTER_ALONG, b + (b - a) * OUTER_ALONG);
                     collider.segment_near_slots(
-                        &a.into(),
-                        &b.into(),
+                        &from.into(),
+                        &to.into(),
                         (reach + skin + outer) * (1.0 + OUTER_ROUNDING),
                         true,
                         &mut self.seg_outer[j],
                     );
-                    self.seg_outer_anchor[j] = [a.into(), b.into()];
+                    self.seg_outer_anchor[j] = [from.into(), to.into()];
                     self.seg_has_outer[j] = true;
                 }
                 collider.segment_near_slots_among(

@@ -155,12 +155,11 @@ impl MeshCollider {
             Vector3::from(*from),
             Vector3::from(*to) - Vector3::from(*from),
         );
-        self.bvh()
-            .for_each_near(&(p + d * 0.5).into(), 0.5 * d.norm() + r, |slot| {
-                if self.segment_within(&p, &d, r, ridges_only, slot) {
-                    out.push(slot as u32);
-                }
-            });
+        self.bvh().for_each_near_segment(from, to, r, |slot| {
+            if self.segment_within(&p, &d, r, ridges_only, slot) {
+                out.push(slot as u32);
+            }
+        });
     }
 
     /// [`Self::segment_near_slots`] among the leaf-order `slots`: the same list when `slots`
