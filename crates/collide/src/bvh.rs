@@ -232,33 +232,9 @@ impl Bvh {
     /// Calls `visit(slot)` for every leaf-order slot (an index into [`tri_indices`](Self::tri_indices))
     /// whose leaf box is within distance `r` of `p`. Iterative, fixed stack, no allocation.
     #[inline]
-    pub fn for_each_near(&self, p: &[f64; 3], r: f64, mut visit: impl FnMut(usize)) {
+    pub fn for_each_near(&self, p: &[f64; 3], r: f64, visit: impl FnMut(usize)) {
         let r2 = r * r;
-        let mut stack = [0u32; STACK_SIZE];
-        let mut sp = 0usize;
-        let mut node = 0u32;
-        loop {
-            let n = &self.nodes[node as usize];
-            if n.distance_squared(p) <= r2 {
-                if n.is_leaf() {
-                    let first = n.first as usize;
-                    for slot in first..first + n.count as usize {
-                        visit(slot);
-                    }
-                } else {
-                    // Descend into the left child now, keep the right one for later.
-                    stack[sp] = n.first + 1;
-                    sp += 1;
-                    node = n.first;
-                    continue;
-                }
-            }
-            if sp == 0 {
-                return;
-            }
-            sp -= 1;
-            node = stack[sp];
-        }
+        self.for_each_in(|n| n.distance_squared(p) <= r2, visit);
     }
 
     /// Calls `visit(slot)`, in leaf order as [`Self::for_each_near`] does, for every slot
@@ -271,23 +247,31 @@ impl Bvh {
         from: &[f64; 3],
         to: &[f64; 3],
         r: f64,
-        mut visit: impl FnMut(usize),
+        visit: impl FnMut(usize),
     ) {
         // Rounding of the slab fractions must not drop a leaf at the edge.
         let r = r * (1.0 + 1e-9);
         let d = [to[0] - from[0], to[1] - from[1], to[2] - from[2]];
+        self.for_each_in(|n| segment_meets_box(from, &d, n, r), visit);
+    }
+
+    /// Calls `visit(slot)` for every slot of the leaves whose box, and every ancestor's, is
+    /// `near`, in leaf order. Iterative, fixed stack, no allocation.
+    #[inline(always)]
+    fn for_each_in(&self, near: impl Fn(&BvhNode) -> bool, mut visit: impl FnMut(usize)) {
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
         let mut node = 0u32;
         loop {
             let n = &self.nodes[node as usize];
-            if segment_meets_box(from, &d, n, r) {
+            if near(n) {
                 if n.is_leaf() {
                     let first = n.first as usize;
                     for slot in first..first + n.count as usize {
                         visit(slot);
                     }
                 } else {
+                    // Descend into the left child now, keep the right one for later.
                     stack[sp] = n.first + 1;
                     sp += 1;
                     node = n.first;
