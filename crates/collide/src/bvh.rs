@@ -82,6 +82,30 @@ pub struct Bvh {
 #[error("BVH invariant violated: {0}")]
 pub struct InvariantViolation(pub String);
 
+/// Whether the segment `from + s d`, `0 ≤ s ≤ 1`, passes through `node`'s box grown by `r` on
+/// every side (Kay and Kajiya's slabs).
+#[inline(always)]
+fn segment_meets_box(from: &[f64; 3], d: &[f64; 3], node: &BvhNode, r: f64) -> bool {
+    let (mut enter, mut leave) = (0.0_f64, 1.0_f64);
+    for k in 0..3 {
+        let (lo, hi) = (f64::from(node.min[k]) - r, f64::from(node.max[k]) + r);
+        if d[k] == 0.0 {
+            if from[k] < lo || from[k] > hi {
+                return false;
+            }
+            continue;
+        }
+        let inv = 1.0 / d[k];
+        let (t0, t1) = ((lo - from[k]) * inv, (hi - from[k]) * inv);
+        enter = enter.max(t0.min(t1));
+        leave = leave.min(t0.max(t1));
+        if enter > leave {
+            return false;
+        }
+    }
+    true
+}
+
 fn round_down(x: f64) -> f32 {
     let f = x as f32;
     if f64::from(f) > x { f.next_down() } else { f }
@@ -208,14 +232,39 @@ impl Bvh {
     /// Calls `visit(slot)` for every leaf-order slot (an index into [`tri_indices`](Self::tri_indices))
     /// whose leaf box is within distance `r` of `p`. Iterative, fixed stack, no allocation.
     #[inline]
-    pub fn for_each_near(&self, p: &[f64; 3], r: f64, mut visit: impl FnMut(usize)) {
+    pub fn for_each_near(&self, p: &[f64; 3], r: f64, visit: impl FnMut(usize)) {
         let r2 = r * r;
+        self.for_each_in(|n| n.distance_squared(p) <= r2, visit);
+    }
+
+    /// Calls `visit(slot)`, in leaf order as [`Self::for_each_near`] does, for every slot
+    /// whose leaf box may be within distance `r` of the segment `from → to`: the segment passes
+    /// through the box grown by `r` on every side. A long segment's leaves lie along it, where
+    /// the sphere around its middle that holds it takes in every leaf as far to its sides.
+    #[inline]
+    pub fn for_each_near_segment(
+        &self,
+        from: &[f64; 3],
+        to: &[f64; 3],
+        r: f64,
+        visit: impl FnMut(usize),
+    ) {
+        // Rounding of the slab fractions must not drop a leaf at the edge.
+        let r = r * (1.0 + 1e-9);
+        let d = [to[0] - from[0], to[1] - from[1], to[2] - from[2]];
+        self.for_each_in(|n| segment_meets_box(from, &d, n, r), visit);
+    }
+
+    /// Calls `visit(slot)` for every slot of the leaves whose box, and every ancestor's, is
+    /// `near`, in leaf order. Iterative, fixed stack, no allocation.
+    #[inline(always)]
+    fn for_each_in(&self, near: impl Fn(&BvhNode) -> bool, mut visit: impl FnMut(usize)) {
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
         let mut node = 0u32;
         loop {
             let n = &self.nodes[node as usize];
-            if n.distance_squared(p) <= r2 {
+            if near(n) {
                 if n.is_leaf() {
                     let first = n.first as usize;
                     for slot in first..first + n.count as usize {
@@ -416,6 +465,37 @@ mod tests {
         for x in [0.1f64, -0.1, 1.0 / 3.0, -2.0 / 3.0, 1e-30, 0.0] {
             assert!(f64::from(round_down(x)) <= x);
             assert!(f64::from(round_up(x)) >= x);
+        }
+    }
+
+    #[test]
+    fn segment_query_visits_every_triangle_near_the_segment_in_leaf_order() {
+        let m = grid(20);
+        let b = Bvh::build_with_leaf_size(&m, 2);
+        for (k, (from, to)) in [
+            ([0.1, 0.2, 0.3], [1.7, 0.4, 0.1]),
+            ([0.5, 0.5, 0.1], [0.5, 0.5, 0.1]),
+            ([-1.0, 0.0, 0.05], [0.3, 1.1, -0.05]),
+            ([1.9, 0.1, -0.2], [0.2, 1.9, 0.2]),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let r = 0.05 + 0.1 * k as f64;
+            let mut got = Vec::new();
+            b.for_each_near_segment(&from, &to, r, |s| got.push(s));
+            assert!(got.windows(2).all(|w| w[0] < w[1]), "not in leaf order");
+            let (p, q) = (Vector3::from(from), Vector3::from(to));
+            let mut near = 0;
+            for (slot, &t) in b.tri_indices().iter().enumerate() {
+                let [a, bb, c] = m.triangle(t as usize);
+                let (d2, _) = crate::segment::segment_triangle_distance2(&p, &(q - p), &a, &bb, &c);
+                if d2 < r * r {
+                    near += 1;
+                    assert!(got.contains(&slot), "{k}: slot {slot} missed");
+                }
+            }
+            assert!(near > 0 && got.len() < b.tri_indices().len(), "{k}");
         }
     }
 

@@ -83,6 +83,35 @@ pub(crate) fn segment_triangle_distance2(
     best
 }
 
+/// Whether the segment `p + s d` comes closer than `√r2` to the triangle `abc`:
+/// [`segment_triangle_distance2`] below `r2`, from the same candidate distances, stopping at
+/// the first one below (an end's, the cheapest, first).
+fn segment_triangle_within(
+    p: &Vector3<f64>,
+    d: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+    r2: f64,
+) -> bool {
+    let q = p + d;
+    for end in [p, &q] {
+        let (x, _) = closest_point_triangle(end, a, b, c);
+        if (end - x).norm_squared() < r2 {
+            return true;
+        }
+    }
+    // A segment through the triangle is at distance 0 from it (and `r2` is positive).
+    if segment_triangle(p, d, a, b, c).is_some() {
+        return 0.0 < r2;
+    }
+    [(a, b), (b, c), (c, a)].into_iter().any(|(u, v)| {
+        let (_, _, c1, c2) =
+            closest_points_segments((*p).into(), q.into(), (*u).into(), (*v).into());
+        (Vector3::from(c1) - Vector3::from(c2)).norm_squared() < r2
+    })
+}
+
 impl MeshCollider {
     /// The triangle nearest to the segment `from → to` among those closer than `reach`, and
     /// where (see [`SegmentNearest`]); `None` when none is that close.
@@ -126,16 +155,57 @@ impl MeshCollider {
             Vector3::from(*from),
             Vector3::from(*to) - Vector3::from(*from),
         );
-        self.bvh()
-            .for_each_near(&(p + d * 0.5).into(), 0.5 * d.norm() + r, |slot| {
-                let t = &self.tris[slot];
-                if (self.ridges[slot] || !ridges_only)
-                    && !beyond_plane(&p, &d, t, r)
-                    && segment_triangle_distance2(&p, &d, &t.a, &t.b, &t.c).0 < r * r
-                {
-                    out.push(slot as u32);
-                }
-            });
+        self.bvh().for_each_near_segment(from, to, r, |slot| {
+            if self.segment_within(&p, &d, r, ridges_only, slot) {
+                out.push(slot as u32);
+            }
+        });
+    }
+
+    /// [`Self::segment_near_slots`] among the leaf-order `slots`: the same list when `slots`
+    /// holds, in leaf order, every triangle within `r` of the segment (the list
+    /// [`Self::segment_near_slots`] made with a larger radius for a segment whose ends are each
+    /// within the difference of the radii of this one's), without the tree walk.
+    pub fn segment_near_slots_among(
+        &self,
+        from: &[f64; 3],
+        to: &[f64; 3],
+        r: f64,
+        ridges_only: bool,
+        slots: &[u32],
+        out: &mut Vec<u32>,
+    ) {
+        out.clear();
+        let (p, d) = (
+            Vector3::from(*from),
+            Vector3::from(*to) - Vector3::from(*from),
+        );
+        out.extend(
+            slots
+                .iter()
+                .filter(|&&slot| self.segment_within(&p, &d, r, ridges_only, slot as usize)),
+        );
+    }
+
+    /// Whether the triangle of `slot` is closer than `r` to the segment `p + s d` (and, with
+    /// `ridges_only`, a ridge triangle): the test of [`Self::segment_near_slots`].
+    #[inline]
+    fn segment_within(
+        &self,
+        p: &Vector3<f64>,
+        d: &Vector3<f64>,
+        r: f64,
+        ridges_only: bool,
+        slot: usize,
+    ) -> bool {
+        let t = &self.tris[slot];
+        if (ridges_only && !self.ridges[slot])
+            || beyond_plane(p, d, t, r)
+            || beyond_sides(p, d, t, r)
+        {
+            return false;
+        }
+        segment_triangle_within(p, d, &t.a, &t.b, &t.c, r * r)
     }
 
     /// [`Self::segment_nearest`] among the triangles in leaf-order `slots` (from
@@ -171,7 +241,7 @@ impl MeshCollider {
         best: &mut Option<(f64, f64, usize)>,
     ) {
         let t = &self.tris[slot];
-        if beyond_plane(p, d, t, reach) {
+        if beyond_plane(p, d, t, reach) || beyond_sides(p, d, t, reach) {
             return;
         }
         let (d2, s) = segment_triangle_distance2(p, d, &t.a, &t.b, &t.c);
@@ -216,6 +286,38 @@ impl MeshCollider {
 fn beyond_plane(p: &Vector3<f64>, d: &Vector3<f64>, t: &TriData, r: f64) -> bool {
     let (h0, h1) = (t.n.dot(&(p - t.a)), t.n.dot(&(p + d - t.a)));
     (h0 > r && h1 > r) || (h0 < -r && h1 < -r)
+}
+
+/// How much farther than `r` (relatively) [`beyond_sides`] asks a triangle to be: the rounding
+/// of its projections must never rule out one the exact distance would keep.
+const SIDES_ROUNDING: f64 = 1e-9;
+
+/// Whether triangle `t` lies wholly before the start or past the end of the segment `p + s d`
+/// by more than `r` along it, or wholly farther than `r` to one side of the line across it in
+/// the triangle's plane (along `d × n`): then so is every point of it from the segment. Two
+/// separating directions at a few multiply–adds each, for the triangles beside or ahead of an
+/// element lying along a wall, whose planes [`beyond_plane`] cannot rule out.
+#[inline]
+fn beyond_sides(p: &Vector3<f64>, d: &Vector3<f64>, t: &TriData, r: f64) -> bool {
+    let len = d.norm();
+    if !(len > 0.0) {
+        return false;
+    }
+    let r = r * (1.0 + SIDES_ROUNDING);
+    let (a, b, c) = (t.a - p, t.b - p, t.c - p);
+    // Projections onto a unit direction relative to `p`, separated from `[lo, hi]` by more
+    // than `r`.
+    let apart = |axis: &Vector3<f64>, lo: f64, hi: f64| {
+        let (x, y, z) = (axis.dot(&a), axis.dot(&b), axis.dot(&c));
+        x.min(y).min(z) > hi + r || x.max(y).max(z) < lo - r
+    };
+    let along = d / len;
+    if apart(&along, 0.0, len) {
+        return true;
+    }
+    let across = d.cross(&t.n);
+    let width = across.norm();
+    width > 1e-9 * len && apart(&(across / width), 0.0, 0.0)
 }
 
 #[cfg(test)]
@@ -284,6 +386,64 @@ mod tests {
                 c.segment_nearest_among(&a, &b, 0.05, &slots),
                 c.segment_nearest(&a, &b, 0.05)
             );
+        }
+    }
+
+    /// The cheap tests that rule a triangle out never rule out one the exact distance keeps,
+    /// and the early-stopping test agrees with the exact distance, over random segments and
+    /// triangles around a unit cube (a fixed xorshift sequence).
+    #[test]
+    fn cheap_rejections_agree_with_the_exact_distance() {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut sides, mut kept) = (0, 0);
+        for _ in 0..20_000 {
+            let v: Vec<Vector3<f64>> = (0..5)
+                .map(|_| Vector3::new(next(), next(), next()))
+                .collect();
+            let (p, d, [a, b, c]) = (v[0], (v[1] - v[0]) * 0.5, [v[2], v[3], v[4]]);
+            let Some(n) = (b - a).cross(&(c - a)).try_normalize(1e-12) else {
+                continue;
+            };
+            let t = TriData { a, b, c, n };
+            let r = 0.3 * next();
+            let (d2, _) = segment_triangle_distance2(&p, &d, &a, &b, &c);
+            assert_eq!(
+                segment_triangle_within(&p, &d, &a, &b, &c, r * r),
+                d2 < r * r
+            );
+            if beyond_sides(&p, &d, &t, r) {
+                sides += 1;
+                assert!(d2 >= r * r, "{p:?} {d:?} {t:?} {r}");
+            } else {
+                kept += 1;
+            }
+        }
+        assert!(
+            sides > 1000 && kept > 1000,
+            "{sides} ruled out, {kept} kept"
+        );
+    }
+
+    /// A near list made from a wider list is the tree's list.
+    #[test]
+    fn a_near_list_from_a_wider_list_is_the_trees() {
+        let c = ridge();
+        let (from, to) = ([-0.5, 0.2, 0.01], [0.5, 0.2, 0.01]);
+        let mut wide = Vec::new();
+        c.segment_near_slots(&from, &to, 0.3, true, &mut wide);
+        let (mut among, mut tree) = (Vec::new(), Vec::new());
+        for shift in [[0.0, 0.0, 0.0], [0.1, -0.05, 0.15], [0.0, 0.19, -0.05]] {
+            let a = [from[0] + shift[0], from[1] + shift[1], from[2] + shift[2]];
+            let b = [to[0] - shift[1], to[1] + shift[0], to[2] + shift[2]];
+            c.segment_near_slots_among(&a, &b, 0.1, true, &wide, &mut among);
+            c.segment_near_slots(&a, &b, 0.1, true, &mut tree);
+            assert_eq!(among, tree);
         }
     }
 

@@ -24,6 +24,11 @@ use crate::contact::MeshCollider;
 /// triangle's size outside an edge still hits it.
 const EDGE_SLACK: f64 = 1e-9;
 
+/// How much nearer than its radius (relatively) to a near list's centre both ends of a
+/// segment must be for [`MeshCollider::first_crossing_among`] to search that list: far more
+/// than [`EDGE_SLACK`] lets a crossing lie outside its triangle.
+pub const AMONG_SLACK: f64 = 1e-6;
+
 /// Where a moving point crossed the wall.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Crossing {
@@ -115,6 +120,30 @@ impl MeshCollider {
         self.first_hit(from, to, Facing::IntoWall)
     }
 
+    /// [`Self::first_crossing`] among the triangles in leaf-order `slots`: the same crossing
+    /// when `slots` holds every triangle the segment meets, as the list of
+    /// [`Self::near_slots`] does for a segment whose ends are both closer to that list's centre
+    /// than its radius (less [`AMONG_SLACK`] of it: a crossing may lie that much outside its
+    /// triangle), without the tree walk. Of two triangles crossed at exactly the same fraction
+    /// (through their shared edge), the tree and the list may report either.
+    pub fn first_crossing_among(
+        &self,
+        from: &[f64; 3],
+        to: &[f64; 3],
+        slots: &[u32],
+    ) -> Option<Crossing> {
+        let a = Vector3::from(*from);
+        let d = Vector3::from(*to) - a;
+        if d == Vector3::zeros() {
+            return None;
+        }
+        let mut best = None;
+        for &slot in slots {
+            self.hit_slot(&a, &d, Facing::IntoWall, slot as usize, &mut best);
+        }
+        self.crossing(&a, &d, best)
+    }
+
     /// The first triangle the segment from `from` to `to` meets, whichever way it crosses it
     /// (a ray cast limited to the segment).
     pub fn first_intersection(&self, from: &[f64; 3], to: &[f64; 3]) -> Option<Crossing> {
@@ -139,15 +168,7 @@ impl MeshCollider {
             }
             if n.is_leaf() {
                 for slot in n.first as usize..(n.first + n.count) as usize {
-                    let t = &self.tris[slot];
-                    if facing == Facing::IntoWall && t.n.dot(&d) >= 0.0 {
-                        continue;
-                    }
-                    if let Some(f) = segment_triangle(&a, &d, &t.a, &t.b, &t.c)
-                        && best.is_none_or(|(b, _)| f < b)
-                    {
-                        best = Some((f, slot));
-                    }
+                    self.hit_slot(&a, &d, facing, slot, &mut best);
                 }
             } else {
                 stack[sp] = n.first;
@@ -155,6 +176,38 @@ impl MeshCollider {
                 sp += 2;
             }
         }
+        self.crossing(&a, &d, best)
+    }
+
+    /// Keeps in `best` (fraction, slot) the earlier of it and the triangle of `slot`'s
+    /// crossing by the segment `a + s d`, if it crosses it as `facing` asks.
+    #[inline]
+    fn hit_slot(
+        &self,
+        a: &Vector3<f64>,
+        d: &Vector3<f64>,
+        facing: Facing,
+        slot: usize,
+        best: &mut Option<(f64, usize)>,
+    ) {
+        let t = &self.tris[slot];
+        if facing == Facing::IntoWall && t.n.dot(d) >= 0.0 {
+            return;
+        }
+        if let Some(f) = segment_triangle(a, d, &t.a, &t.b, &t.c)
+            && best.is_none_or(|(b, _)| f < b)
+        {
+            *best = Some((f, slot));
+        }
+    }
+
+    /// The [`Crossing`] of what [`Self::hit_slot`] kept.
+    fn crossing(
+        &self,
+        a: &Vector3<f64>,
+        d: &Vector3<f64>,
+        best: Option<(f64, usize)>,
+    ) -> Option<Crossing> {
         let (f, slot) = best?;
         Some(Crossing {
             triangle: self.bvh().tri_indices()[slot],
@@ -221,6 +274,33 @@ mod tests {
                 "slipped through at {s}"
             );
         }
+    }
+
+    /// A motion within a near list's radius of its centre crosses in the list what it crosses
+    /// in the tree: a finer floor, motions down through it and back up in every direction.
+    #[test]
+    fn a_near_list_holds_every_crossing_of_a_motion_within_its_radius() {
+        let mesh = TriMesh::patch([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 20, "floor");
+        let c = MeshCollider::new(mesh.expect("valid"));
+        let (centre, r) = ([0.43, 0.51, 0.02], 0.1);
+        let mut slots = Vec::new();
+        c.near_slots(&centre, r, &mut slots);
+        assert!(slots.len() > 4 && slots.len() < 100, "{}", slots.len());
+        let mut crossed = 0;
+        for k in 0..200 {
+            let a = k as f64 * 0.7;
+            let (s, t) = (a.cos() * 0.06, a.sin() * 0.06);
+            let from = [centre[0] + s, centre[1] + t, centre[2] + 0.03 * a.sin()];
+            let to = [
+                centre[0] - t,
+                centre[1] + s,
+                centre[2] - 0.05 * a.cos().abs(),
+            ];
+            let tree = c.first_crossing(&from, &to);
+            crossed += usize::from(tree.is_some());
+            assert_eq!(c.first_crossing_among(&from, &to, &slots), tree, "{k}");
+        }
+        assert!(crossed > 20, "{crossed}");
     }
 
     #[test]
