@@ -243,6 +243,8 @@ pub struct GpuStiffSimulation {
     staging: wgpu::Buffer,
     rep_staging: wgpu::Buffer,
     rods: Vec<GpuStiffRod>,
+    /// The held ends' motions of a batch, kept between batches (no allocation per batch).
+    motion_scratch: Vec<f64>,
     /// Every rod's report as last read back (`REPORT` numbers each).
     reports: Vec<[f64; REPORT]>,
     settings: SolverSettings<f64>,
@@ -407,6 +409,7 @@ impl GpuStiffSimulation {
             staging,
             rep_staging,
             rods,
+            motion_scratch: Vec::new(),
             reports: vec![[0.0; REPORT]; n_rods],
             settings: *settings,
             stiff: *stiff,
@@ -578,7 +581,9 @@ impl GpuStiffSimulation {
     fn dispatch(&mut self, k: u64) {
         let h = self.settings.dt;
         let n_rods = self.rods.len();
-        let mut motion = vec![0.0; k as usize * n_rods * 2 * MOTION];
+        let mut motion = std::mem::take(&mut self.motion_scratch);
+        motion.clear();
+        motion.resize(k as usize * n_rods * 2 * MOTION, 0.0);
         for s in 0..k as usize {
             let t = (self.step + s as u64) as f64 * h;
             for (r, rod) in self.rods.iter().enumerate() {
@@ -595,6 +600,7 @@ impl GpuStiffSimulation {
         }
         let q = &self.gpu.queue;
         q.write_buffer(&self.motion, 0, bytes(&motion));
+        self.motion_scratch = motion;
         let refactor = match self.stiff.refactor {
             Refactor::EveryStep => 0u32,
             Refactor::EveryIteration => 1,

@@ -28,7 +28,6 @@ pub struct GpuStiffStepper {
     /// The state after the last batch, as read back.
     states: Vec<RodState<f64>>,
     params: Vec<RodParams<f64>>,
-    masses: Vec<Vec<f64>>,
     ends: Vec<[EndCondition<f64>; 2]>,
     loads: Vec<Vec<PointLoad<f64>>>,
     settings: SolverSettings<f64>,
@@ -95,7 +94,6 @@ impl GpuStiffStepper {
         sim.set_reaction_cutoff(reaction_cutoff_hz);
         Ok(Self {
             states: rods.iter().map(|r| r.0.clone()).collect(),
-            masses: rods.iter().map(|r| r.1.masses.clone()).collect(),
             params: (0..sim.rods()).map(|r| sim.rod(r).params.clone()).collect(),
             ends: rods.into_iter().map(|r| r.2).collect(),
             loads,
@@ -285,7 +283,7 @@ impl Stepper for GpuStiffStepper {
         self.params[rod].inv_masses[point] = if new.holds_point() {
             0.0
         } else {
-            1.0 / self.masses[rod][point]
+            1.0 / self.params[rod].masses[point]
         };
         if new.holds_frame() && !old.holds_frame() {
             self.states[rod].seat_clamp(&self.params[rod], end);

@@ -338,7 +338,7 @@ fn inverse3(m: mat3x3<f64>) -> mat3x3<f64> {
 fn elements(rod: u32) -> u32 {
     return u32(kx(rod, K_ROD));
 }
-// Whether element j's slot exists in the rod (j < n).
+// The first element (and point, and frame) of invocation t's slice.
 fn first_of(t: u32) -> u32 {
     return t * EPT;
 }
@@ -932,8 +932,8 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
     for (var step = 0u; step < band_part.steps; step++) {
         // 1. Prediction.
         if damped {
+            // Each invocation keeps its own slice's values: no barrier between the two.
             constraints(rod, t, n);
-            sync();
             keep_constraint_values(rod, t, n);
         }
         if t == 0u {
@@ -1073,6 +1073,7 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             let i = first_of(t) + e;
             put_s3(rod, S_V, i, (s3(rod, S_X, i) - w3(rod, W_X_OLD, i)) * scale);
         }
+        // The reset of `fail_element` above before any invocation's test below.
         workgroupBarrier();
         for (var e = 0u; e < EPT; e++) {
             let j = first_of(t) + e;
