@@ -58,7 +58,7 @@ pub use device::AdapterSummary;
 pub use readback::{GpuField, GpuSnapshot};
 pub use sim::GpuSimulation;
 pub use stepper::GpuStepper;
-pub use stiff::{GpuStiffRod, GpuStiffSimulation, GpuStiffSnapshot};
+pub use stiff::{GpuStiffRod, GpuStiffSimulation, GpuStiffSnapshot, GpuStiffWall};
 pub use stiff_stepper::{GpuStiffStepper, StiffRodParts};
 #[doc(hidden)]
 pub use variants::KernelVariant;

@@ -33,6 +33,10 @@ pub(crate) const BANDED_PARTITIONED_WGSL: &str = include_str!("shaders/banded_pa
 /// The stiff scheme's whole step, one rod per workgroup, around the partitioned solve
 /// (`stiff.rs`).
 pub(crate) const STIFF_STEP_WGSL: &str = include_str!("shaders/stiff_step.wgsl");
+/// The mesh queries of the stiff step's contacts, in `f64` (`stiff.rs`, with a mesh).
+pub(crate) const STIFF_WALL_WGSL: &str = include_str!("shaders/stiff_wall.wgsl");
+/// The stiff step's contacts (`stiff.rs`, with a mesh), after `stiff_wall.wgsl`.
+pub(crate) const STIFF_CONTACT_WGSL: &str = include_str!("shaders/stiff_contact.wgsl");
 /// The partitioned solve's buffers and entry point, for the solve alone.
 pub(crate) const BANDED_PARTITIONED_MAIN_WGSL: &str =
     include_str!("shaders/banded_partitioned_main.wgsl");
@@ -755,11 +759,27 @@ mod tests {
                     "stiff_step.wgsl on disk differs from the compiled-in copy"
                 );
                 for (threads, per_thread) in [(1, 2), (2, 1), (4, 3), (64, 4)] {
-                    validate(
-                        &format!("{name} {threads}×{per_thread}"),
-                        &crate::stiff::source_for(threads, per_thread),
-                    );
+                    for mesh in [false, true] {
+                        validate(
+                            &format!("{name} {threads}×{per_thread} mesh {mesh}"),
+                            &crate::stiff::source_for(threads, per_thread, mesh),
+                        );
+                    }
                 }
+                continue;
+            }
+            if let Some((file, compiled)) = [
+                ("stiff_wall.wgsl", STIFF_WALL_WGSL),
+                ("stiff_contact.wgsl", STIFF_CONTACT_WGSL),
+            ]
+            .into_iter()
+            .find(|(f, _)| file.file_name().is_some_and(|n| n == *f))
+            {
+                // Composed into the stiff step with a mesh, validated with it above.
+                assert_eq!(
+                    text, compiled,
+                    "{file} on disk differs from the compiled-in copy"
+                );
                 continue;
             }
             kernels += 1;

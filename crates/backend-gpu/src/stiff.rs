@@ -18,9 +18,14 @@
 //! geometric bound of the frames, internal damping, drag, gravity and constant point loads,
 //! free, pinned and clamped ends driven by their prescribed motions (constant velocities,
 //! timed moves, keyframed paths: the host evaluates each held end's velocities over each step, as
-//! the CPU does, and uploads them with the batch), and the divergence test. **What it leaves
-//! out** (refused by [`GpuStiffSimulation::new`] or by the stepper's capabilities): contacts,
-//! guides, bindings, rod contact, sliding and hinged ends, varying loads and moments, BDF2, the
+//! the CPU does, and uploads them with the batch), the divergence test, and contact with one
+//! static triangle mesh shared by all rods ([`GpuStiffSimulation::with_wall`]; the CPU's stiff
+//! contacts, `shaders/stiff_contact.wgsl`: points pinned on the wall inside the solve, creases,
+//! element contacts at ridges, swept tests, Coulomb friction, rounds of the solve), compiled
+//! only into the kernels of simulations that have a mesh. **What it leaves out** (refused by
+//! [`GpuStiffSimulation::new`] or by the stepper's capabilities): guides, several obstacles,
+//! analytic shapes and moving ones, friction per triangle, contact rows, bindings, rod contact,
+//! sliding and hinged ends, varying loads and moments, BDF2, the
 //! Gauss–Seidel variant; and, of the CPU's safety nets, the retake of an unconverged inextensible
 //! step with the axial compliance and the retake of a diverged step in halves: an unconverged step
 //! is counted (`StiffReport::unconverged_steps`) and a diverged one stops the rod with its
@@ -28,11 +33,13 @@
 
 use crate::device::Gpu;
 use crate::{GpuError, GpuOptions};
+use cosserat_collide::MeshCollider;
 use cosserat_model::{Quat, RodParams, RodState, Vec3};
 use cosserat_problem::{
-    DivergedQuantity, Divergence, EndCondition, Integrator, Refactor, SolverSettings, StiffReport,
-    StiffScheme, StiffSettings, stiff_compliance, stiff_damped_row,
+    CollisionStats, DivergedQuantity, Divergence, EndCondition, Integrator, Refactor,
+    SolverSettings, StiffReport, StiffScheme, StiffSettings, stiff_compliance, stiff_damped_row,
 };
+use std::sync::Arc;
 
 /// One rod for the GPU's stiff scheme: the pieces `cosserat_backend_cpu::CpuRod::new` takes, in
 /// `f64` (the stiff scheme's state is kept in `f64`).
@@ -46,6 +53,21 @@ pub struct GpuStiffRod {
     pub ends: [EndCondition<f64>; 2],
     /// Constant point forces: `(point, force)`.
     pub loads: Vec<(usize, [f64; 3])>,
+}
+
+/// A static triangle mesh the rods of a [`GpuStiffSimulation`] touch (one for all rods: a vessel
+/// the copies of a batch share), with its Coulomb friction and speculative margin
+/// (`MeshContactSettings` of the CPU).
+#[derive(Clone, Debug)]
+pub struct GpuStiffWall {
+    /// The mesh and its tree.
+    pub collider: Arc<MeshCollider>,
+    /// Coulomb coefficient while a point holds.
+    pub static_friction: f64,
+    /// Coulomb coefficient while a point slides.
+    pub kinetic_friction: f64,
+    /// Speculative margin [m].
+    pub margin: f64,
 }
 
 /// Invocations per rod: the partitioned solve's default (64), fewer for short rods.
@@ -104,8 +126,11 @@ struct StiffLayout {
 }
 
 /// Numbers of the per-rod scalars in `kc` (`K_ROD`): elements, drag rate, damped, whether each
-/// end holds its point, clamps, the masses of the two end points, then 12 per clamp.
-const ROD_SCALARS: usize = 32;
+/// end holds its point, clamps, the masses of the two end points, then 12 per clamp; then the
+/// rod's radius (number 32, for its contacts).
+const ROD_SCALARS: usize = 36;
+/// Numbers per point of the contact state (`CSS` of `stiff_contact.wgsl`).
+const CONTACT_STATE: usize = 48;
 /// Numbers of the per-rod report (`rep`): the counters (`ST_*` of the kernel), then per end the
 /// raw and the filtered reaction (`RE`, `RE_END`), then the largest filtered force (`RE_MAX`).
 const REPORT: usize = 48;
@@ -204,7 +229,7 @@ impl StiffLayout {
         std::array::from_fn(|c| block[col + self.at_entry(j, c, N)])
     }
 
-    fn source(&self) -> String {
+    fn source(&self, mesh: bool) -> String {
         let head = format!(
             "const PT: u32 = {}u;\nconst EPT: u32 = {}u;\nconst XCH: u32 = {}u;\nconst NP: u32 = {}u;\nconst NPT: u32 = {}u;\n{}{}{}",
             self.threads,
@@ -216,9 +241,19 @@ impl StiffLayout {
             self.st.wgsl("SS"),
             self.wk.wgsl("WS"),
         ) + &format!("const RS: u32 = {REPORT}u;\n");
+        let flags: &[&str] = if mesh { &["MESH"] } else { &[] };
+        let contact = if mesh {
+            format!(
+                "{}\n{}",
+                crate::shader::STIFF_WALL_WGSL,
+                crate::shader::STIFF_CONTACT_WGSL
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "{head}\n{}\n{}\n{}",
-            crate::shader::STIFF_STEP_WGSL,
+            "{head}\n{}\n{contact}\n{}\n{}",
+            crate::shader::preprocess(crate::shader::STIFF_STEP_WGSL, flags),
             crate::shader::CHOLESKY_WGSL,
             crate::shader::BANDED_PARTITIONED_WGSL
         )
@@ -242,6 +277,9 @@ pub struct GpuStiffSimulation {
     rep: wgpu::Buffer,
     staging: wgpu::Buffer,
     rep_staging: wgpu::Buffer,
+    /// The contact state of every point (`cs`), with a mesh.
+    contact: Option<wgpu::Buffer>,
+    wall: Option<GpuStiffWall>,
     rods: Vec<GpuStiffRod>,
     /// The held ends' motions of a batch, kept between batches (no allocation per batch).
     motion_scratch: Vec<f64>,
@@ -261,6 +299,7 @@ pub struct GpuStiffSimulation {
 /// starts from, the factorisation's rows, the report) and what the host keeps.
 pub struct GpuStiffSnapshot {
     buffers: [wgpu::Buffer; 4],
+    contact: Option<wgpu::Buffer>,
     rods: Vec<GpuStiffRod>,
     reports: Vec<[f64; REPORT]>,
     step: u64,
@@ -281,7 +320,23 @@ impl GpuStiffSimulation {
         stiff: &StiffSettings,
         options: &GpuOptions,
     ) -> Result<Self, GpuError> {
+        Self::with_wall(rods, settings, stiff, options, None)
+    }
+
+    /// [`new`](Self::new) with the rods in contact with `wall`, as the CPU's stiff contacts
+    /// (`shaders/stiff_contact.wgsl` says what differs). Without one, no contact code is
+    /// compiled.
+    pub fn with_wall(
+        rods: Vec<GpuStiffRod>,
+        settings: &SolverSettings<f64>,
+        stiff: &StiffSettings,
+        options: &GpuOptions,
+        wall: Option<GpuStiffWall>,
+    ) -> Result<Self, GpuError> {
         let mut rods = rods;
+        if let Some(w) = &wall {
+            check_wall(w, stiff)?;
+        }
         check_input(&mut rods, stiff)?;
         let gpu = Gpu::acquire(options)?;
         if !gpu.device.features().contains(wgpu::Features::SHADER_F64) {
@@ -349,6 +404,30 @@ impl GpuStiffSimulation {
             n_rods * REPORT,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
+        let init = |label: &str, contents: &[u8]| {
+            wgpu::util::DeviceExt::create_buffer_init(
+                device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE,
+                },
+            )
+        };
+        // The mesh (tree and f64 triangles) and the points' contact state.
+        let mesh = wall.as_ref().map(|w| {
+            let nodes = w.collider.bvh().node_words();
+            let tris = w.collider.wall_triangles_f64();
+            (
+                init("stiff wall nodes", bytemuck::cast_slice(&nodes)),
+                init("stiff wall triangles", bytes(&tris)),
+                buffer(
+                    "stiff contact state",
+                    n_rods * (slots + 1) * CONTACT_STATE,
+                    copy_out,
+                ),
+            )
+        });
         let shape = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("stiff shape"),
             size: 32,
@@ -358,7 +437,7 @@ impl GpuStiffSimulation {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("stiff_step.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(layout.source().into()),
+            source: wgpu::ShaderSource::Wgsl(layout.source(wall.is_some()).into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("stiff_step"),
@@ -368,7 +447,7 @@ impl GpuStiffSimulation {
             compilation_options: Default::default(),
             cache: None,
         });
-        let entries: Vec<_> = [
+        let mut bound = vec![
             (0, &shape),
             (1, &rows),
             (3, &x),
@@ -378,13 +457,17 @@ impl GpuStiffSimulation {
             (7, &wk),
             (8, &motion),
             (9, &rep),
-        ]
-        .into_iter()
-        .map(|(binding, b)| wgpu::BindGroupEntry {
-            binding,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
+        ];
+        if let Some((nodes, tris, state)) = &mesh {
+            bound.extend([(10, nodes), (11, tris), (12, state)]);
+        }
+        let entries: Vec<_> = bound
+            .into_iter()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("stiff_step"),
             layout: &pipeline.get_bind_group_layout(0),
@@ -408,6 +491,8 @@ impl GpuStiffSimulation {
             rep,
             staging,
             rep_staging,
+            contact: mesh.map(|(_, _, state)| state),
+            wall,
             rods,
             motion_scratch: Vec::new(),
             reports: vec![[0.0; REPORT]; n_rods],
@@ -470,6 +555,11 @@ impl GpuStiffSimulation {
         q.write_buffer(&self.wk, (rod * self.layout.wk.len * 8) as u64, bytes(&wk));
         // The counters and reactions go on; the factorisation and any divergence are
         // forgotten.
+        if let Some(c) = &self.contact {
+            // A written state starts free of contacts (the CPU's `StiffContacts::reset`).
+            let len = (self.layout.slots() + 1) * CONTACT_STATE;
+            q.write_buffer(c, (rod * len * 8) as u64, bytes(&vec![0.0; len]));
+        }
         let report = &mut self.reports[rod];
         report[6..11].fill(0.0);
         q.write_buffer(&self.rep, (rod * REPORT * 8) as u64, bytes(&report[..]));
@@ -634,6 +724,9 @@ impl GpuStiffSimulation {
             keep,
             from_old,
             from_new,
+            self.wall.as_ref().map_or(0.0, |w| w.margin),
+            self.wall.as_ref().map_or(0.0, |w| w.static_friction),
+            self.wall.as_ref().map_or(0.0, |w| w.kinetic_friction),
         ];
         q.write_buffer(&self.glob, 0, bytes(&glob));
         let mut encoder = self
@@ -721,7 +814,7 @@ impl GpuStiffSimulation {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("stiff snapshot"),
         });
-        let buffers = [&self.st, &self.wk, &self.rows, &self.rep].map(|b| {
+        let mut keep = |b: &wgpu::Buffer| {
             let copy = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("stiff snapshot"),
                 size: b.size(),
@@ -730,10 +823,13 @@ impl GpuStiffSimulation {
             });
             encoder.copy_buffer_to_buffer(b, 0, &copy, 0, b.size());
             copy
-        });
+        };
+        let buffers = [&self.st, &self.wk, &self.rows, &self.rep].map(&mut keep);
+        let contact = self.contact.as_ref().map(&mut keep);
         self.gpu.queue.submit([encoder.finish()]);
         GpuStiffSnapshot {
             buffers,
+            contact,
             rods: self.rods.clone(),
             reports: self.reports.clone(),
             step: self.step,
@@ -782,8 +878,30 @@ impl GpuStiffSimulation {
         {
             encoder.copy_buffer_to_buffer(copy, 0, b, 0, b.size());
         }
+        if let (Some(copy), Some(b)) = (&snapshot.contact, &self.contact) {
+            encoder.copy_buffer_to_buffer(copy, 0, b, 0, b.size());
+        }
         self.gpu.queue.submit([encoder.finish()]);
         self.gpu.wait_idle()
+    }
+
+    /// The contacts' statistics of rod `rod` as last read back (`None` without a wall): the
+    /// penetration and the points behind the wall from a detection at each step's end, the
+    /// points pinned at the last step and the most so far, the swept tests' catches and the
+    /// element contacts per detection.
+    pub fn collision_stats(&self, rod: usize) -> Option<CollisionStats> {
+        self.wall.as_ref()?;
+        let s = self.reports.get(rod)?;
+        Some(CollisionStats {
+            max_penetration: s[13],
+            escaped_points: s[14] as usize,
+            contacts: s[11] as usize,
+            max_contacts: s[12] as usize,
+            steps: s[42] as u64,
+            swept_catches: s[15] as u64,
+            segment_contacts: s[41] as u64,
+            ..CollisionStats::default()
+        })
     }
 
     /// Every rod's state as it is now (reads the device).
@@ -855,8 +973,29 @@ impl GpuStiffSimulation {
 /// The kernel's source for `threads` invocations per rod and `per_thread` elements each (shader
 /// validation).
 #[cfg(test)]
-pub(crate) fn source_for(threads: usize, per_thread: usize) -> String {
-    StiffLayout::new(threads, per_thread).source()
+pub(crate) fn source_for(threads: usize, per_thread: usize, mesh: bool) -> String {
+    StiffLayout::new(threads, per_thread).source(mesh)
+}
+
+/// Refuses a wall the kernel's contacts do not run, naming what.
+fn check_wall(w: &GpuStiffWall, stiff: &StiffSettings) -> Result<(), GpuError> {
+    if stiff.contact_rows {
+        return Err(GpuError::InvalidInput(
+            "contact rows (solver.stiff.contact_rows = true) run on the CPU only".into(),
+        ));
+    }
+    for (name, v) in [
+        ("static friction", w.static_friction),
+        ("kinetic friction", w.kinetic_friction),
+        ("margin", w.margin),
+    ] {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(GpuError::InvalidInput(format!(
+                "the wall's {name} is {v}; it must be finite and not negative"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Refuses what the kernel does not run, naming it, and zeroes the inverse masses of held end
@@ -1017,6 +1156,7 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
     k[s + 5] = clamps as f64;
     k[s + 6] = p.masses[0];
     k[s + 7] = p.masses[n];
+    k[s + 32] = p.radius;
     k
 }
 

@@ -15,7 +15,7 @@ use cosserat_problem::{
 };
 
 use crate::stiff::GpuStiffSnapshot;
-use crate::{GpuError, GpuOptions, GpuStiffRod, GpuStiffSimulation};
+use crate::{GpuError, GpuOptions, GpuStiffRod, GpuStiffSimulation, GpuStiffWall};
 
 const NAME: &str = "gpu stiff";
 
@@ -70,8 +70,9 @@ fn forces(loads: &[PointLoad<f64>]) -> Vec<(usize, [f64; 3])> {
 }
 
 impl GpuStiffStepper {
-    /// Uploads `rods` (state, parameters, ends, constant loads) to a device of its own; the held
-    /// ends' reactions are low-pass filtered at `reaction_cutoff_hz`.
+    /// Uploads `rods` (state, parameters, ends, constant loads) to a device of its own, in
+    /// contact with `wall` if given; the held ends' reactions are low-pass filtered at
+    /// `reaction_cutoff_hz`.
     pub fn new(
         rods: Vec<StiffRodParts>,
         loads: Vec<Vec<PointLoad<f64>>>,
@@ -79,6 +80,7 @@ impl GpuStiffStepper {
         stiff: &StiffSettings,
         reaction_cutoff_hz: f64,
         options: &GpuOptions,
+        wall: Option<GpuStiffWall>,
     ) -> Result<Self, GpuError> {
         let inputs: Vec<GpuStiffRod> = rods
             .iter()
@@ -90,7 +92,7 @@ impl GpuStiffStepper {
                 loads: forces(l),
             })
             .collect();
-        let mut sim = GpuStiffSimulation::new(inputs, settings, stiff, options)?;
+        let mut sim = GpuStiffSimulation::with_wall(inputs, settings, stiff, options, wall)?;
         sim.set_reaction_cutoff(reaction_cutoff_hz);
         Ok(Self {
             states: rods.iter().map(|r| r.0.clone()).collect(),
@@ -104,10 +106,12 @@ impl GpuStiffStepper {
         })
     }
 
-    /// What the GPU's stiff stepper runs besides free rods: keyframed end paths, the held ends'
-    /// reactions, double precision (its state is `f64` whatever the scene's precision).
+    /// What the GPU's stiff stepper runs besides free rods: contact with one static mesh,
+    /// keyframed end paths, the held ends' reactions, double precision (its state is `f64`
+    /// whatever the scene's precision).
     pub fn supported() -> Capabilities {
         Capabilities::of(&[
+            Capability::MeshContact,
             Capability::StiffScheme,
             Capability::DoublePrecision,
             Capability::EndPaths,
@@ -312,8 +316,8 @@ impl Stepper for GpuStiffStepper {
         Ok(())
     }
 
-    fn collision_stats(&self, _rod: usize) -> Option<CollisionStats> {
-        None
+    fn collision_stats(&self, rod: usize) -> Option<CollisionStats> {
+        self.sim.collision_stats(rod)
     }
 
     fn coupling_stats(&self) -> Option<CouplingStats> {

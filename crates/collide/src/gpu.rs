@@ -136,4 +136,31 @@ impl MeshCollider {
             })
             .collect()
     }
+
+    /// The triangles in leaf order for contact queries in `f64` (the GPU's stiff scheme, which
+    /// answers the CPU's queries to rounding): [`WALL_F64`] numbers per slot, the corners a, b,
+    /// c, the unit face normal, the pseudo-normals of edges 0–2 and corners 0–2 (three numbers
+    /// each, the values the CPU's queries use), then the boundary and ridge bits of
+    /// [`GpuWallTriangle::boundary`] and the triangle's index in the mesh.
+    pub fn wall_triangles_f64(&self) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.bvh().tri_indices().len() * WALL_F64);
+        for (slot, t) in self.wall_triangles().iter().enumerate() {
+            let [a, b, c] = self
+                .mesh()
+                .triangle(self.bvh().tri_indices()[slot] as usize);
+            let normals = [Feature::Face]
+                .into_iter()
+                .chain((0..3).map(Feature::Edge))
+                .chain((0..3).map(Feature::Vertex))
+                .map(|f| self.pseudo_normal(slot, f));
+            for v in [a, b, c].into_iter().chain(normals) {
+                out.extend([v.x, v.y, v.z]);
+            }
+            out.extend([f64::from(t.boundary), f64::from(t.index)]);
+        }
+        out
+    }
 }
+
+/// Numbers per triangle of [`MeshCollider::wall_triangles_f64`].
+pub const WALL_F64: usize = 32;

@@ -58,7 +58,7 @@ pub mod winding;
 
 pub use bvh::{Bvh, BvhNode, InvariantViolation, STACK_SIZE};
 pub use contact::{Contact, ContactBuffer, MeshCollider, Nearest, PointResponse};
-pub use gpu::{GpuMesh, GpuTriangle, GpuWallTriangle};
+pub use gpu::{GpuMesh, GpuTriangle, GpuWallTriangle, WALL_F64};
 pub use io::{load_mesh, load_obj, load_stl, parse_obj, parse_stl};
 pub use mesh::{MeshError, MeshReport, TriMesh};
 pub use port::{Port, PortError, open_port};

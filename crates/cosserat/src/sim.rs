@@ -1103,8 +1103,8 @@ fn gpu_stepper(b: &SimulationBuilder, needs: Capabilities) -> Result<Box<dyn Ste
     Ok(Box::new(stepper))
 }
 
-/// The stiff scheme on the GPU (`cosserat_backend_gpu::GpuStiffStepper`): rods in `f64`, free
-/// of contacts.
+/// The stiff scheme on the GPU (`cosserat_backend_gpu::GpuStiffStepper`): rods in `f64`, in
+/// contact with one static mesh they all share, or free.
 #[cfg(feature = "gpu")]
 fn gpu_stiff_stepper(
     b: &SimulationBuilder,
@@ -1119,6 +1119,37 @@ fn gpu_stiff_stepper(
     )?;
     let rods = cpu_rods::<f64>(b)?;
     let loads: Vec<Vec<PointLoad<f64>>> = b.rods.iter().map(RodBuilder::point_loads).collect();
+    // One mesh of one friction for every rod (more obstacles, or another friction per triangle,
+    // were refused by `require`).
+    let walls: Vec<_> = rods
+        .iter()
+        .map(|r| {
+            r.mesh_settings().and_then(|m| {
+                Some(cosserat_backend_gpu::GpuStiffWall {
+                    collider: m.collider.clone()?,
+                    static_friction: m.friction.static_coefficient,
+                    kinetic_friction: m.friction.kinetic_coefficient,
+                    margin: m.margin,
+                })
+            })
+        })
+        .collect();
+    let wall = walls.first().cloned().flatten();
+    let shared = walls.iter().all(|w| match (w, &wall) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            std::sync::Arc::ptr_eq(&a.collider, &b.collider)
+                && (a.static_friction, a.kinetic_friction, a.margin)
+                    == (b.static_friction, b.kinetic_friction, b.margin)
+        }
+        _ => false,
+    });
+    if !shared {
+        return Err(BuildError::Setting(
+            "the GPU's stiff scheme runs rods that all touch the same mesh, or none (use --backend cpu)"
+                .into(),
+        ));
+    }
     let rods = rods
         .into_iter()
         .map(|r| (r.state, r.params, r.ends))
@@ -1131,6 +1162,7 @@ fn gpu_stiff_stepper(
         b.reaction_cutoff_hz
             .unwrap_or(cosserat_problem::report::DEFAULT_CUTOFF_HZ),
         &cosserat_backend_gpu::GpuOptions::default(),
+        wall,
     )
     .map_err(|e| BuildError::Setting(format!("the GPU's stiff scheme: {e}")))?;
     Ok(Box::new(stepper))

@@ -5,8 +5,9 @@
 // per interior node); each step predicts the inertial targets and takes Newton iterations of
 // the full XPBD system `(J K⁻¹ Jᵀ + α̃) Δλ = −(C + α̃ λ + J u)` until every residual is below the
 // tolerance. The step is the CPU's `step_fixed` / `solve_step` / `direct_solve` without
-// contacts, guides, bindings, loads and retakes, pass for pass: `constraints`, `precondition`,
-// `rhs`, `assemble`, the banded solve, `apply`, `velocities`, the stretch test. Invocation t
+// guides, bindings, varying loads and retakes, pass for pass: `constraints`, `precondition`,
+// `rhs`, `assemble`, the banded solve, `apply`, `velocities`, the stretch test. With a mesh
+// (`//#if MESH`, `stiff_contact.wgsl`), the contacts' passes and the rounds of the solve. Invocation t
 // owns elements (and points, and frames) t·EPT … t·EPT + EPT − 1, the slice the partitioned
 // banded solve (`banded_partitioned.wgsl`, put after this file) eliminates; the point past the
 // last element belongs to the last invocation. Every pass reads its neighbours' values from
@@ -477,6 +478,9 @@ fn bend_bound(rod: u32, col: u32, j: u32, n: u32) -> f64 {
 // `precondition`: each frame's `K_θ⁻¹` with the geometric bound σ of the multipliers (the
 // previous step's with `previous`), and the clamped end frames' `W`.
 fn precondition(rod: u32, t: u32, n: u32, previous: bool, h: f64) {
+//#if MESH
+    freeze_own(rod, t, n);
+//#endif
     let geometric = glob[2];
     let cg = select(W_LAM_G, W_LAMP_G, previous);
     let co = select(W_LAM_O, W_LAMP_O, previous);
@@ -582,7 +586,10 @@ fn own_point(t: u32, e: u32, n: u32) -> bool {
 }
 
 // `rhs`, first half: `u_x = x̃ − x + M⁻¹ Jᵀ λ`, `u_θ` (the clamped end frames' through `W`).
-fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) {
+// With contacts, a pinned point's `u` is its pin's (`pinned_balance`); returns the largest of
+// their residuals and of their friction's imbalances.
+fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) -> vec2<f64> {
+    var pinned = vec2<f64>();
     for (var e = 0u; e <= EPT; e++) {
         if !own_point(t, e, n) {
             break;
@@ -593,6 +600,11 @@ fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) {
             let f = point_term(rod, W_LAM_G, i32(i) - 1, n, false) - point_term(rod, W_LAM_G, i32(i), n, false);
             u += f * k1(rod, K_IM, i);
         }
+//#if MESH
+        if is_pinned(rod, i) && k1(rod, K_IM, i) > 0.0lf {
+            u = pinned_balance(rod, i, n, u, &pinned);
+        }
+//#endif
         put_w3(rod, W_UX, i, u);
     }
     for (var e = 0u; e < EPT; e++) {
@@ -622,6 +634,7 @@ fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) {
         }
         put_w3(rod, W_UTH, j, u);
     }
+    return pinned;
 }
 
 // `rhs`, second half: the right-hand side `−(C + α̃ λ − γ C_n + J u)` of every row into the
@@ -747,6 +760,10 @@ fn assemble(rod: u32, t: u32, n: u32) {
                 osecond = awbt(db, wb, cross_plus(s1.xyz * ilb1, -(s1.w * ilb1)));
             }
         }
+//#if MESH
+        // The pinned points' directions, as the CPU's `pin_blocks` (before the clamps' terms).
+        pin_rows(rod, j, n, &dg, &gsecond);
+//#endif
         // The clamped end frames' terms (their K_θ⁻¹ above is zero).
         for (var ci = 0u; ci < clamp_count(rod); ci++) {
             let c = clamp_of(rod, ci);
@@ -788,17 +805,44 @@ fn assemble(rod: u32, t: u32, n: u32) {
 
 // `apply`: `Δx = u + M⁻¹ Jᵀ Δλ`, `Δθ = u_θ + K_θ⁻¹ J_θᵀ Δλ` (the clamped frames' through `W`),
 // `λ += Δλ`. It reads its neighbours' increments from the solve's vector and writes only its
-// own slice.
-fn apply(rod: u32, t: u32, n: u32) {
+// own slice. With contacts, a pinned point moves as its pin lets it (`pinned_update`), and a
+// Newton step that would move some point further than `max_move` is shortened as a whole.
+fn apply(rod: u32, t: u32, n: u32, max_move: f64) {
+//#if MESH
+    var longest = 0.0lf;
+//#endif
     for (var e = 0u; e <= EPT; e++) {
         if !own_point(t, e, n) {
             break;
         }
         let i = first_of(t) + e;
         let f = point_term(rod, 0u, i32(i) - 1, n, true) - point_term(rod, 0u, i32(i), n, true);
+//#if MESH
+        var u = w3(rod, W_UX, i) + f * k1(rod, K_IM, i);
+        if is_pinned(rod, i) {
+            u = pinned_update(rod, i, w3(rod, W_UX, i), f * k1(rod, K_IM, i));
+        }
+        put_w3(rod, W_UX, i, u);
+        longest = max(longest, dot3(u, u));
+//#else
         let u = w3(rod, W_UX, i) + f * k1(rod, K_IM, i);
         put_s3(rod, S_X, i, s3(rod, S_X, i) + u);
+//#endif
     }
+//#if MESH
+    let reach = sqrt(workgroup_max(t, longest));
+    var scale = 1.0lf;
+    if reach > max_move {
+        scale = max_move / reach;
+    }
+    for (var e = 0u; e <= EPT; e++) {
+        if !own_point(t, e, n) {
+            break;
+        }
+        let i = first_of(t) + e;
+        put_s3(rod, S_X, i, s3(rod, S_X, i) + w3(rod, W_UX, i) * scale);
+    }
+//#endif
     for (var e = 0u; e < EPT; e++) {
         let j = first_of(t) + e;
         if j >= n {
@@ -810,10 +854,17 @@ fn apply(rod: u32, t: u32, n: u32) {
         if ci < 2u {
             th = w3(rod, W_UTH, j) + wm3(rod, W_CLAMP_W, ci) * dth;
         }
+//#if MESH
+        th *= scale;
+//#endif
         let q = s4(rod, S_Q, j);
         put_s4(rod, S_Q, j, qnormalise(qmul(q, vec4<f64>(th * 0.5lf, 1.0lf))));
         // The element's own multipliers (no pass of this one reads them).
+//#if MESH
+        let x = V6(solution(rod, j).u * scale, solution(rod, j).v * scale);
+//#else
         let x = solution(rod, j);
+//#endif
         put_w3(rod, W_LAM_G, j, w3(rod, W_LAM_G, j) + x.u);
         if j + 1u < n {
             put_w3(rod, W_LAM_O, j, w3(rod, W_LAM_O, j) + x.v);
@@ -876,6 +927,38 @@ fn workgroup_max(t: u32, v: f64) -> f64 {
     return workgroupUniformLoad(&red_out);
 }
 
+// The residual of an iteration: the rows' largest, and with contacts the pinned points'
+// (`Work::rhs`) and their friction's imbalance times the tolerance (`direct_solve`).
+fn residual_of(rows: f64, pinned: vec2<f64>, tolerance: f64) -> f64 {
+//#if MESH
+    let r = max(rows, max(pinned.x, tolerance * pinned.y));
+    if !(r <= HUGE) {
+        return HUGE;
+    }
+    return r;
+//#else
+    return rows;
+//#endif
+}
+
+// The bits of `bits` set by any invocation (every invocation calls it).
+var<workgroup> or_bits: atomic<u32>;
+var<workgroup> or_out: u32;
+fn workgroup_or(t: u32, bits: u32) -> u32 {
+    if t == 0u {
+        atomicStore(&or_bits, 0u);
+    }
+    workgroupBarrier();
+    if bits != 0u {
+        atomicOr(&or_bits, bits);
+    }
+    workgroupBarrier();
+    if t == 0u {
+        or_out = atomicLoad(&or_bits);
+    }
+    return workgroupUniformLoad(&or_out);
+}
+
 // A barrier for storage and workgroup memory both.
 fn sync() {
     storageBarrier();
@@ -898,6 +981,16 @@ const ST_DSTEP: u32 = 7u;
 const ST_DEL: u32 = 8u;
 const ST_DKIND: u32 = 9u;
 const ST_DVAL: u32 = 10u;
+// With contacts: the points pinned at the end of the last step, the most so far, the deepest
+// penetration, the most points behind the wall at a step's end, the swept tests' catches, the
+// element contacts, and the steps counted.
+const ST_CONT: u32 = 11u;
+const ST_MAXC: u32 = 12u;
+const ST_PEN: u32 = 13u;
+const ST_ESC: u32 = 14u;
+const ST_SWEPT: u32 = 15u;
+const ST_SEG: u32 = 41u;
+const ST_CSTEPS: u32 = 42u;
 // Then per end (RE_END numbers each from RE): the raw force and torque of the last step, the
 // filtered force and torque; then the largest filtered force so far.
 const RE: u32 = 16u;
@@ -924,6 +1017,13 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
     if t == 0u {
         fail_word = u32(r1(rod, ST_VALID)) | select(0u, 2u, r1(rod, ST_DKIND) != 0.0lf);
     }
+//#if MESH
+    if t == 0u {
+        for (var k = 0u; k < 4u; k++) {
+            atomicStore(&wg_counts[k], 0u);
+        }
+    }
+//#endif
     let word = workgroupUniformLoad(&fail_word);
     var factor_valid = (word & 1u) != 0u;
     if (word & 2u) != 0u {
@@ -998,55 +1098,116 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             put_w3(rod, W_LAM_O, j, vec3<f64>());
         }
         sync();
-        // 2. Newton iterations (`direct_solve`, one round).
+//#if MESH
+        contact_begin(rod, t, n, h);
+        sync();
+        let max_move = ITERATION_MOVE * rod_radius(rod);
+//#else
+        let max_move = HUGE;
+//#endif
+        // 2. Newton iterations (`direct_solve`), in rounds while the contacts change
+        // (`solve_step`): one, and one more each time they change (at most MAX_ROUNDS more),
+        // continuing from the multipliers reached; rounds after the first are solved to
+        // LOOSE_ROUND times the tolerance, and only one whose contacts then hold still is
+        // finished at the tolerance.
         var lambda_zero = true;
         var previous = HUGE * 10.0lf;
         var residual = 0.0lf;
         var used = 0u;
-        for (var it = 0u; it <= band_part.iterations; it++) {
-            let last = it == band_part.iterations;
-            if last && tolerance <= 0.0lf {
-                break;
+        var first = true;
+        var loose = false;
+        var round = 0u;
+        loop {
+            var round_tolerance = tolerance;
+//#if MESH
+            if loose {
+                round_tolerance = LOOSE_ROUND * tolerance;
             }
-            var refactor = !factor_valid || band_part.refactor == 1u || (band_part.refactor == 0u && it == 0u);
-            constraints(rod, t, n);
-            if refactor && !last {
-                // Its own slice's constraints only: no barrier between the two.
-                precondition(rod, t, n, it == 0u, h);
-            }
-            sync();
-            rhs_updates(rod, t, n, lambda_zero, h);
-            sync();
-            residual = workgroup_max(t, rhs_rows(rod, t, n));
-            if (residual <= tolerance && it > 0u) || last {
-                break;
-            }
-            if !refactor && residual > 0.25lf * previous {
-                // An iteration that contracted by less than 4×: refactorise with the current
-                // multipliers.
-                precondition(rod, t, n, false, h);
-                sync();
-                rhs_updates(rod, t, n, lambda_zero, h);
-                sync();
-                residual = workgroup_max(t, rhs_rows(rod, t, n));
-                refactor = true;
-            }
-            if refactor {
-                assemble(rod, t, n);
-                factor_valid = true;
-                if t == 0u {
-                    put_r1(rod, ST_FACT, r1(rod, ST_FACT) + 1.0lf);
+//#endif
+            // Whether the last iteration pinned points (the matrix changed).
+            var pins_changed = false;
+            for (var it = 0u; it <= band_part.iterations; it++) {
+                let last = it == band_part.iterations;
+                if last && tolerance <= 0.0lf {
+                    break;
                 }
+                var refactor = !factor_valid || pins_changed || band_part.refactor == 1u || (band_part.refactor == 0u && it == 0u && first);
+                constraints(rod, t, n);
+                if refactor && !last {
+                    // Its own slice's constraints only: no barrier between the two.
+                    precondition(rod, t, n, first && it == 0u, h);
+                }
+                sync();
+                var pinned = rhs_updates(rod, t, n, lambda_zero, h);
+                sync();
+                residual = workgroup_max(t, residual_of(rhs_rows(rod, t, n), pinned, round_tolerance));
+                if (residual <= round_tolerance && it > 0u) || last {
+                    break;
+                }
+                if !refactor && residual > 0.25lf * previous {
+                    // An iteration that contracted by less than 4×: refactorise with the current
+                    // multipliers.
+                    precondition(rod, t, n, false, h);
+                    sync();
+                    pinned = rhs_updates(rod, t, n, lambda_zero, h);
+                    sync();
+                    residual = workgroup_max(t, residual_of(rhs_rows(rod, t, n), pinned, round_tolerance));
+                    refactor = true;
+                }
+                if refactor {
+                    assemble(rod, t, n);
+                    factor_valid = true;
+                    if t == 0u {
+                        put_r1(rod, ST_FACT, r1(rod, ST_FACT) + 1.0lf);
+                    }
+                }
+                previous = residual;
+                sync();
+                partitioned_solve(rod, t);
+                sync();
+                apply(rod, t, n, max_move);
+                lambda_zero = false;
+                used += 1u;
+                sync();
+//#if MESH
+                pins_changed = (workgroup_or(t, catch_penetrations(rod, t, n, h)) & 2u) != 0u;
+                sync();
+//#endif
             }
-            previous = residual;
+            first = false;
+//#if MESH
+            let update = workgroup_or(t, contact_update(rod, t, n, h));
             sync();
-            partitioned_solve(rod, t);
-            sync();
-            apply(rod, t, n);
-            lambda_zero = false;
-            used += 1u;
-            sync();
+            let resolve = (update & 1u) != 0u;
+            let matrix_changed = (update & 2u) != 0u;
+            if loose && !resolve && residual <= tolerance {
+                break;
+            }
+            if loose && !resolve {
+                // The contacts held still at the loose tolerance: finish the round at the step's
+                // own.
+                loose = false;
+                if matrix_changed {
+                    factor_valid = false;
+                }
+                continue;
+            }
+            if !resolve || round == MAX_ROUNDS {
+                break;
+            }
+            round += 1u;
+            loose = round < MAX_ROUNDS;
+            previous = HUGE * 10.0lf;
+            if matrix_changed {
+                factor_valid = false;
+            }
+//#else
+            break;
+//#endif
         }
+//#if MESH
+        contact_record(rod, t, n);
+//#endif
         // 3. The step's record, velocities, the divergence test.
         let global_step = first_step + f64(step);
         let unconverged = tolerance > 0.0lf && !(residual <= tolerance);
