@@ -229,15 +229,19 @@ fn a_wire_dragged_over_a_floor_moves_as_on_the_cpu() {
     assert!(s.contacts > 20, "the wire lies on the floor: {s:?}");
 }
 
+/// The procedural vessel, coarse (4 000 triangles), with the friction of the insertion scenes.
+const VESSEL_WALL: &str = r#"
+[environment]
+mesh = { kind = "vessel", triangles = 4000 }
+friction = { static = 0.08, kinetic = 0.05 }
+margin = 1e-4
+"#;
+
 /// A soft wire pushed by its clamped end into the procedural vessel at 1 ms, without an
 /// introducer, sagging onto the wall: every part of the contacts (new contacts and releases,
 /// points caught by the swept test, two walls at a crease, elements on ridges, rounds of the
 /// solve).
 const VESSEL: &str = r#"
-[environment]
-mesh = { kind = "vessel", triangles = 4000 }
-friction = { static = 0.08, kinetic = 0.05 }
-margin = 1e-4
 
 [[rod]]
 elements = 64
@@ -249,11 +253,38 @@ start = { kind = "clamped", axial_speed = 0.5, end_time = 1.0 }
 
 #[test]
 fn a_wire_pushed_into_a_vessel_moves_as_on_the_cpu() {
-    let Some((mut cpu, mut gpu)) = gpu_stiff(&format!("{CONTACT_SOLVER}{VESSEL}")) else {
+    let Some((mut cpu, mut gpu)) = gpu_stiff(&format!("{CONTACT_SOLVER}{VESSEL_WALL}{VESSEL}"))
+    else {
         return;
     };
     agree(&mut cpu, &mut gpu, 8, 25, 1e-8);
     contacts_agree(&cpu, &gpu, 1e-9);
     let s = cpu.stepper().collision_stats(0).expect("stats");
     assert!(s.max_contacts > 3, "the wire touched the wall: {s:?}");
+}
+
+/// The insertion of `scenes/nitinol-guidewire-insertion.toml`, short and coarse: a nitinol wire
+/// fed through the introducer (its guided points held on the axis) into the vessel at 1 ms.
+const INSERTION: &str = r#"
+
+[[rod]]
+elements = 64
+shape = { kind = "insertion", length = 0.3, inserted = 0.05 }
+material = { preset = "nitinol" }
+damping = { drag = 5.0 }
+start = { kind = "clamped", axial_speed = 0.5, end_time = 1.0, guide = 0.24 }
+"#;
+
+#[test]
+fn a_wire_fed_through_the_introducer_moves_as_on_the_cpu() {
+    let Some((mut cpu, mut gpu)) = gpu_stiff(&format!("{CONTACT_SOLVER}{VESSEL_WALL}{INSERTION}"))
+    else {
+        return;
+    };
+    let hand = gpu.positions(RodHandle(0))[0];
+    agree(&mut cpu, &mut gpu, 8, 25, 1e-8);
+    contacts_agree(&cpu, &gpu, 1e-9);
+    // The hand pushed 0.5 m/s for 0.2 s.
+    let moved = largest_gap(&[hand], &[gpu.positions(RodHandle(0))[0]]);
+    assert!((moved - 0.1).abs() < 1e-9, "the hand moved {moved} m");
 }

@@ -759,10 +759,12 @@ mod tests {
                     "stiff_step.wgsl on disk differs from the compiled-in copy"
                 );
                 for (threads, per_thread) in [(1, 2), (2, 1), (4, 3), (64, 4)] {
-                    for mesh in [false, true] {
+                    for (mesh, guide) in
+                        [(false, false), (true, false), (false, true), (true, true)]
+                    {
                         validate(
-                            &format!("{name} {threads}×{per_thread} mesh {mesh}"),
-                            &crate::stiff::source_for(threads, per_thread, mesh),
+                            &format!("{name} {threads}×{per_thread} mesh {mesh} guide {guide}"),
+                            &crate::stiff::source_for(threads, per_thread, mesh, guide),
                         );
                     }
                 }

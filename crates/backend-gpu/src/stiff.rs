@@ -53,6 +53,9 @@ pub struct GpuStiffRod {
     pub ends: [EndCondition<f64>; 2],
     /// Constant point forces: `(point, force)`.
     pub loads: Vec<(usize, [f64; 3])>,
+    /// The straight introducer the rod is fed through, if any: the points it holds move along
+    /// its axis only (the CPU's `contact::pin_guided`).
+    pub guide: Option<crate::GpuGuide>,
 }
 
 /// A static triangle mesh the rods of a [`GpuStiffSimulation`] touch (one for all rods: a vessel
@@ -127,8 +130,9 @@ struct StiffLayout {
 
 /// Numbers of the per-rod scalars in `kc` (`K_ROD`): elements, drag rate, damped, whether each
 /// end holds its point, clamps, the masses of the two end points, then 12 per clamp; then the
-/// rod's radius (number 32, for its contacts).
-const ROD_SCALARS: usize = 36;
+/// rod's radius (number 32, for its contacts), then its guide (33: whether it has one, 34 the
+/// origin, 37 the unit axis, 40 the length, 41 the clearance).
+const ROD_SCALARS: usize = 44;
 /// Numbers per point of the contact state (`CSS` of `stiff_contact.wgsl`).
 const CONTACT_STATE: usize = 48;
 /// Numbers of the per-rod report (`rep`): the counters (`ST_*` of the kernel), then per end the
@@ -229,7 +233,8 @@ impl StiffLayout {
         std::array::from_fn(|c| block[col + self.at_entry(j, c, N)])
     }
 
-    fn source(&self, mesh: bool) -> String {
+    /// The kernel's text, with the contacts' passes (`mesh`) and the guide's (`guide`).
+    fn source(&self, mesh: bool, guide: bool) -> String {
         let head = format!(
             "const PT: u32 = {}u;\nconst EPT: u32 = {}u;\nconst XCH: u32 = {}u;\nconst NP: u32 = {}u;\nconst NPT: u32 = {}u;\n{}{}{}",
             self.threads,
@@ -241,8 +246,17 @@ impl StiffLayout {
             self.st.wgsl("SS"),
             self.wk.wgsl("WS"),
         ) + &format!("const RS: u32 = {REPORT}u;\n");
-        let flags: &[&str] = if mesh { &["MESH"] } else { &[] };
-        let contact = if mesh {
+        let mut flags = Vec::new();
+        if mesh {
+            flags.push("MESH");
+        }
+        if guide {
+            flags.push("GUIDE");
+        }
+        if mesh || guide {
+            flags.push("PINS");
+        }
+        let contact = if mesh || guide {
             format!(
                 "{}\n{}",
                 crate::shader::STIFF_WALL_WGSL,
@@ -253,7 +267,7 @@ impl StiffLayout {
         };
         format!(
             "{head}\n{}\n{contact}\n{}\n{}",
-            crate::shader::preprocess(crate::shader::STIFF_STEP_WGSL, flags),
+            crate::shader::preprocess(crate::shader::STIFF_STEP_WGSL, &flags),
             crate::shader::CHOLESKY_WGSL,
             crate::shader::BANDED_PARTITIONED_WGSL
         )
@@ -277,9 +291,11 @@ pub struct GpuStiffSimulation {
     rep: wgpu::Buffer,
     staging: wgpu::Buffer,
     rep_staging: wgpu::Buffer,
-    /// The contact state of every point (`cs`), with a mesh.
+    /// The contact state of every point (`cs`), with a mesh or a guide.
     contact: Option<wgpu::Buffer>,
     wall: Option<GpuStiffWall>,
+    /// Whether the kernel pins guided points (built with a rod that has a guide).
+    guided: bool,
     rods: Vec<GpuStiffRod>,
     /// The held ends' motions of a batch, kept between batches (no allocation per batch).
     motion_scratch: Vec<f64>,
@@ -414,18 +430,21 @@ impl GpuStiffSimulation {
                 },
             )
         };
-        // The mesh (tree and f64 triangles) and the points' contact state.
+        // The mesh (tree and f64 triangles), and the points' pins and contact state.
         let mesh = wall.as_ref().map(|w| {
             let nodes = w.collider.bvh().node_words();
             let tris = w.collider.wall_triangles_f64();
             (
                 init("stiff wall nodes", bytemuck::cast_slice(&nodes)),
                 init("stiff wall triangles", bytes(&tris)),
-                buffer(
-                    "stiff contact state",
-                    n_rods * (slots + 1) * CONTACT_STATE,
-                    copy_out,
-                ),
+            )
+        });
+        let guided = rods.iter().any(|r| r.guide.is_some());
+        let contact = (wall.is_some() || guided).then(|| {
+            buffer(
+                "stiff contact state",
+                n_rods * (slots + 1) * CONTACT_STATE,
+                copy_out,
             )
         });
         let shape = device.create_buffer(&wgpu::BufferDescriptor {
@@ -437,7 +456,7 @@ impl GpuStiffSimulation {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("stiff_step.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(layout.source(wall.is_some()).into()),
+            source: wgpu::ShaderSource::Wgsl(layout.source(wall.is_some(), guided).into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("stiff_step"),
@@ -458,8 +477,11 @@ impl GpuStiffSimulation {
             (8, &motion),
             (9, &rep),
         ];
-        if let Some((nodes, tris, state)) = &mesh {
-            bound.extend([(10, nodes), (11, tris), (12, state)]);
+        if let Some((nodes, tris)) = &mesh {
+            bound.extend([(10, nodes), (11, tris)]);
+        }
+        if let Some(state) = &contact {
+            bound.push((12, state));
         }
         let entries: Vec<_> = bound
             .into_iter()
@@ -491,8 +513,9 @@ impl GpuStiffSimulation {
             rep,
             staging,
             rep_staging,
-            contact: mesh.map(|(_, _, state)| state),
+            contact,
             wall,
+            guided,
             rods,
             motion_scratch: Vec::new(),
             reports: vec![[0.0; REPORT]; n_rods],
@@ -614,6 +637,11 @@ impl GpuStiffSimulation {
             return Err(GpuError::InvalidInput(format!(
                 "rod {rod} has {} elements; a replacement must have as many",
                 self.rods[rod].state.elements()
+            )));
+        }
+        if new.guide.is_some() && !self.guided {
+            return Err(GpuError::InvalidInput(format!(
+                "rod {rod}: a guide given to a simulation built without guides"
             )));
         }
         let mut one = vec![new];
@@ -973,8 +1001,8 @@ impl GpuStiffSimulation {
 /// The kernel's source for `threads` invocations per rod and `per_thread` elements each (shader
 /// validation).
 #[cfg(test)]
-pub(crate) fn source_for(threads: usize, per_thread: usize, mesh: bool) -> String {
-    StiffLayout::new(threads, per_thread).source(mesh)
+pub(crate) fn source_for(threads: usize, per_thread: usize, mesh: bool, guide: bool) -> String {
+    StiffLayout::new(threads, per_thread).source(mesh, guide)
 }
 
 /// Refuses a wall the kernel's contacts do not run, naming what.
@@ -1029,6 +1057,16 @@ fn check_input(rods: &mut [GpuStiffRod], stiff: &StiffSettings) -> Result<(), Gp
             }
             if end.holds_point() {
                 rod.params.inv_masses[if e == 0 { 0 } else { n }] = 0.0;
+            }
+        }
+        if let Some(g) = &rod.guide {
+            let unit = (g.axis.iter().map(|a| a * a).sum::<f64>() - 1.0).abs() < 1e-9;
+            let finite = g.origin.iter().chain(&g.axis).all(|x| x.is_finite());
+            if !(unit && finite && g.length > 0.0 && g.clearance > 0.0) {
+                return Err(GpuError::InvalidInput(format!(
+                    "rod {i}: a guide at {:?} along {:?}, {} m long, clearance {} m (the axis must be a unit vector, the lengths positive)",
+                    g.origin, g.axis, g.length, g.clearance
+                )));
             }
         }
         for &(p, f) in &rod.loads {
@@ -1157,6 +1195,13 @@ fn constants(rod: &GpuStiffRod, l: &StiffLayout, h: f64, extensible: bool, floor
     k[s + 6] = p.masses[0];
     k[s + 7] = p.masses[n];
     k[s + 32] = p.radius;
+    if let Some(g) = &rod.guide {
+        k[s + 33] = 1.0;
+        k[s + 34..s + 37].copy_from_slice(&g.origin);
+        k[s + 37..s + 40].copy_from_slice(&g.axis);
+        k[s + 40] = g.length;
+        k[s + 41] = g.clearance;
+    }
     k
 }
 

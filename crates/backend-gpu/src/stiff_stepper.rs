@@ -19,8 +19,14 @@ use crate::{GpuError, GpuOptions, GpuStiffRod, GpuStiffSimulation, GpuStiffWall}
 
 const NAME: &str = "gpu stiff";
 
-/// A rod as the stepper takes it: state, parameters, end conditions.
-pub type StiffRodParts = (RodState<f64>, RodParams<f64>, [EndCondition<f64>; 2]);
+/// A rod as the stepper takes it: state, parameters, end conditions, and the introducer it is
+/// fed through, if any.
+pub type StiffRodParts = (
+    RodState<f64>,
+    RodParams<f64>,
+    [EndCondition<f64>; 2],
+    Option<crate::GpuGuide>,
+);
 
 /// Rods stepped by the stiff scheme on the GPU, through the [`Stepper`] interface.
 pub struct GpuStiffStepper {
@@ -30,6 +36,7 @@ pub struct GpuStiffStepper {
     params: Vec<RodParams<f64>>,
     ends: Vec<[EndCondition<f64>; 2]>,
     loads: Vec<Vec<PointLoad<f64>>>,
+    guides: Vec<Option<crate::GpuGuide>>,
     settings: SolverSettings<f64>,
     stiff: StiffSettings,
     clock: Clock,
@@ -85,11 +92,12 @@ impl GpuStiffStepper {
         let inputs: Vec<GpuStiffRod> = rods
             .iter()
             .zip(&loads)
-            .map(|((state, params, ends), l)| GpuStiffRod {
+            .map(|((state, params, ends, guide), l)| GpuStiffRod {
                 state: state.clone(),
                 params: params.clone(),
                 ends: ends.clone(),
                 loads: forces(l),
+                guide: *guide,
             })
             .collect();
         let mut sim = GpuStiffSimulation::with_wall(inputs, settings, stiff, options, wall)?;
@@ -97,6 +105,7 @@ impl GpuStiffStepper {
         Ok(Self {
             states: rods.iter().map(|r| r.0.clone()).collect(),
             params: (0..sim.rods()).map(|r| sim.rod(r).params.clone()).collect(),
+            guides: rods.iter().map(|r| r.3).collect(),
             ends: rods.into_iter().map(|r| r.2).collect(),
             loads,
             sim,
@@ -106,12 +115,13 @@ impl GpuStiffStepper {
         })
     }
 
-    /// What the GPU's stiff stepper runs besides free rods: contact with one static mesh,
+    /// What the GPU's stiff stepper runs besides free rods: contact with one static mesh, guides,
     /// keyframed end paths, the held ends' reactions, double precision (its state is `f64`
     /// whatever the scene's precision).
     pub fn supported() -> Capabilities {
         Capabilities::of(&[
             Capability::MeshContact,
+            Capability::Guide,
             Capability::StiffScheme,
             Capability::DoublePrecision,
             Capability::EndPaths,
@@ -136,6 +146,7 @@ impl GpuStiffStepper {
             params: self.params[rod].clone(),
             ends: self.ends[rod].clone(),
             loads: forces(&self.loads[rod]),
+            guide: self.guides[rod],
         };
         self.sim.replace_rod(rod, new).map_err(to_control)
     }

@@ -1152,7 +1152,15 @@ fn gpu_stiff_stepper(
     }
     let rods = rods
         .into_iter()
-        .map(|r| (r.state, r.params, r.ends))
+        .map(|r| {
+            let guide = r.guide().map(|g| cosserat_backend_gpu::GpuGuide {
+                origin: g.origin().into(),
+                axis: g.axis().into(),
+                length: g.length(),
+                clearance: g.clearance(),
+            });
+            (r.state, r.params, r.ends, guide)
+        })
         .collect();
     let stepper = cosserat_backend_gpu::GpuStiffStepper::new(
         rods,

@@ -10,7 +10,8 @@
 // the element queries read both points' gaps, the assembly of an element both points' pins,
 // and a pin's impulse both elements' multipliers.
 //
-// Composed after stiff_wall.wgsl; `stiff_step.wgsl` calls these functions when CONTACT is on.
+// Composed after stiff_wall.wgsl; `stiff_step.wgsl` calls these functions with `MESH`, and the
+// pins' (`PINS`) also for the points an introducer guide holds on its axis (`GUIDE`).
 // Differences from the CPU: every detection queries every point (the CPU's
 // `reuse_contact_queries = false`), and the penetration and escaped points of a step are those
 // of a detection at its end positions (the CPU measures the deepest point exactly and tells
@@ -18,7 +19,8 @@
 
 @group(0) @binding(12) var<storage, read_write> cs: array<f64>;
 
-// Per point, CSS numbers: whether it is pinned (C_PIN); its pin (normal, crease, normal impulse
+// Per point, CSS numbers: whether it is pinned (C_PIN: 0 no, 1 on the mesh, 2 on a guide's
+// axis); its pin (normal, crease, normal impulse
 // times the step, friction); how it touched at the end of the last step (C_LAST: 0 free,
 // 1 held by friction, 2 sliding; C_LASTPN); its last detection (C_FOUND, normal, gap, whether
 // the swept test found it, whether its centre is behind the wall); and, at the point's index, the
@@ -95,6 +97,8 @@ fn mesh_margin() -> f64 {
 // A pinned point (`Pinned`) and its friction (`PinFriction`).
 
 struct Pin {
+    // Held on a line along `normal` (a guide's axis) instead of a plane across it.
+    line: bool,
     normal: vec3<f64>,
     has_crease: bool,
     crease: vec3<f64>,
@@ -114,9 +118,14 @@ struct Pin {
 fn is_pinned(rod: u32, i: u32) -> bool {
     return cg1(rod, i, C_PIN) != 0.0lf;
 }
+// Pinned on the mesh (`Pinned::on_mesh`), not on a guide's axis.
+fn on_mesh(rod: u32, i: u32) -> bool {
+    return cg1(rod, i, C_PIN) == 1.0lf;
+}
 
 fn load_pin(rod: u32, i: u32) -> Pin {
     var p: Pin;
+    p.line = cg1(rod, i, C_PIN) == 2.0lf;
     p.normal = cg3(rod, i, C_N);
     p.has_crease = cg1(rod, i, C_CR) != 0.0lf;
     p.crease = cg3(rod, i, C_M);
@@ -134,7 +143,7 @@ fn load_pin(rod: u32, i: u32) -> Pin {
 }
 
 fn store_pin(rod: u32, i: u32, p: Pin) {
-    cp1(rod, i, C_PIN, 1.0lf);
+    cp1(rod, i, C_PIN, select(1.0lf, 2.0lf, p.line));
     cp3(rod, i, C_N, p.normal);
     cp1(rod, i, C_CR, select(0.0lf, 1.0lf, p.has_crease));
     cp3(rod, i, C_M, p.crease);
@@ -259,6 +268,9 @@ fn crease_direction(p: Pin) -> vec4<f64> {
 }
 
 fn sliding_part(p: Pin, v: vec3<f64>) -> vec3<f64> {
+    if p.line {
+        return p.normal * dot3(p.normal, v);
+    }
     let t = crease_direction(p);
     if t.w > 0.0lf {
         return t.xyz * dot3(t.xyz, v);
@@ -271,6 +283,9 @@ fn pin_slip(p: Pin, x: vec3<f64>) -> vec3<f64> {
 }
 
 fn free_directions(p: Pin) -> Dirs {
+    if p.line {
+        return Dirs(p.normal, vec3<f64>());
+    }
     let t = crease_direction(p);
     if t.w > 0.0lf {
         return Dirs(t.xyz, vec3<f64>());
@@ -628,12 +643,6 @@ fn contact_detect(rod: u32, t: u32, n: u32) {
 // Step 1 of `contact.rs` (`begin_step`), after the prediction: pins the points touching the mesh
 // at the solve's starting guess.
 fn contact_begin(rod: u32, t: u32, n: u32, h: f64) {
-    for (var e = 0u; e <= EPT; e++) {
-        if !own_point(t, e, n) {
-            break;
-        }
-        cp1(rod, first_of(t) + e, C_PIN, 0.0lf);
-    }
     contact_detect(rod, t, n);
     let tol = DEPTH_TOLERANCE * rod_radius(rod);
     for (var e = 0u; e <= EPT; e++) {
@@ -642,7 +651,7 @@ fn contact_begin(rod: u32, t: u32, n: u32, h: f64) {
         }
         let i = first_of(t) + e;
         let gap = cg1(rod, i, C_DG);
-        if cg1(rod, i, C_FOUND) == 0.0lf || k1(rod, K_IM, i) == 0.0lf || gap > tol {
+        if cg1(rod, i, C_FOUND) == 0.0lf || k1(rod, K_IM, i) == 0.0lf || gap > tol || is_pinned(rod, i) {
             continue;
         }
         let normal = cg3(rod, i, C_DN);
@@ -730,7 +739,12 @@ fn removed_of(rod: u32, i: u32) -> Removed {
     let p = load_pin(rod, i);
     var out: Removed;
     let t = crease_direction(p);
-    if t.w > 0.0lf {
+    if p.line {
+        let h = perpendiculars(p.normal);
+        out.e[0] = h.a;
+        out.e[1] = h.b;
+        out.c.y = w;
+    } else if t.w > 0.0lf {
         let h = perpendiculars(t.xyz);
         out.e[0] = h.a;
         out.e[1] = h.b;
@@ -786,13 +800,14 @@ fn catch_penetrations(rod: u32, t: u32, n: u32, h: f64) -> u32 {
         let i = first_of(t) + e;
         let found = cg1(rod, i, C_FOUND) != 0.0lf;
         if !found {
-            if is_pinned(rod, i) {
+            if on_mesh(rod, i) {
                 cp1(rod, i, C_PIN, 0.0lf);
                 bits |= 3u;
             }
             continue;
         }
-        if k1(rod, K_IM, i) == 0.0lf {
+        // Held points and guided ones are where their holders put them.
+        if k1(rod, K_IM, i) == 0.0lf || (is_pinned(rod, i) && !on_mesh(rod, i)) {
             continue;
         }
         let gap = cg1(rod, i, C_DG);
@@ -827,7 +842,7 @@ fn contact_update(rod: u32, t: u32, n: u32, h: f64) -> u32 {
             break;
         }
         let i = first_of(t) + e;
-        if !is_pinned(rod, i) {
+        if !on_mesh(rod, i) {
             continue;
         }
         var p = load_pin(rod, i);
@@ -875,7 +890,7 @@ fn contact_end(rod: u32, t: u32, n: u32) -> u32 {
         }
         let i = first_of(t) + e;
         var last = 0.0lf;
-        if is_pinned(rod, i) {
+        if on_mesh(rod, i) {
             pinned += 1u;
             let p = load_pin(rod, i);
             last = 2.0lf;
@@ -898,7 +913,7 @@ fn contact_depth(rod: u32, t: u32, n: u32) -> vec2<f64> {
             break;
         }
         let i = first_of(t) + e;
-        if k1(rod, K_IM, i) == 0.0lf || cg1(rod, i, C_FOUND) == 0.0lf {
+        if k1(rod, K_IM, i) == 0.0lf || cg1(rod, i, C_FOUND) == 0.0lf || (is_pinned(rod, i) && !on_mesh(rod, i)) {
             continue;
         }
         out.x = max(out.x, -cg1(rod, i, C_DG));
@@ -935,4 +950,66 @@ fn contact_record(rod: u32, t: u32, n: u32) {
         }
     }
     sync();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pins that are not the mesh's.
+
+// Every pin of the invocation's points goes at the start of a step (`w.pinned.clear()`).
+fn clear_pins(rod: u32, t: u32, n: u32) {
+    for (var e = 0u; e <= EPT; e++) {
+        if !own_point(t, e, n) {
+            break;
+        }
+        cp1(rod, first_of(t) + e, C_PIN, 0.0lf);
+    }
+}
+
+var<workgroup> guide_end: atomic<u32>;
+
+// The introducer guide (`contact::pin_guided`): the run of points it holds from index 1 on (the
+// first point being held by the hand), up to the first it does not, put on its axis and pinned
+// to move along it only. The rod's guide: K_ROD + 33 whether it has one, + 34 its origin, + 37
+// its unit axis, + 40 its length, + 41 its clearance.
+fn guide_pins(rod: u32, t: u32, n: u32) {
+    let has = kx(rod, K_ROD + 33u) > 0.0lf;
+    let origin = vec3<f64>(kx(rod, K_ROD + 34u), kx(rod, K_ROD + 35u), kx(rod, K_ROD + 36u));
+    let axis = vec3<f64>(kx(rod, K_ROD + 37u), kx(rod, K_ROD + 38u), kx(rod, K_ROD + 39u));
+    let length = kx(rod, K_ROD + 40u);
+    let clearance = kx(rod, K_ROD + 41u);
+    if t == 0u {
+        atomicStore(&guide_end, select(1u, n + 1u, has));
+    }
+    workgroupBarrier();
+    for (var e = 0u; e <= EPT; e++) {
+        if !own_point(t, e, n) {
+            break;
+        }
+        let i = first_of(t) + e;
+        let rel = s3(rod, S_X, i) - origin;
+        let along = dot3(rel, axis);
+        let lateral = rel - axis * along;
+        if i >= 1u && !(along < length && norm3(lateral) <= clearance) {
+            atomicMin(&guide_end, i);
+        }
+    }
+    workgroupBarrier();
+    let end = atomicLoad(&guide_end);
+    for (var e = 0u; e <= EPT; e++) {
+        if !own_point(t, e, n) {
+            break;
+        }
+        let i = first_of(t) + e;
+        if i < 1u || i >= end || k1(rod, K_IM, i) == 0.0lf {
+            continue;
+        }
+        let x = s3(rod, S_X, i);
+        let rel = x - origin;
+        put_s3(rod, S_X, i, x - (rel - axis * dot3(rel, axis)));
+        var p: Pin;
+        p.line = true;
+        p.normal = axis;
+        p.sliding = -1.0lf;
+        store_pin(rod, i, p);
+    }
 }

@@ -478,7 +478,7 @@ fn bend_bound(rod: u32, col: u32, j: u32, n: u32) -> f64 {
 // `precondition`: each frame's `K_θ⁻¹` with the geometric bound σ of the multipliers (the
 // previous step's with `previous`), and the clamped end frames' `W`.
 fn precondition(rod: u32, t: u32, n: u32, previous: bool, h: f64) {
-//#if MESH
+//#if PINS
     freeze_own(rod, t, n);
 //#endif
     let geometric = glob[2];
@@ -600,7 +600,7 @@ fn rhs_updates(rod: u32, t: u32, n: u32, lambda_zero: bool, h: f64) -> vec2<f64>
             let f = point_term(rod, W_LAM_G, i32(i) - 1, n, false) - point_term(rod, W_LAM_G, i32(i), n, false);
             u += f * k1(rod, K_IM, i);
         }
-//#if MESH
+//#if PINS
         if is_pinned(rod, i) && k1(rod, K_IM, i) > 0.0lf {
             u = pinned_balance(rod, i, n, u, &pinned);
         }
@@ -760,7 +760,7 @@ fn assemble(rod: u32, t: u32, n: u32) {
                 osecond = awbt(db, wb, cross_plus(s1.xyz * ilb1, -(s1.w * ilb1)));
             }
         }
-//#if MESH
+//#if PINS
         // The pinned points' directions, as the CPU's `pin_blocks` (before the clamps' terms).
         pin_rows(rod, j, n, &dg, &gsecond);
 //#endif
@@ -808,7 +808,7 @@ fn assemble(rod: u32, t: u32, n: u32) {
 // own slice. With contacts, a pinned point moves as its pin lets it (`pinned_update`), and a
 // Newton step that would move some point further than `max_move` is shortened as a whole.
 fn apply(rod: u32, t: u32, n: u32, max_move: f64) {
-//#if MESH
+//#if PINS
     var longest = 0.0lf;
 //#endif
     for (var e = 0u; e <= EPT; e++) {
@@ -817,7 +817,7 @@ fn apply(rod: u32, t: u32, n: u32, max_move: f64) {
         }
         let i = first_of(t) + e;
         let f = point_term(rod, 0u, i32(i) - 1, n, true) - point_term(rod, 0u, i32(i), n, true);
-//#if MESH
+//#if PINS
         var u = w3(rod, W_UX, i) + f * k1(rod, K_IM, i);
         if is_pinned(rod, i) {
             u = pinned_update(rod, i, w3(rod, W_UX, i), f * k1(rod, K_IM, i));
@@ -829,12 +829,14 @@ fn apply(rod: u32, t: u32, n: u32, max_move: f64) {
         put_s3(rod, S_X, i, s3(rod, S_X, i) + u);
 //#endif
     }
+//#if PINS
+    var scale = 1.0lf;
 //#if MESH
     let reach = sqrt(workgroup_max(t, longest));
-    var scale = 1.0lf;
     if reach > max_move {
         scale = max_move / reach;
     }
+//#endif
     for (var e = 0u; e <= EPT; e++) {
         if !own_point(t, e, n) {
             break;
@@ -854,13 +856,13 @@ fn apply(rod: u32, t: u32, n: u32, max_move: f64) {
         if ci < 2u {
             th = w3(rod, W_UTH, j) + wm3(rod, W_CLAMP_W, ci) * dth;
         }
-//#if MESH
+//#if PINS
         th *= scale;
 //#endif
         let q = s4(rod, S_Q, j);
         put_s4(rod, S_Q, j, qnormalise(qmul(q, vec4<f64>(th * 0.5lf, 1.0lf))));
         // The element's own multipliers (no pass of this one reads them).
-//#if MESH
+//#if PINS
         let x = V6(solution(rod, j).u * scale, solution(rod, j).v * scale);
 //#else
         let x = solution(rod, j);
@@ -930,7 +932,7 @@ fn workgroup_max(t: u32, v: f64) -> f64 {
 // The residual of an iteration: the rows' largest, and with contacts the pinned points'
 // (`Work::rhs`) and their friction's imbalance times the tolerance (`direct_solve`).
 fn residual_of(rows: f64, pinned: vec2<f64>, tolerance: f64) -> f64 {
-//#if MESH
+//#if PINS
     let r = max(rows, max(pinned.x, tolerance * pinned.y));
     if !(r <= HUGE) {
         return HUGE;
@@ -1098,6 +1100,12 @@ fn stiff_step(@builtin(local_invocation_index) t: u32, @builtin(workgroup_id) wi
             put_w3(rod, W_LAM_O, j, vec3<f64>());
         }
         sync();
+//#if PINS
+        clear_pins(rod, t, n);
+//#endif
+//#if GUIDE
+        guide_pins(rod, t, n);
+//#endif
 //#if MESH
         contact_begin(rod, t, n, h);
         sync();
