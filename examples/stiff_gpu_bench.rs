@@ -1,8 +1,9 @@
 //! The benchmark behind the "stiff step on the GPU" section of `docs/benchmarks/stiff-gpu.md`:
 //! a real guidewire (the `nitinol` preset, 256 elements over 0.5 m) stepped by the stiff scheme
-//! at 0.1 ms, its clamped hand end moving sideways and twisting under gravity, in free space (the
-//! GPU's stiff scheme has no contacts yet), run as a user runs it through the facade (wall clock,
-//! everything included).
+//! at 0.1 ms, run as a user runs it through the facade (wall clock, everything included). Two
+//! scenes (`--scene`): `free`, its clamped hand end moving sideways and twisting under gravity in
+//! free space; `insertion`, `scenes/nitinol-guidewire-insertion.toml` (pushed through the
+//! introducer into the 26 000-triangle vessel) at `--elements` and `--dt`.
 //!
 //! - one copy as a 1 kHz haptic loop would call it: ten 0.1 ms steps and the tip read back per
 //!   tick, on the GPU and on the CPU (one core) of the same machine, with the tips compared;
@@ -10,8 +11,10 @@
 //!   distance between any copy's tip and the first copy's (they start alike, so it is zero when
 //!   every copy is stepped alike).
 //!
-//! `cargo run --release --example stiff_gpu_bench -- [--ticks N] [--copies 1,64,1024,4096]
-//! [--steps N] [--elements N] [--dt S]`. Prints one JSON object per line.
+//! `cargo run --release --example stiff_gpu_bench -- [--scene free|insertion] [--ticks N]
+//! [--copies 1,64,1024,4096] [--steps N] [--elements N] [--dt S]`. Prints one JSON object per
+//! line; with contacts, each row also gives the deepest penetration and the most points behind
+//! the wall of any copy.
 
 use cosserat::scene::parse_scene;
 use cosserat::sim::{Backend, RodHandle, Simulation};
@@ -36,6 +39,23 @@ damping = {{ drag = 5.0 }}
 start = {{ kind = "clamped", velocity = [0.0, 0.2, 0.0], angular_velocity = [6.0, 0.0, 0.0], end_time = 10.0 }}
 "#
     )
+}
+
+/// `scenes/nitinol-guidewire-insertion.toml` at `elements` and `dt`.
+fn insertion(elements: usize, dt: f64) -> String {
+    include_str!("../scenes/nitinol-guidewire-insertion.toml")
+        .replace("elements = 512", &format!("elements = {elements}"))
+        .replace("dt = 1e-4", &format!("dt = {dt:e}"))
+}
+
+/// The deepest penetration and the most points behind the wall of any rod (zero without
+/// contacts).
+fn walls(sim: &Simulation) -> (f64, usize) {
+    (0..sim.stepper().rod_count())
+        .filter_map(|r| sim.stepper().collision_stats(r))
+        .fold((0.0, 0), |(d, e), s| {
+            (d.max(s.max_penetration), e.max(s.escaped_points))
+        })
 }
 
 fn build(text: &str, backend: Backend, copies: usize) -> Simulation {
@@ -92,7 +112,11 @@ fn main() {
             .map(|c| c.parse().expect("--copies N,N"))
             .collect()
     });
-    let text = scene(elements, dt);
+    let text = match value("--scene").as_deref() {
+        None | Some("free") => scene(elements, dt),
+        Some("insertion") => insertion(elements, dt),
+        Some(other) => panic!("--scene free|insertion, got {other}"),
+    };
     let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let mut gpu = build(&text, Backend::Gpu, 1);
     let mut cpu = build(&text, Backend::Cpu, 1);
@@ -121,6 +145,12 @@ fn main() {
             "cpu_iterations_per_step": summary(&cpu).0,
             "gpu_unconverged": summary(&gpu).1,
             "cpu_unconverged": summary(&cpu).1,
+            "gpu_penetration_m": walls(&gpu).0,
+            "cpu_penetration_m": walls(&cpu).0,
+            "gpu_escaped": walls(&gpu).1,
+            "cpu_escaped": walls(&cpu).1,
+            "gpu_hand_force_n": gpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
+            "cpu_hand_force_n": cpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
         })
     );
     drop(gpu);
@@ -156,6 +186,8 @@ fn main() {
                 "iterations_per_step": its,
                 "unconverged_steps": unconverged,
                 "tip_spread_m": spread,
+                "penetration_m": walls(&sim).0,
+                "escaped": walls(&sim).1,
             })
         );
     }

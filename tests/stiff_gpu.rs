@@ -185,6 +185,25 @@ fn contacts_agree(cpu: &Simulation, gpu: &Simulation, tol: f64) {
             g.max_penetration,
             c.max_penetration
         );
+        // The wall's force on each point it holds.
+        let (mut fc, mut fg) = (Vec::new(), Vec::new());
+        cpu.stepper().contacts(rod, &mut fc).expect("cpu contacts");
+        gpu.stepper().contacts(rod, &mut fg).expect("gpu contacts");
+        fc.sort_by_key(|c| c.point);
+        assert_eq!(fg.len(), fc.len(), "rod {rod}: contacts");
+        for (a, b) in fc.iter().zip(&fg) {
+            assert_eq!(a.point, b.point);
+            let scale = a.force.iter().fold(1e-12, |m: f64, x| m.max(x.abs()));
+            let (force, normal) = (
+                largest_gap(&[a.force], &[b.force]),
+                largest_gap(&[a.normal], &[b.normal]),
+            );
+            assert!(
+                force < 1e-6 * scale && normal < 1e-9,
+                "rod {rod} point {}: cpu {a:?} gpu {b:?} (force {force:e} N, normal {normal:e})",
+                a.point
+            );
+        }
     }
 }
 

@@ -932,6 +932,47 @@ impl GpuStiffSimulation {
         })
     }
 
+    /// The wall's contacts with rod `rod` at the end of the last step (reads the device): each
+    /// point the wall held, its unit normal into the lumen and the wall's force on it over the
+    /// step [N] (normal and friction), by point. Empty without a wall.
+    #[allow(clippy::type_complexity)]
+    pub fn wall_contacts(&self, rod: usize) -> Result<Vec<(usize, [f64; 3], [f64; 3])>, GpuError> {
+        self.check_rod(rod)?;
+        let (Some(state), Some(_)) = (&self.contact, &self.wall) else {
+            return Ok(Vec::new());
+        };
+        let points = self.layout.slots() + 1;
+        let len = (points * CONTACT_STATE * 8) as u64;
+        let device = &self.gpu.device;
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("stiff contacts staging"),
+            size: len,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        encoder.copy_buffer_to_buffer(state, rod as u64 * len, &staging, 0, len);
+        self.gpu.queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+        self.gpu.wait_idle()?;
+        let block: Vec<f64> = {
+            let view = staging
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Wgpu(format!("mapping the contacts: {e}")))?;
+            bytemuck::cast_slice::<u8, f64>(&view).to_vec()
+        };
+        let n = self.rods[rod].state.elements();
+        // `C_LAST` (22) says how the point touched at the end of the last step; its normal (1)
+        // and the wall's force (42).
+        Ok((0..=n)
+            .filter_map(|i| {
+                let c = &block[i * CONTACT_STATE..(i + 1) * CONTACT_STATE];
+                (c[22] != 0.0).then(|| (i, [c[1], c[2], c[3]], [c[42], c[43], c[44]]))
+            })
+            .collect())
+    }
+
     /// Every rod's state as it is now (reads the device).
     pub fn read_state(&mut self) -> Result<Vec<RodState<f64>>, GpuError> {
         let all = self.read_back(&self.st, &self.staging, self.layout.st.len)?;

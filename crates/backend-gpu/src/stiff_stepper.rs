@@ -324,6 +324,16 @@ impl Stepper for GpuStiffStepper {
     fn contacts(&self, rod: usize, out: &mut Vec<ContactSample>) -> Result<(), ControlError> {
         check_rod(rod, self.states.len())?;
         out.clear();
+        let found = self.sim.wall_contacts(rod).map_err(to_control)?;
+        out.extend(
+            found
+                .into_iter()
+                .map(|(point, normal, force)| ContactSample {
+                    point,
+                    normal,
+                    force,
+                }),
+        );
         Ok(())
     }
 

@@ -24,7 +24,8 @@
 // times the step, friction); how it touched at the end of the last step (C_LAST: 0 free,
 // 1 held by friction, 2 sliding; C_LASTPN); its last detection (C_FOUND, normal, gap, whether
 // the swept test found it, whether its centre is behind the wall); and, at the point's index, the
-// element query of the element that starts there (C_RG found, normal, wall point, gap).
+// element query of the element that starts there (C_RG found, normal, wall point, gap); the
+// wall's force on it over the last step (C_FORCE).
 const CSS: u32 = 48u;
 const C_PIN: u32 = 0u;
 const C_N: u32 = 1u;
@@ -51,6 +52,9 @@ const C_RN: u32 = 34u;
 const C_RW: u32 = 37u;
 const C_RGAP: u32 = 40u;
 const C_ESC: u32 = 41u;
+// The wall's force on the point over the last accepted step [N] (normal and friction), while
+// C_LAST says it touched.
+const C_FORCE: u32 = 42u;
 
 // The CPU's constants (`contact.rs`, `pin.rs`, `mesh_contact.rs`).
 const DEPTH_TOLERANCE: f64 = 2e-2lf;
@@ -880,9 +884,11 @@ fn contact_update(rod: u32, t: u32, n: u32, h: f64) -> u32 {
     return bits;
 }
 
-// At the end of an accepted step (`end_step`): how each point touches, for the next step.
-// Returns the invocation's pinned points.
+// At the end of an accepted step (`end_step`): how each point touches, for the next step, and
+// the wall's force on it (`record_forces`: its pin's impulse over the step squared). Returns the
+// invocation's pinned points.
 fn contact_end(rod: u32, t: u32, n: u32) -> u32 {
+    let h = glob[0];
     var pinned = 0u;
     for (var e = 0u; e <= EPT; e++) {
         if !own_point(t, e, n) {
@@ -898,6 +904,7 @@ fn contact_end(rod: u32, t: u32, n: u32) -> u32 {
                 last = 1.0lf;
             }
             cp1(rod, i, C_LASTPN, p.pn);
+            cp3(rod, i, C_FORCE, pin_impulse(rod, i, n) / (h * h));
         }
         cp1(rod, i, C_LAST, last);
     }
