@@ -41,8 +41,10 @@
 // keeps a zero multiplier. The blocks it multiplies are scaled by L⁻¹ once (Ŷ = L⁻¹ C, …),
 // and every update −Xᵀ P Y is the product −X̂ᵀ Ŷ of two of them: P = L⁻ᵀ L⁻¹ is never formed,
 // the symmetric updates take half their products, and the zero block of C_j (Γj has no
-// coupling to Ωj+1) is skipped. The elimination's chain from one element to the next is then
-// three products deep (L⁻¹, Ŷ, Ŷᵀ Ŷ) where P, P C and Cᵀ P C made it eight.
+// coupling to Ωj+1) is skipped: 41 3×3 products per interior element instead of 48, and the
+// chain from one pivot to the next no longer waits for P to be formed. On an H100 this made the
+// f64 solve 1.2× (one rod) to 1.5× (4096 rods) faster (`docs/benchmarks/stiff-gpu.md`, "Second
+// round"); the results differ from the explicit inverse's by rounding only.
 //
 // Rows and right-hand sides are laid out so that a workgroup's loads coalesce: number q of
 // element j of invocation t's slice of rod r sits at `((r · EPT + j) · Q + q) · PT + t` (Q = 48:
@@ -55,11 +57,12 @@
 // Filled in by `banded.rs`: REAL (f64 or f32); prepended: the constants PT (invocations per rod,
 // a power of two), EPT (elements per invocation) and XCH (numbers in `xch`: 27 · PT, at least 36).
 // The file that includes it declares the buffers `band_rows` (the block rows) and `band_x` (the
-// right-hand sides, overwritten with the solutions) and a uniform `band_part` with the field
-// `threads` (PT), the cyclic reduction's loop bound (a loop of barriers that a compiler had best
-// not copy per level): `banded_partitioned_main.wgsl` for the solve alone, `stiff_step.wgsl` for
-// the stiff step that assembles the rows itself. The slice's own loops run to the constant EPT
-// instead, so that they can be unrolled and their private arrays indexed by constants.
+// right-hand sides, overwritten with the solutions) and a uniform `band_part` with the fields
+// `per_thread` (EPT) and `threads` (PT): `banded_partitioned_main.wgsl` for the solve alone,
+// `stiff_step.wgsl` for the stiff step that assembles the rows itself. The loops take their
+// bounds from it rather than from the constants: bounded by EPT instead, so that a compiler
+// could unroll the slice's loops and index `ys`, `zs`, `ws` by constants, the solve was no
+// faster on an H100 (`docs/benchmarks/stiff-gpu.md`), so they stay loops.
 
 // [[a, b], [c, d]]: each field the 3×3 block itself (entry (r, c) of `a` is a[c][r]).
 struct M6 {
@@ -159,8 +162,8 @@ fn add_v(p: V6, q: V6) -> V6 {
     return V6(p.u + q.u, p.v + q.v);
 }
 
-// p + q of two symmetric blocks; the sum's c is the transpose of its b, so that the compiler
-// keeps 27 numbers of it rather than 36.
+// p + q of two symmetric blocks: the sum's c is taken as the transpose of its b (27 numbers
+// computed rather than 36).
 fn add_sym(p: M6, q: M6) -> M6 {
     let b = p.b + q.b;
     return M6(p.a + q.a, b, transpose(b), p.d + q.d);
@@ -352,9 +355,7 @@ fn partitioned_solve(rod: u32, t: u32) {
     var ys: array<M6, EPT>;
     var zs: array<M6, EPT>;
     var ws: array<V6, EPT>;
-    // The slice's loops run to the constant EPT, so that a compiler can unroll them and index
-    // these arrays by constants (registers) rather than by a loop variable (local memory).
-    for (var j = 1u; j < EPT; j++) {
+    for (var j = 1u; j < band_part.per_thread; j++) {
         // With P = L⁻ᵀ L⁻¹: Ŷ = L⁻¹ C_j, Ẑ = L⁻¹ G_j, ŵ = L⁻¹ g_j, and every update is a
         // product of two of them (−C_jᵀ P C_j = −Ŷᵀ Ŷ, …), symmetric ones by half.
         let l = chol6(add_sym(load_b(rod, j, t), dn));
@@ -462,8 +463,8 @@ fn partitioned_solve(rod: u32, t: u32) {
     if t + 1u < PT {
         xn = get_v(6u * (t + 1u));
     }
-    for (var i = 1u; i < EPT; i++) {
-        let j = EPT - i;
+    for (var i = 1u; i < band_part.per_thread; i++) {
+        let j = band_part.per_thread - i;
         let v = add_v(ws[j], add_v(neg_mul_v(ys[j], xn), neg_mul_v(zs[j], xa)));
         store_x(rod, j, t, v);
         xn = v;
