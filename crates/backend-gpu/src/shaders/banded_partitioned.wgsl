@@ -35,9 +35,16 @@
 // the same array, and every invocation back-substitutes its interior,
 // x_j = P g_j − P C_j x_{j+1} − P G_j x_a, and writes its elements' solutions.
 //
-// A 6×6 pivot is inverted by its Cholesky factorisation whose non-positive pivots get an
-// inverse of zero (as the cyclic reduction's `cr_inverse` in `banded_solve.wgsl`, taken by 3×3
-// blocks): a row no free degree of freedom reaches keeps a zero multiplier.
+// No pivot is inverted explicitly: each 6×6 pivot D = L Lᵀ is factorised by Cholesky (by 3×3
+// blocks), its non-positive pivots giving a zero row and column of L⁻¹ (as the cyclic
+// reduction's `cr_inverse` in `banded_solve.wgsl`): a row no free degree of freedom reaches
+// keeps a zero multiplier. The blocks it multiplies are scaled by L⁻¹ once (Ŷ = L⁻¹ C, …),
+// and every update −Xᵀ P Y is the product −X̂ᵀ Ŷ of two of them: P = L⁻ᵀ L⁻¹ is never formed,
+// the symmetric updates take half their products, and the zero block of C_j (Γj has no
+// coupling to Ωj+1) is skipped: 41 3×3 products per interior element instead of 48, and the
+// chain from one pivot to the next no longer waits for P to be formed. On an H100 this made the
+// f64 solve 1.2× (one rod) to 1.5× (4096 rods) faster (`docs/benchmarks/stiff-gpu.md`, "Second
+// round"); the results differ from the explicit inverse's by rounding only.
 //
 // Rows and right-hand sides are laid out so that a workgroup's loads coalesce: number q of
 // element j of invocation t's slice of rod r sits at `((r · EPT + j) · Q + q) · PT + t` (Q = 48:
@@ -52,7 +59,10 @@
 // The file that includes it declares the buffers `band_rows` (the block rows) and `band_x` (the
 // right-hand sides, overwritten with the solutions) and a uniform `band_part` with the fields
 // `per_thread` (EPT) and `threads` (PT): `banded_partitioned_main.wgsl` for the solve alone,
-// `stiff_step.wgsl` for the stiff step that assembles the rows itself.
+// `stiff_step.wgsl` for the stiff step that assembles the rows itself. The loops take their
+// bounds from it rather than from the constants: bounded by EPT instead, so that a compiler
+// could unroll the slice's loops and index `ys`, `zs`, `ws` by constants, the solve was no
+// faster on an H100 (`docs/benchmarks/stiff-gpu.md`), so they stay loops.
 
 // [[a, b], [c, d]]: each field the 3×3 block itself (entry (r, c) of `a` is a[c][r]).
 struct M6 {
@@ -132,9 +142,78 @@ fn store_x(rod: u32, j: u32, t: u32, v: V6) {
     band_x[px(rod, j, 5u, t)] = v.v.z;
 }
 
-// p q.
-fn mul(p: M6, q: M6) -> M6 {
-    return M6(p.a * q.a + p.b * q.c, p.a * q.b + p.b * q.d, p.c * q.a + p.d * q.c, p.c * q.b + p.d * q.d);
+// L⁻¹ of the Cholesky factor L of a symmetric positive semidefinite 6×6 block, as its three
+// 3×3 blocks: [[m1, 0], [k, m2]] with m1 and m2 lower triangular.
+struct L6 {
+    m1: mat3x3<REAL>,
+    k: mat3x3<REAL>,
+    m2: mat3x3<REAL>,
+}
+
+fn zero3() -> mat3x3<REAL> {
+    return mat3x3<REAL>(vec3<REAL>(), vec3<REAL>(), vec3<REAL>());
+}
+
+fn transpose6(p: M6) -> M6 {
+    return M6(transpose(p.a), transpose(p.c), transpose(p.b), transpose(p.d));
+}
+
+fn add_v(p: V6, q: V6) -> V6 {
+    return V6(p.u + q.u, p.v + q.v);
+}
+
+// p + q of two symmetric blocks: the sum's c is taken as the transpose of its b (27 numbers
+// computed rather than 36).
+fn add_sym(p: M6, q: M6) -> M6 {
+    let b = p.b + q.b;
+    return M6(p.a + q.a, b, transpose(b), p.d + q.d);
+}
+
+// B = L Lᵀ taken by 3×3 blocks, L = [[L₁, 0], [Wᵀ, L₂]] with W = L₁⁻¹ B₁₂ and L₂ the factor
+// of the Schur complement B₂₂ − Wᵀ W (a Gram product, positive semidefinite as computed), each
+// non-positive pivot giving a zero row and column of L⁻¹ (the 6×6 Cholesky of the cyclic
+// reduction's `cr_inverse`, blockwise); L⁻¹ = [[M₁, 0], [K, M₂]], K = −M₂ Wᵀ M₁. Only the
+// lower triangles of B's diagonal blocks are read.
+fn chol6(p: M6) -> L6 {
+    let m1 = chol_inv(p.a);
+    let w = m1 * p.b;
+    let m2 = chol_inv(p.d - transpose(w) * w);
+    return L6(m1, (m2 * transpose(w) * m1) * REAL(-1.0), m2);
+}
+
+// L⁻¹ q.
+fn lmul(l: L6, q: M6) -> M6 {
+    return M6(l.m1 * q.a, l.m1 * q.b, l.k * q.a + l.m2 * q.c, l.k * q.b + l.m2 * q.d);
+}
+
+// L⁻¹ q for a q whose b block is zero (a coupling C_j), and so is the product's.
+fn lmul_c(l: L6, q: M6) -> M6 {
+    return M6(l.m1 * q.a, zero3(), l.k * q.a + l.m2 * q.c, l.m2 * q.d);
+}
+
+// L⁻¹ v.
+fn lmul_v(l: L6, v: V6) -> V6 {
+    return V6(l.m1 * v.u, l.k * v.u + l.m2 * v.v);
+}
+
+// L⁻ᵀ q = [[M₁ᵀ, Kᵀ], [0, M₂ᵀ]] q.
+fn ltmul(l: L6, q: M6) -> M6 {
+    let t1 = transpose(l.m1);
+    let tk = transpose(l.k);
+    let t2 = transpose(l.m2);
+    return M6(t1 * q.a + tk * q.c, t1 * q.b + tk * q.d, t2 * q.c, t2 * q.d);
+}
+
+// L⁻ᵀ q for a q whose b block is zero.
+fn ltmul_c(l: L6, q: M6) -> M6 {
+    let tk = transpose(l.k);
+    let t2 = transpose(l.m2);
+    return M6(transpose(l.m1) * q.a + tk * q.c, tk * q.d, t2 * q.c, t2 * q.d);
+}
+
+// L⁻ᵀ v (`v * m` is mᵀ v in WGSL).
+fn ltmul_v(l: L6, v: V6) -> V6 {
+    return V6(v.u * l.m1 + v.v * l.k, v.v * l.m2);
 }
 
 // −pᵀ q.
@@ -147,17 +226,27 @@ fn neg_tmul(p: M6, q: M6) -> M6 {
     return M6(ta * q.a + tc * q.c, ta * q.b + tc * q.d, tb * q.a + td * q.c, tb * q.b + td * q.d);
 }
 
-fn transpose6(p: M6) -> M6 {
-    return M6(transpose(p.a), transpose(p.c), transpose(p.b), transpose(p.d));
+// −pᵀ q for a p whose b block is zero.
+fn neg_tmul_c(p: M6, q: M6) -> M6 {
+    let ta = transpose(p.a) * REAL(-1.0);
+    let tc = transpose(p.c) * REAL(-1.0);
+    let td = transpose(p.d) * REAL(-1.0);
+    return M6(ta * q.a + tc * q.c, ta * q.b + tc * q.d, td * q.c, td * q.d);
 }
 
-fn add(p: M6, q: M6) -> M6 {
-    return M6(p.a + q.a, p.b + q.b, p.c + q.c, p.d + q.d);
+// −pᵀ p, symmetric: six 3×3 products instead of eight.
+fn neg_gram(p: M6) -> M6 {
+    let ta = transpose(p.a) * REAL(-1.0);
+    let tc = transpose(p.c) * REAL(-1.0);
+    let b = ta * p.b + tc * p.d;
+    return M6(ta * p.a + tc * p.c, b, transpose(b), (transpose(p.b) * REAL(-1.0)) * p.b + (transpose(p.d) * REAL(-1.0)) * p.d);
 }
 
-// p v.
-fn mul_v(p: M6, v: V6) -> V6 {
-    return V6(p.a * v.u + p.b * v.v, p.c * v.u + p.d * v.v);
+// −pᵀ p for a p whose b block is zero: four products.
+fn neg_gram_c(p: M6) -> M6 {
+    let tc = transpose(p.c) * REAL(-1.0);
+    let b = tc * p.d;
+    return M6((transpose(p.a) * REAL(-1.0)) * p.a + tc * p.c, b, transpose(b), (transpose(p.d) * REAL(-1.0)) * p.d);
 }
 
 // −p v.
@@ -165,27 +254,14 @@ fn neg_mul_v(p: M6, v: V6) -> V6 {
     return V6(-(p.a * v.u + p.b * v.v), -(p.c * v.u + p.d * v.v));
 }
 
-// −pᵀ v (`v * m` is mᵀ v in WGSL).
+// −pᵀ v.
 fn neg_tmul_v(p: M6, v: V6) -> V6 {
     return V6(-(v.u * p.a + v.v * p.c), -(v.u * p.b + v.v * p.d));
 }
 
-fn add_v(p: V6, q: V6) -> V6 {
-    return V6(p.u + q.u, p.v + q.v);
-}
-
-// B⁺ of a symmetric positive semidefinite 6×6 block: its Cholesky factorisation taken by 3×3
-// blocks, L = [[L₁, 0], [Wᵀ, L₂]] with W = L₁⁻¹ B₁₂ and L₂ the factor of the Schur complement
-// B₂₂ − Wᵀ W (a Gram product, positive semidefinite as computed), each non-positive pivot
-// giving a zero inverse (the 6×6 Cholesky of the cyclic reduction's `cr_inverse`, blockwise);
-// then L⁻ᵀ L⁻¹ with L⁻¹ = [[M₁, 0], [K, M₂]], K = −M₂ Wᵀ M₁.
-fn pinv(p: M6) -> M6 {
-    let m1 = chol_inv(p.a);
-    let w = m1 * p.b;
-    let m2 = chol_inv(p.d - transpose(w) * w);
-    let k = (m2 * transpose(w) * m1) * REAL(-1.0);
-    let b = transpose(k) * m2;
-    return M6(transpose(m1) * m1 + transpose(k) * k, b, transpose(b), transpose(m2) * m2);
+// −pᵀ v for a p whose b block is zero.
+fn neg_tmul_v_c(p: M6, v: V6) -> V6 {
+    return V6(-(v.u * p.a + v.v * p.c), -(v.v * p.d));
 }
 
 // The exchange array as blocks: 3×3 (9 numbers, row-major), 6×6 (36), symmetric 6×6 (a's and
@@ -272,7 +348,7 @@ fn partitioned_solve(rod: u32, t: u32) {
     var b = load_b(rod, 0u, t);
     var f = load_f(rod, 0u, t);
     var gn = transpose6(load_c(rod, 0u, t));
-    let zero = mat3x3<REAL>(vec3<REAL>(), vec3<REAL>(), vec3<REAL>());
+    let zero = zero3();
     var dn = M6(zero, zero, zero, zero);
     var fnext = V6(vec3<REAL>(), vec3<REAL>());
     // P C_j, P G_j and P g_j of every interior element, for the back-substitution.
@@ -280,19 +356,20 @@ fn partitioned_solve(rod: u32, t: u32) {
     var zs: array<M6, EPT>;
     var ws: array<V6, EPT>;
     for (var j = 1u; j < band_part.per_thread; j++) {
-        let cj = load_c(rod, j, t);
-        let p = pinv(add(load_b(rod, j, t), dn));
-        let y = mul(p, cj);
-        let z = mul(p, gn);
-        let w = mul_v(p, add_v(load_f(rod, j, t), fnext));
-        b = add(b, neg_tmul(gn, z));
-        f = add_v(f, neg_tmul_v(gn, w));
-        dn = neg_tmul(cj, y);
-        gn = neg_tmul(cj, z);
-        fnext = neg_tmul_v(cj, w);
-        ys[j] = y;
-        zs[j] = z;
-        ws[j] = w;
+        // With P = L⁻ᵀ L⁻¹: Ŷ = L⁻¹ C_j, Ẑ = L⁻¹ G_j, ŵ = L⁻¹ g_j, and every update is a
+        // product of two of them (−C_jᵀ P C_j = −Ŷᵀ Ŷ, …), symmetric ones by half.
+        let l = chol6(add_sym(load_b(rod, j, t), dn));
+        let yh = lmul_c(l, load_c(rod, j, t));
+        let zh = lmul(l, gn);
+        let wh = lmul_v(l, add_v(load_f(rod, j, t), fnext));
+        b = add_sym(b, neg_gram(zh));
+        f = add_v(f, neg_tmul_v(zh, wh));
+        dn = neg_gram_c(yh);
+        gn = neg_tmul_c(yh, zh);
+        fnext = neg_tmul_v_c(yh, wh);
+        ys[j] = ltmul_c(l, yh);
+        zs[j] = ltmul(l, zh);
+        ws[j] = ltmul_v(l, wh);
     }
     // The reduced system: row t is the separator's, its coupling to row t + 1 is gnᵀ, and what
     // the slice before it left for it comes from invocation t − 1 (first round); the rows
@@ -301,7 +378,7 @@ fn partitioned_solve(rod: u32, t: u32) {
     put_v(XQ * t + 21u, fnext);
     workgroupBarrier();
     if t > 0u {
-        b = add(b, get_sym(XQ * (t - 1u)));
+        b = add_sym(b, get_sym(XQ * (t - 1u)));
         f = add_v(f, get_v(XQ * (t - 1u) + 21u));
     }
     workgroupBarrier();
@@ -315,27 +392,26 @@ fn partitioned_solve(rod: u32, t: u32) {
         a = transpose6(get_m(36u * (t / 2u)));
     }
     workgroupBarrier();
-    // Cyclic reduction. A row eliminated at level s keeps P A, P C and P f in `a`, `cc`, `f`.
+    // Cyclic reduction. A row eliminated at level s keeps L⁻¹ of its pivot in `le` and L⁻¹ A,
+    // L⁻¹ C and L⁻¹ f in `a`, `cc`, `f`.
     var level = 0u;
+    var le = L6(zero, zero, zero);
     var db_l = a;
     var db_r = a;
     for (var s = 1u; s < band_part.threads; s *= 2u) {
         let elim = t % (2u * s) == s;
         let keep = t % (2u * s) == 0u;
         if elim {
-            let p = pinv(b);
-            let pa = mul(p, a);
-            let pc = mul(p, cc);
-            let pf = mul_v(p, f);
+            le = chol6(b);
+            a = lmul(le, a);
+            cc = lmul(le, cc);
+            f = lmul_v(le, f);
             let at = 48u * (t / (2u * s));
-            put_m(at, neg_tmul(a, pc));
-            put_v(at + 36u, neg_tmul_v(a, pf));
-            put_v(at + 42u, neg_tmul_v(cc, pf));
-            db_l = neg_tmul(a, pa);
-            db_r = neg_tmul(cc, pc);
-            a = pa;
-            cc = pc;
-            f = pf;
+            put_m(at, neg_tmul(a, cc));
+            put_v(at + 36u, neg_tmul_v(a, f));
+            put_v(at + 42u, neg_tmul_v(cc, f));
+            db_l = neg_gram(a);
+            db_r = neg_gram(cc);
             level = s;
         }
         workgroupBarrier();
@@ -358,15 +434,17 @@ fn partitioned_solve(rod: u32, t: u32) {
         workgroupBarrier();
         if keep {
             if t >= s {
-                b = add(b, get_sym(42u * ((t - s) / (2u * s)) + 21u));
+                b = add_sym(b, get_sym(42u * ((t - s) / (2u * s)) + 21u));
             }
-            b = add(b, get_sym(42u * ((t + s) / (2u * s))));
+            b = add_sym(b, get_sym(42u * ((t + s) / (2u * s))));
         }
         workgroupBarrier();
     }
     // Back down: row 0, then the rows of each level from the top; `xch` holds the solutions.
+    // x_e = L⁻ᵀ (L⁻¹ f − L⁻¹ A x_{e−s} − L⁻¹ C x_{e+s}).
     if t == 0u {
-        put_v(0u, mul_v(pinv(b), f));
+        let l = chol6(b);
+        put_v(0u, ltmul_v(l, lmul_v(l, f)));
     }
     workgroupBarrier();
     for (var s = band_part.threads / 2u; s >= 1u; s /= 2u) {
@@ -375,7 +453,7 @@ fn partitioned_solve(rod: u32, t: u32) {
             if t + s < PT {
                 v = add_v(v, neg_mul_v(cc, get_v(6u * (t + s))));
             }
-            put_v(6u * t, v);
+            put_v(6u * t, ltmul_v(le, v));
         }
         workgroupBarrier();
     }
