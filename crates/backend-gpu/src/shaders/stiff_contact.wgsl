@@ -25,7 +25,8 @@
 // 1 held by friction, 2 sliding; C_LASTPN); its last detection (C_FOUND, normal, gap, whether
 // the swept test found it, whether its centre is behind the wall); and, at the point's index, the
 // element query of the element that starts there (C_RG found, normal, wall point, gap); the
-// wall's force on it over the last step (C_FORCE).
+// wall's force on it over the last step (C_FORCE); its clearance from the mesh (C_CLEAR2 about
+// C_CLEAR_AT).
 const CSS: u32 = 48u;
 const C_PIN: u32 = 0u;
 const C_N: u32 = 1u;
@@ -47,6 +48,10 @@ const C_FOUND: u32 = 24u;
 const C_DN: u32 = 25u;
 const C_DG: u32 = 28u;
 const C_SWEPT: u32 = 29u;
+// The point's clearance: the squared distance it may move from C_CLEAR_AT before any triangle
+// can come within its reach (not positive: none).
+const C_CLEAR2: u32 = 30u;
+const C_CLEAR_AT: u32 = 45u;
 const C_RG: u32 = 33u;
 const C_RN: u32 = 34u;
 const C_RW: u32 = 37u;
@@ -507,7 +512,10 @@ fn pin_touching(rod: u32, i: u32, normal0: vec3<f64>, gap0: f64, walls: TwoWalls
 // ---------------------------------------------------------------------------------------------
 // Detection (`StiffContacts::detect` without reuse: `RodMeshContact::detect_except` and
 // `segment_contacts`), three passes with barriers between them. Counts of swept catches and
-// element contacts go to `wg_counts`.
+// element contacts go to `wg_counts`. As on the CPU, a point that has not left the ball its last
+// query found free of triangles (its clearance) is not queried, a motion within that ball is not
+// swept, and an element whose points' clearances cover it is not queried: each skips only what
+// cannot touch, so the contacts are those of full queries.
 
 var<workgroup> wg_counts: array<atomic<u32>, 4>;
 
@@ -529,7 +537,15 @@ fn detect_points(rod: u32, t: u32, n: u32) {
         var escaped = false;
         var normal = vec3<f64>();
         var gap = 0.0lf;
-        if dot3(d, d) > far2 {
+        let c2 = cg1(rod, i, C_CLEAR2);
+        let centre = cg3(rod, i, C_CLEAR_AT);
+        let due = !(dot3(x - centre, x - centre) < c2);
+        var within = false;
+        if c2 > 0.0lf {
+            let free = (sqrt(c2) + reach) * (sqrt(c2) + reach);
+            within = dot3(x - centre, x - centre) < free && dot3(x_old - centre, x_old - centre) < free;
+        }
+        if dot3(d, d) > far2 && !within {
             let c = first_crossing64(x_old, d);
             if c.f >= 0.0lf {
                 let point = x_old + d * c.f;
@@ -539,18 +555,28 @@ fn detect_points(rod: u32, t: u32, n: u32) {
                 escaped = ahead < 0.0lf;
                 found = true;
                 swept = true;
+                cp1(rod, i, C_CLEAR2, -1.0lf);
                 atomicAdd(&wg_counts[0], 1u);
             }
         }
-        if !swept {
+        if !swept && due {
             let acc = sphere_walk(x, reach, vec3<f64>(), 2.0lf);
             let r = sphere_response(acc);
             escaped = r.escaped;
-            if acc.count > 0u && norm3(r.dir) > 0.0lf {
+            var clear = -1.0lf;
+            if acc.count == 0u {
+                // Rounding of the distances must not open a gap.
+                let clearance = sqrt(acc.near2) - reach - 1e-9lf;
+                if clearance > 0.0lf {
+                    clear = clearance * clearance;
+                }
+            } else if norm3(r.dir) > 0.0lf {
                 found = true;
                 normal = r.dir;
                 gap = -(r.depth - margin);
             }
+            cp1(rod, i, C_CLEAR2, clear);
+            cp3(rod, i, C_CLEAR_AT, x);
         }
         cp1(rod, i, C_FOUND, select(0.0lf, 1.0lf, found));
         cp3(rod, i, C_DN, normal);
@@ -558,6 +584,16 @@ fn detect_points(rod: u32, t: u32, n: u32) {
         cp1(rod, i, C_SWEPT, select(0.0lf, 1.0lf, swept));
         cp1(rod, i, C_ESC, select(0.0lf, 1.0lf, escaped));
     }
+}
+
+// How far beyond its reach point i at `x` is from the mesh at least (0 when unknown).
+fn clearance_left(rod: u32, i: u32, x: vec3<f64>) -> f64 {
+    let c2 = cg1(rod, i, C_CLEAR2);
+    if !(c2 > 0.0lf) {
+        return 0.0lf;
+    }
+    let c = cg3(rod, i, C_CLEAR_AT);
+    return max(sqrt(c2) - sqrt(dot3(x - c, x - c)), 0.0lf);
 }
 
 // A point's own gap for the element queries: its contact's, or the margin.
@@ -576,11 +612,17 @@ fn detect_elements(rod: u32, t: u32, n: u32) {
             break;
         }
         cp1(rod, j, C_RG, 0.0lf);
+        let a = s3(rod, S_X, j);
+        let b = s3(rod, S_X, j + 1u);
+        // Points whose clearances cover the element: it cannot reach the mesh.
+        let clear = clearance_left(rod, j, a) + clearance_left(rod, j + 1u, b);
+        if clear * clear >= dot3(b - a, b - a) {
+            continue;
+        }
         let limit = min(own_gap(rod, j), own_gap(rod, j + 1u)) + radius - SEGMENT_TOLERANCE * radius;
         if !(limit > 0.0lf) {
             continue;
         }
-        let a = s3(rod, S_X, j);
         let hit = ridge_nearest(a, s3(rod, S_X, j + 1u) - a, limit);
         if !hit.found || !(hit.fraction >= SEGMENT_END && hit.fraction <= 1.0lf - SEGMENT_END) {
             continue;

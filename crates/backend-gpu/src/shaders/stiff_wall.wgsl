@@ -119,6 +119,10 @@ struct SphereHit {
     // its pseudo-normal and signed distance (`wall_sd` < 0: none).
     wall_n: vec3<f64>,
     wall_sd: f64,
+    // A lower bound of the squared distance to every triangle: the nearest tested, the plane's
+    // distance of one ruled out by its plane, or the nearest box the walk did not enter (0 when
+    // the stack overflowed and nodes were left out).
+    near2: f64,
 }
 
 // Walks the tree for the sphere of radius `r` at `p` (`MeshCollider::query_sphere`). The walls
@@ -128,6 +132,7 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
     var acc: SphereHit;
     acc.near_d2 = 1.0e300lf;
     acc.wall_sd = -1.0lf;
+    acc.near2 = 1.0e300lf;
     var best_wall = 1.0e300lf;
     let r2 = r * r;
     var stack: array<u32, MESH_STACK>;
@@ -136,7 +141,9 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
     while sp > 0u {
         sp -= 1u;
         let nd = mesh_nodes[stack[sp]];
-        if node_distance2(p, nd) > r2 {
+        let bd2 = node_distance2(p, nd);
+        if bd2 > r2 {
+            acc.near2 = min(acc.near2, bd2);
             continue;
         }
         if nd.count == 0u {
@@ -144,6 +151,8 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
                 stack[sp] = nd.first;
                 stack[sp + 1u] = nd.first + 1u;
                 sp += 2u;
+            } else {
+                acc.near2 = 0.0lf;
             }
             continue;
         }
@@ -152,11 +161,13 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
             let plane = dot(tri3(slot, 3u), p - a);
             // `TriData::beyond_plane` with `PLANE_REJECT`.
             if plane * plane > r2 * (1.0lf + 1e-9lf) {
+                acc.near2 = min(acc.near2, plane * plane);
                 continue;
             }
             let cl = closest_on_triangle64(p, a, tri3(slot, 1u), tri3(slot, 2u));
             let diff = p - cl.c;
             let d2 = dot(diff, diff);
+            acc.near2 = min(acc.near2, d2);
             if !(d2 < r2) {
                 continue;
             }
