@@ -70,6 +70,45 @@ const INSTRUMENTS: [Instrument; 4] = [
     },
 ];
 
+/// What a maintainer may change about the whole suite (`cargo xtask torture --contact-rows
+/// VALUE --dt SECONDS`); the default run leaves both as the scenes and [`INSTRUMENTS`] have them.
+#[derive(Default)]
+pub(crate) struct Variant {
+    /// The TOML value given to `solver.stiff.contact_rows` in every run.
+    pub(crate) contact_rows: Option<String>,
+    /// One step for every instrument instead of its recommended one [s].
+    pub(crate) dt: Option<f64>,
+}
+
+impl Variant {
+    /// The page a run of the whole suite writes: `torture.md` for the default, else a page of
+    /// its own named by what it changed, so that the default table is never overwritten by a
+    /// variant.
+    fn page(&self) -> String {
+        let mut name = String::from("torture");
+        if let Some(dt) = self.dt {
+            name.push_str(&format!("-dt{dt:e}"));
+        }
+        if let Some(rows) = &self.contact_rows {
+            let value: String = rows.chars().filter(char::is_ascii_alphanumeric).collect();
+            name.push_str(&format!("-contact-rows-{value}"));
+        }
+        name + ".md"
+    }
+
+    /// The command line that makes the page.
+    fn command(&self) -> String {
+        let mut c = String::from("cargo xtask torture");
+        if let Some(rows) = &self.contact_rows {
+            c.push_str(&format!(" --contact-rows {rows}"));
+        }
+        if let Some(dt) = self.dt {
+            c.push_str(&format!(" --dt {dt:e}"));
+        }
+        c
+    }
+}
+
 /// Bins of the number of points in contact at the end of a step, `(from, to)` inclusive: the
 /// step's cost is compared between vessels at the same number of contacts.
 const CONTACT_BINS: [(usize, usize); 6] =
@@ -257,12 +296,16 @@ fn seamed_phantom(dir: &Path) -> Result<PathBuf, String> {
     Ok(path)
 }
 
-fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> {
+fn run_one(vessel: &Vessel, instrument: &Instrument, variant: &Variant) -> Result<Outcome, String> {
     let mut set = vessel.set.clone();
+    let dt = variant.dt.unwrap_or(instrument.dt);
+    if let Some(rows) = &variant.contact_rows {
+        set.push(("solver.stiff.contact_rows".to_string(), rows.clone()));
+    }
     set.extend([
         ("solver.scheme".to_string(), "\"stiff\"".to_string()),
         ("solver.precision".to_string(), "\"f64\"".to_string()),
-        ("solver.dt".to_string(), format!("{:e}", instrument.dt)),
+        ("solver.dt".to_string(), format!("{dt:e}")),
         ("rod.0.elements".to_string(), "256".to_string()),
         (
             "rod.0.material".to_string(),
@@ -292,7 +335,7 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         d.map(|x| x / l)
     };
-    let per_tick = (1e-3 / instrument.dt).round().max(1.0) as u64;
+    let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let radius = sim.rod_radius(wire);
     let mut out = Outcome {
         frames: 0,
@@ -440,7 +483,7 @@ fn cost_by_contacts(vessels: &[Vessel], costs: &[RunCost]) -> String {
 
 /// Runs the suite, writes `docs/benchmarks/torture.md`; `Err` when a point was outside or a run
 /// diverged.
-pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
+pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("cosserat-torture-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let defective = defective_phantom(&dir)?;
@@ -563,7 +606,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 continue;
             }
             eprintln!("{} × {} …", vessel.label, instrument.label);
-            let row = match run_one(vessel, instrument) {
+            let dt = variant.dt.unwrap_or(instrument.dt);
+            let row = match run_one(vessel, instrument, variant) {
                 Ok(o) => {
                     // The statistics agree with the oracle's depth within 5 % (and rounding).
                     let agree = (o.contact_depth - o.sphere_depth).abs()
@@ -577,7 +621,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                         "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {:.2} | {} |",
                         vessel.label,
                         instrument.label,
-                        instrument.dt,
+                        dt,
                         o.frames,
                         o.most_outside,
                         o.deepest * 1e3,
@@ -601,7 +645,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                     clean = false;
                     format!(
                         "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
-                        vessel.label, instrument.label, instrument.dt
+                        vessel.label, instrument.label, dt
                     )
                 }
             };
@@ -614,9 +658,9 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
     print!("{by_contacts}");
     let doc = format!(
         "# Torture suite: instruments through hard vessels, checked by the inside test\n\n\
-         Machine: {}; {}. Command: `cargo xtask torture` (`xtask/src/torture.rs`, whose module \
-         docs say what each run does). Each run: 256 elements, the stiff scheme in f64 at the \
-         step the README recommends for the preset in a vessel, the hand pushing at 0.2 m/s and \
+         Machine: {}; {}. Command: `{}` (`xtask/src/torture.rs`, whose module \
+         docs say what each run does). Each run: 256 elements, the stiff scheme in f64 at {}, \
+         contacts {}, the hand pushing at 0.2 m/s and \
          twisting at up to 5 rad/s for 1 s through the control API, one tick a millisecond. \
          `frames checked`: inside tests made (after every millisecond tick); `points outside \
          (inside test)`: the most points the inside test found outside the lumen at once, and \
@@ -633,11 +677,20 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
          distance any point moved over one millisecond tick, over the tick (the hand moves \
          at 0.2 m/s; a whipping wire is faster).\n\n{table}\n{by_contacts}",
         machine(),
-        conditions()
+        conditions(),
+        variant.command(),
+        match variant.dt {
+            Some(dt) => format!("a step of {dt:e} s"),
+            None => "the step the README recommends for the preset in a vessel".to_string(),
+        },
+        match &variant.contact_rows {
+            Some(rows) => format!("with `solver.stiff.contact_rows = {rows}`"),
+            None => "as the scene's default solver settings resolve them".to_string(),
+        },
     );
     // A part of the suite does not replace the whole table.
     if only.is_none() {
-        let path = root().join("docs/benchmarks/torture.md");
+        let path = root().join("docs/benchmarks").join(variant.page());
         std::fs::write(&path, doc).map_err(|e| format!("{}: {e}", path.display()))?;
         println!("wrote {}", path.display());
     }
