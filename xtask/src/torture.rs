@@ -134,6 +134,9 @@ struct Outcome {
     /// the end: where the step's time goes.
     iterations: f64,
     factorisations: f64,
+    /// Steps kept above the solver's tolerance, and the largest residual of any step.
+    unconverged: u64,
+    max_residual: f64,
     contacts: usize,
     us_per_step: f64,
     /// Of which in the contact queries.
@@ -345,6 +348,8 @@ fn run_one(vessel: &Vessel, instrument: &Instrument, variant: &Variant) -> Resul
         contact_depth: 0.0,
         iterations: 0.0,
         factorisations: 0.0,
+        unconverged: 0,
+        max_residual: 0.0,
         contacts: 0,
         us_per_step: 0.0,
         detection_us_per_step: 0.0,
@@ -423,6 +428,8 @@ fn run_one(vessel: &Vessel, instrument: &Instrument, variant: &Variant) -> Resul
     if let Some(st) = sim.stiff_summary() {
         out.iterations = st.iterations_per_step();
         out.factorisations = st.factorisations_per_step();
+        out.unconverged = st.unconverged_steps;
+        out.max_residual = st.max_residual;
     }
     out.us_per_step = wall * 1e6 / sim.steps().max(1) as f64;
     Ok(out)
@@ -594,7 +601,7 @@ pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
     let mut table = String::new();
     let _ = writeln!(
         table,
-        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | outside (statistics) | deepest (statistics) [µm] | deepest sphere (inside test) [µm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | outside (statistics) | deepest (statistics) [µm] | deepest sphere (inside test) [µm] | first outside | contacts at the end | iterations / factorisations per step | steps above the tolerance (largest residual) | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut clean = true;
     // Per run: vessel, instrument and the step's cost by contacts.
@@ -618,7 +625,7 @@ pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
                         && agree;
                     costs.push((v, instrument.label, o.by_contacts));
                     format!(
-                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {:.2} | {} |",
+                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {} ({:.1e}) | {:.1} | {:.1} | {:.2} | {} |",
                         vessel.label,
                         instrument.label,
                         dt,
@@ -635,6 +642,8 @@ pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
                         o.contacts,
                         o.iterations,
                         o.factorisations,
+                        o.unconverged,
+                        o.max_residual,
                         o.us_per_step,
                         o.detection_us_per_step,
                         o.fastest,
@@ -644,7 +653,7 @@ pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
                 Err(e) => {
                     clean = false;
                     format!(
-                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
+                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
                         vessel.label, instrument.label, dt
                     )
                 }
@@ -672,7 +681,8 @@ pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
          test and the distance from the mesh (radius less distance, points inside the lumen), \
          its independent measure; \
          `first outside`: when, which point and how deep the inside test first found a \
-         point outside; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
+         point outside; `steps above the tolerance`: steps the stiff solver kept with a \
+         residual above its tolerance (1e-5), and the largest residual of any step; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
          (points, swept points and elements, all iterations); `fastest point`: the largest \
          distance any point moved over one millisecond tick, over the tick (the hand moves \
          at 0.2 m/s; a whipping wire is faster).\n\n{table}\n{by_contacts}",
