@@ -159,6 +159,14 @@ fn bad_values_name_file_field_and_value() {
             "-0.5",
         ),
         (
+            GOOD.replace(
+                "steps = 10",
+                "steps = 10\nscheme = \"stiff\"\n[solver.stiff]\ncontact_rows = \"pins\"",
+            ),
+            "solver.stiff.contact_rows",
+            "pins",
+        ),
+        (
             GOOD.to_string() + "[[rod.load]]\npoint = 99\nforce = [0, 0, 1]\n",
             "rod[0].load[0].point",
             "99",

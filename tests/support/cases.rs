@@ -26,6 +26,7 @@ use cosserat::{
     EndCondition, Ordering, PrescribedMotion, RodBuilder, RodHandle, Simulation, SimulationBuilder,
 };
 use std::f64::consts::PI;
+use std::sync::OnceLock;
 
 /// How big the runs are: CI sizes for `cargo test`, full sizes for `cargo xtask validate`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -328,13 +329,30 @@ fn simulation_in(
         .expect("validation scene builds")
 }
 
-/// `b` stepped with `scheme`'s solver (the stiff one with its default settings).
+/// Whether the stiff scheme's cases hold contacts as rows of the solve, when a maintainer run
+/// chose (`cargo xtask validate --contact-rows BOOL`); unset, the cases take the default.
+static CONTACT_ROWS: OnceLock<bool> = OnceLock::new();
+
+/// Makes every later stiff case of this process run with `contact_rows` (a maintainer's
+/// comparison of the two contact treatments); `Err` when a case already chose.
+pub fn set_contact_rows(contact_rows: bool) -> Result<(), String> {
+    CONTACT_ROWS
+        .set(contact_rows)
+        .map_err(|_| "the stiff cases' contact treatment was already chosen".to_string())
+}
+
+/// `b` stepped with `scheme`'s solver (the stiff one with its default settings, but for
+/// [`set_contact_rows`]).
 fn with_scheme(b: SimulationBuilder, scheme: Scheme) -> SimulationBuilder {
     match scheme {
         Scheme::Explicit => b,
-        Scheme::Stiff | Scheme::StiffAt(_) => b.stiff_solver(Some(
-            cosserat::cosserat_backend_cpu::StiffSettings::default(),
-        )),
+        Scheme::Stiff | Scheme::StiffAt(_) => {
+            let mut settings = cosserat::cosserat_backend_cpu::StiffSettings::default();
+            if let Some(&rows) = CONTACT_ROWS.get() {
+                settings.contact_rows = rows;
+            }
+            b.stiff_solver(Some(settings))
+        }
     }
 }
 

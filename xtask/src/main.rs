@@ -3,7 +3,9 @@
 //! - `cargo xtask validate` — every validation case at full size against its independent
 //!   reference, the 10⁵-step long runs and the measured stable-dt map; prints the table,
 //!   writes `docs/validation.md` and `docs/stability.md`, exits non-zero on a failure.
-//!   `--only NAME` runs only the cases whose name contains NAME (and writes no docs).
+//!   `--only NAME` runs only the cases whose name contains NAME (and writes no docs);
+//!   `--contact-rows BOOL` runs the stiff scheme's cases with `StiffSettings::contact_rows` set
+//!   so (and writes no docs either).
 //! - `cargo xtask validate --timings` — the paper's free-space test at 100 and 1000 elements
 //!   next to the published timings.
 //! - `cargo xtask bench --pareto` — run time against error, work-precision diagrams in
@@ -21,7 +23,9 @@
 //!   non-zero when a loop's 99th percentile is over its period on this machine).
 //! - `cargo xtask torture` — every instrument preset pushed and twisted through hard vessels
 //!   (bowed and narrowing, the phantom, the phantom with flipped patches and a fragment), each
-//!   frame checked by the inside test, into `docs/benchmarks/torture.md`.
+//!   frame checked by the inside test, into `docs/benchmarks/torture.md`. `--contact-rows
+//!   VALUE` gives every run `solver.stiff.contact_rows = VALUE`, `--dt SECONDS` one step for
+//!   every instrument; either writes its own page beside it (`torture-dt1e-3-contact-rows-true.md`).
 //! - `cargo xtask bench --gpu [--quick]` — the GPU backend's benchmark on this machine's adapter,
 //!   into `docs/benchmarks/gpu-local.{md,json}` (`--quick`: two sizes, for software adapters). On
 //!   a GPU host without a Rust toolchain, build the example here and run it there
@@ -108,10 +112,10 @@ impl Args {
     }
 }
 
-const VALUE_OPTIONS: &[&str] = &["only"];
+const VALUE_OPTIONS: &[&str] = &["only", "contact-rows", "dt"];
 
 fn usage() -> String {
-    "usage: cargo xtask validate [--timings] [--only NAME]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --render | --gpu [--quick]]\n       cargo xtask torture [--only TEXT]\n       cargo xtask pictures".into()
+    "usage: cargo xtask validate [--timings] [--only NAME] [--contact-rows BOOL]\n       cargo xtask bench [--pareto | --insertion | --stiff | --haptic | --render | --gpu [--quick]]\n       cargo xtask torture [--only TEXT] [--contact-rows VALUE] [--dt SECONDS]\n       cargo xtask pictures".into()
 }
 
 fn run() -> Result<bool, String> {
@@ -122,7 +126,14 @@ fn run() -> Result<bool, String> {
             if args.flag("timings") {
                 return literature::run();
             }
-            validate::run(args.option("only"))
+            let contact_rows = args
+                .option("contact-rows")
+                .map(|v| {
+                    v.parse::<bool>()
+                        .map_err(|_| format!("`--contact-rows` takes true or false, not `{v}`"))
+                })
+                .transpose()?;
+            validate::run(args.option("only"), contact_rows)
         }
         "bench" => {
             args.reject_unknown(&[
@@ -152,7 +163,19 @@ fn run() -> Result<bool, String> {
         }
         "torture" => {
             args.reject_unknown(&[])?;
-            match torture::run(args.option("only")) {
+            let variant = torture::Variant {
+                contact_rows: args.option("contact-rows").map(str::to_string),
+                dt: args
+                    .option("dt")
+                    .map(|d| {
+                        d.parse::<f64>()
+                            .ok()
+                            .filter(|d| *d > 0.0)
+                            .ok_or_else(|| format!("`--dt` takes a step in seconds, not `{d}`"))
+                    })
+                    .transpose()?,
+            };
+            match torture::run(args.option("only"), &variant) {
                 Ok(()) => Ok(true),
                 Err(e) => {
                     eprintln!("{e}");

@@ -70,6 +70,45 @@ const INSTRUMENTS: [Instrument; 4] = [
     },
 ];
 
+/// What a maintainer may change about the whole suite (`cargo xtask torture --contact-rows
+/// VALUE --dt SECONDS`); the default run leaves both as the scenes and [`INSTRUMENTS`] have them.
+#[derive(Default)]
+pub(crate) struct Variant {
+    /// The TOML value given to `solver.stiff.contact_rows` in every run.
+    pub(crate) contact_rows: Option<String>,
+    /// One step for every instrument instead of its recommended one [s].
+    pub(crate) dt: Option<f64>,
+}
+
+impl Variant {
+    /// The page a run of the whole suite writes: `torture.md` for the default, else a page of
+    /// its own named by what it changed, so that the default table is never overwritten by a
+    /// variant.
+    fn page(&self) -> String {
+        let mut name = String::from("torture");
+        if let Some(dt) = self.dt {
+            name.push_str(&format!("-dt{dt:e}"));
+        }
+        if let Some(rows) = &self.contact_rows {
+            let value: String = rows.chars().filter(char::is_ascii_alphanumeric).collect();
+            name.push_str(&format!("-contact-rows-{value}"));
+        }
+        name + ".md"
+    }
+
+    /// The command line that makes the page.
+    fn command(&self) -> String {
+        let mut c = String::from("cargo xtask torture");
+        if let Some(rows) = &self.contact_rows {
+            c.push_str(&format!(" --contact-rows {rows}"));
+        }
+        if let Some(dt) = self.dt {
+            c.push_str(&format!(" --dt {dt:e}"));
+        }
+        c
+    }
+}
+
 /// Bins of the number of points in contact at the end of a step, `(from, to)` inclusive: the
 /// step's cost is compared between vessels at the same number of contacts.
 const CONTACT_BINS: [(usize, usize); 6] =
@@ -95,6 +134,9 @@ struct Outcome {
     /// the end: where the step's time goes.
     iterations: f64,
     factorisations: f64,
+    /// Steps kept above the solver's tolerance, and the largest residual of any step.
+    unconverged: u64,
+    max_residual: f64,
     contacts: usize,
     us_per_step: f64,
     /// Of which in the contact queries.
@@ -257,12 +299,16 @@ fn seamed_phantom(dir: &Path) -> Result<PathBuf, String> {
     Ok(path)
 }
 
-fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> {
+fn run_one(vessel: &Vessel, instrument: &Instrument, variant: &Variant) -> Result<Outcome, String> {
     let mut set = vessel.set.clone();
+    let dt = variant.dt.unwrap_or(instrument.dt);
+    if let Some(rows) = &variant.contact_rows {
+        set.push(("solver.stiff.contact_rows".to_string(), rows.clone()));
+    }
     set.extend([
         ("solver.scheme".to_string(), "\"stiff\"".to_string()),
         ("solver.precision".to_string(), "\"f64\"".to_string()),
-        ("solver.dt".to_string(), format!("{:e}", instrument.dt)),
+        ("solver.dt".to_string(), format!("{dt:e}")),
         ("rod.0.elements".to_string(), "256".to_string()),
         (
             "rod.0.material".to_string(),
@@ -292,7 +338,7 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         d.map(|x| x / l)
     };
-    let per_tick = (1e-3 / instrument.dt).round().max(1.0) as u64;
+    let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let radius = sim.rod_radius(wire);
     let mut out = Outcome {
         frames: 0,
@@ -302,6 +348,8 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
         contact_depth: 0.0,
         iterations: 0.0,
         factorisations: 0.0,
+        unconverged: 0,
+        max_residual: 0.0,
         contacts: 0,
         us_per_step: 0.0,
         detection_us_per_step: 0.0,
@@ -380,6 +428,8 @@ fn run_one(vessel: &Vessel, instrument: &Instrument) -> Result<Outcome, String> 
     if let Some(st) = sim.stiff_summary() {
         out.iterations = st.iterations_per_step();
         out.factorisations = st.factorisations_per_step();
+        out.unconverged = st.unconverged_steps;
+        out.max_residual = st.max_residual;
     }
     out.us_per_step = wall * 1e6 / sim.steps().max(1) as f64;
     Ok(out)
@@ -440,7 +490,7 @@ fn cost_by_contacts(vessels: &[Vessel], costs: &[RunCost]) -> String {
 
 /// Runs the suite, writes `docs/benchmarks/torture.md`; `Err` when a point was outside or a run
 /// diverged.
-pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
+pub(crate) fn run(only: Option<&str>, variant: &Variant) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("cosserat-torture-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let defective = defective_phantom(&dir)?;
@@ -551,7 +601,7 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
     let mut table = String::new();
     let _ = writeln!(
         table,
-        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | outside (statistics) | deepest (statistics) [µm] | deepest sphere (inside test) [µm] | first outside | contacts at the end | iterations / factorisations per step | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| vessel | instrument | step | frames checked | points outside (inside test) | deepest [mm] | outside (statistics) | deepest (statistics) [µm] | deepest sphere (inside test) [µm] | first outside | contacts at the end | iterations / factorisations per step | steps above the tolerance (largest residual) | µs/step | of which contact queries | fastest point [m/s] | stopped |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut clean = true;
     // Per run: vessel, instrument and the step's cost by contacts.
@@ -563,7 +613,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 continue;
             }
             eprintln!("{} × {} …", vessel.label, instrument.label);
-            let row = match run_one(vessel, instrument) {
+            let dt = variant.dt.unwrap_or(instrument.dt);
+            let row = match run_one(vessel, instrument, variant) {
                 Ok(o) => {
                     // The statistics agree with the oracle's depth within 5 % (and rounding).
                     let agree = (o.contact_depth - o.sphere_depth).abs()
@@ -574,10 +625,10 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                         && agree;
                     costs.push((v, instrument.label, o.by_contacts));
                     format!(
-                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {:.1} | {:.1} | {:.2} | {} |",
+                        "| {} | {} | {:e} s | {} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {} | {:.2} / {:.2} | {} ({:.1e}) | {:.1} | {:.1} | {:.2} | {} |",
                         vessel.label,
                         instrument.label,
-                        instrument.dt,
+                        dt,
                         o.frames,
                         o.most_outside,
                         o.deepest * 1e3,
@@ -591,6 +642,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                         o.contacts,
                         o.iterations,
                         o.factorisations,
+                        o.unconverged,
+                        o.max_residual,
                         o.us_per_step,
                         o.detection_us_per_step,
                         o.fastest,
@@ -600,8 +653,8 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
                 Err(e) => {
                     clean = false;
                     format!(
-                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
-                        vessel.label, instrument.label, instrument.dt
+                        "| {} | {} | {:e} s | — | — | — | — | — | — | — | — | — | — | — | — | — | could not run: {e} |",
+                        vessel.label, instrument.label, dt
                     )
                 }
             };
@@ -614,9 +667,9 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
     print!("{by_contacts}");
     let doc = format!(
         "# Torture suite: instruments through hard vessels, checked by the inside test\n\n\
-         Machine: {}; {}. Command: `cargo xtask torture` (`xtask/src/torture.rs`, whose module \
-         docs say what each run does). Each run: 256 elements, the stiff scheme in f64 at the \
-         step the README recommends for the preset in a vessel, the hand pushing at 0.2 m/s and \
+         Machine: {}; {}. Command: `{}` (`xtask/src/torture.rs`, whose module \
+         docs say what each run does). Each run: 256 elements, the stiff scheme in f64 at {}, \
+         contacts {}, the hand pushing at 0.2 m/s and \
          twisting at up to 5 rad/s for 1 s through the control API, one tick a millisecond. \
          `frames checked`: inside tests made (after every millisecond tick); `points outside \
          (inside test)`: the most points the inside test found outside the lumen at once, and \
@@ -628,16 +681,26 @@ pub(crate) fn run(only: Option<&str>) -> Result<(), String> {
          test and the distance from the mesh (radius less distance, points inside the lumen), \
          its independent measure; \
          `first outside`: when, which point and how deep the inside test first found a \
-         point outside; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
+         point outside; `steps above the tolerance`: steps the stiff solver kept with a \
+         residual above its tolerance (1e-5), and the largest residual of any step; `µs/step`: wall time of the steps alone, and of that the time in the contact queries \
          (points, swept points and elements, all iterations); `fastest point`: the largest \
          distance any point moved over one millisecond tick, over the tick (the hand moves \
          at 0.2 m/s; a whipping wire is faster).\n\n{table}\n{by_contacts}",
         machine(),
-        conditions()
+        conditions(),
+        variant.command(),
+        match variant.dt {
+            Some(dt) => format!("a step of {dt:e} s"),
+            None => "the step the README recommends for the preset in a vessel".to_string(),
+        },
+        match &variant.contact_rows {
+            Some(rows) => format!("with `solver.stiff.contact_rows = {rows}`"),
+            None => "as the scene's default solver settings resolve them".to_string(),
+        },
     );
     // A part of the suite does not replace the whole table.
     if only.is_none() {
-        let path = root().join("docs/benchmarks/torture.md");
+        let path = root().join("docs/benchmarks").join(variant.page());
         std::fs::write(&path, doc).map_err(|e| format!("{}: {e}", path.display()))?;
         println!("wrote {}", path.display());
     }

@@ -402,8 +402,9 @@ pub struct StiffSection {
     /// of a step from its last query (default true; `false` queries every point every time;
     /// `cosserat_backend_cpu::StiffSettings::reuse_contact_queries`).
     pub reuse_contact_queries: Option<bool>,
-    /// Contacts as unilateral rows of the Newton system instead of pins (default false;
-    /// `cosserat_backend_cpu::StiffSettings::contact_rows`).
+    /// Contacts with meshes and rod contacts' planes as unilateral rows of the Newton system
+    /// (default true); `false` holds them as pins whose walls may pull within a round, as before
+    /// 2026-11-27 (`cosserat_backend_cpu::StiffSettings::contact_rows`).
     pub contact_rows: Option<bool>,
     /// Residual above which a step still unconverged after `iterations` is retaken in halves
     /// (default: never; `cosserat_backend_cpu::StiffSettings::halve_above`).

@@ -381,12 +381,16 @@ pub struct StiffSettings {
     /// checking.
     pub reuse_contact_queries: bool,
     /// Contacts with the mesh and rod contacts' planes as unilateral rows of the Newton system,
-    /// with normal impulses of their own (`stiff/rows.rs`): each iteration solves the banded
-    /// system with the contact points' full normal mobility and, through the Schur complement
-    /// on the contact rows (one banded solve per contact at each factorisation), the
-    /// complementarity of gaps and impulses. `false` holds contact points as pins of projected
-    /// inverse mass `w (I − n nᵀ)` whose walls may pull within a round, let go between rounds.
-    /// Measured in `docs/stiff-solver.md` ("Contacts as rows of the solve").
+    /// with normal impulses of their own (`stiff/rows.rs`; the default): each iteration solves
+    /// the banded system with the contact points' full normal mobility and, through the Schur
+    /// complement on the contact rows (one banded solve per contact at each factorisation), the
+    /// complementarity of gaps and impulses, so no wall pulls within a solve. `false` holds
+    /// contact points as pins of projected inverse mass `w (I − n nᵀ)` whose walls may pull
+    /// within a round and are let go between rounds: on a stiff wire pressed on many
+    /// neighbouring points at 1 ms the pulls alternate with pushes and the steps do not converge
+    /// (the steel wire of the insertion at 1 mm elements: 640 of 2450 steps unconverged with
+    /// pins, 1 with rows). Measured in `docs/stiff-solver.md` ("Contacts as rows of the
+    /// solve"); TOML: `[solver.stiff] contact_rows = false` for pins.
     pub contact_rows: bool,
     /// Time integration: implicit Euler (the default) or BDF2 ([`Integrator`]).
     pub integrator: Integrator,
@@ -418,8 +422,8 @@ impl Default for StiffSettings {
     /// Direct solve, one factorisation per step reused by its later iterations (falling back
     /// to Newton when an iteration contracts poorly, [`Refactor`]), with the geometric bound of
     /// the frames, iterating until the residual is at most 1e-5 (at most 8 iterations, at
-    /// least one), the model's own frame inertia: the settings measured in
-    /// `docs/stiff-solver.md`. Steps that converge take 1–2 iterations; the cap of 8 (4
+    /// least one), the model's own frame inertia, contacts as rows of the solve: the settings
+    /// measured in `docs/stiff-solver.md`. Steps that converge take 1–2 iterations; the cap of 8 (4
     /// before) lets the few that need more reach the tolerance: with 4 (and Newton), 17 of the
     /// suture's 10 000 pushed-and-twisted steps at 1e-3 ended above it (largest residual
     /// 1.4e-4); with 8, one did (1.6e-5).
@@ -435,7 +439,7 @@ impl Default for StiffSettings {
             halve_above: f64::INFINITY,
             axial_fallback: true,
             reuse_contact_queries: true,
-            contact_rows: false,
+            contact_rows: true,
             integrator: Integrator::ImplicitEuler,
         }
     }

@@ -43,7 +43,9 @@
 //!    turned away stays on its plane, in the lumen;
 //! 3. after the solve, each pinned point's wall impulse `g = M (x − x̃) − Jᵀ λ` (normal and
 //!    friction) is read: a point the wall would have to pull (`n·g ≤ 0`) is released; the
-//!    others take their new normal impulse `p_n = n·g` for their friction;
+//!    others take their new normal impulse `p_n = n·g` for their friction. A contact row
+//!    (`rows.rs`) gives its multiplier instead, which `n·g` equals to rounding but for the sign
+//!    of that rounding where the solve left the row free (`Work::row_impulse`);
 //! 4. if a point was released or caught, or a normal impulse changed by more than
 //!    [`NORMAL_CHANGE`](super::pin::NORMAL_CHANGE), the solve continues from its current multipliers, for at most
 //!    [`MAX_ROUNDS`] rounds, with a new factorisation if the pinned points or their directions
@@ -462,8 +464,10 @@ impl StiffContacts {
                 continue;
             }
             let i = p.point;
-            let g = pin_impulse(w, k, &w.lambda[0], i);
-            let (pn, off_crease) = walls_impulse(&p, &g);
+            let (pn, off_crease) = match w.row_impulse(&p) {
+                Some(pn) => (pn, None),
+                None => walls_impulse(&p, &pin_impulse(w, k, &w.lambda[0], i)),
+            };
             if let Some(normal) = off_crease {
                 // One wall would have to pull: the point slides on the other.
                 p.normal = normal;

@@ -357,9 +357,10 @@ impl RodPlanes {
             if !p.rod {
                 continue;
             }
-            let g = pin_impulse(w, k, &w.lambda[0], p.point);
             // A rod-contact pin is on one plane (no crease, see `second_plane`).
-            let pn = p.normal.dot(&g);
+            let pn = w
+                .row_impulse(&p)
+                .unwrap_or_else(|| p.normal.dot(&pin_impulse(w, k, &w.lambda[0], p.point)));
             if !(pn > 0.0) {
                 // As the mesh's: a contact row left free by the solve goes quietly.
                 released |= !w.quietly_free(&p);

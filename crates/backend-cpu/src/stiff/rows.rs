@@ -267,6 +267,7 @@ fn nonnegative_qp(s: &DMatrix<f64>, c: &DVector<f64>, start: &DVector<f64>) -> D
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stiff::contact::pin_impulse;
     use crate::stiff::direct::Assembled;
     use crate::stiff::pin::Pinned;
     use crate::stiff::work::tests::setup;
@@ -312,7 +313,11 @@ mod tests {
             let before: Vec<_> = (0..=n).map(|i| w.x.get(i)).collect();
             w.apply(&k, f64::INFINITY);
             let mut free = vec![];
+            for p in w.pinned.iter().filter(|_| !rows) {
+                assert_eq!(w.row_impulse(p), None, "pin {}", p.point);
+            }
             if rows {
+                let most = w.pinned.iter().fold(0.0_f64, |m, p| m.max(p.mult));
                 for p in &w.pinned {
                     let gap = normal.dot(&(w.x.get(p.point) - before[p.point]));
                     assert!(p.mult >= 0.0 && gap > -1e-15, "point {}", p.point);
@@ -320,6 +325,16 @@ mod tests {
                     if p.mult == 0.0 {
                         free.push(p.point);
                     }
+                    // The update reads a row's normal impulse as its multiplier (exactly zero
+                    // when free), which the wall impulse `n · g` equals to rounding.
+                    let wall = normal.dot(&pin_impulse(&w, &k, &w.lambda[0], p.point));
+                    assert_eq!(w.row_impulse(p), Some(p.mult), "point {}", p.point);
+                    assert!(
+                        (wall - p.mult).abs() <= 1e-9 * most,
+                        "point {}: {wall} vs {}",
+                        p.point,
+                        p.mult
+                    );
                 }
             }
             ((0..=n).map(|i| w.x.get(i)).collect::<Vec<_>>(), free)

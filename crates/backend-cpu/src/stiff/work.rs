@@ -123,6 +123,18 @@ impl Work {
         self.contact_rows && !p.line && p.crease.is_none()
     }
 
+    /// The normal impulse of pin `p` as the solve carries it, for a contact row the solve has
+    /// held since its point last moved (`rows.rs`): its multiplier, exactly zero where the
+    /// solve left it free. Its wall impulse `n · g` equals the multiplier only to rounding,
+    /// and for a free row that rounding has either sign: read as a normal impulse, it let a
+    /// free row stay pinned with an impulse of 1e-20 whose relative change from round to round
+    /// asked for another round (`pin::NORMAL_CHANGE`). `None` for pins, and for a row put
+    /// back on a wall since (its multiplier is the old wall's).
+    pub(crate) fn row_impulse(&self, p: &Pinned) -> Option<f64> {
+        (self.is_row(p) && p.row_normal == p.normal && p.row_x == self.x.get(p.point))
+            .then_some(p.mult)
+    }
+
     /// Whether letting go of pin `p` leaves the solve as it is: a contact row whose impulse
     /// the solve left at zero and whose friction has no normal impulse to act with.
     pub(crate) fn quietly_free(&self, p: &Pinned) -> bool {
