@@ -207,8 +207,9 @@ fn contacts_agree(cpu: &Simulation, gpu: &Simulation, tol: f64) {
     }
 }
 
-/// The stiff scheme at 1 ms under gravity, every detection a full query (the GPU's way; the
-/// CPU's reuse of a point's last query passes on a bound of its gap, not the gap).
+/// The stiff scheme at 1 ms under gravity, contacts as pins and every detection a full query
+/// (the GPU's way: it has no contact rows, and the CPU's reuse of a point's last query passes on
+/// a bound of its gap, not the gap).
 const CONTACT_SOLVER: &str = r#"
 [solver]
 scheme = "stiff"
@@ -219,6 +220,7 @@ gravity = [0.0, 0.0, -9.81]
 
 [solver.stiff]
 reuse_contact_queries = false
+contact_rows = false
 "#;
 
 /// A soft wire lying across a floor, one clamped end dragged along it at 1 ms: the points pinned

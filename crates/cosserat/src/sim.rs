@@ -781,6 +781,15 @@ impl SimulationBuilder {
             warnings.extend(env.intake.iter().cloned());
             warnings.extend(env.entry_problem());
         }
+        if self.backend == Backend::Gpu
+            && self.stiff.is_some_and(|st| st.contact_rows)
+            && (self.environment.is_some() || !self.obstacles.is_empty())
+        {
+            warnings.push(
+                "the GPU's stiff scheme resolves mesh contacts as pins (solver.stiff.contact_rows = false); contact rows run on the CPU"
+                    .into(),
+            );
+        }
         let needs = self.needs();
         let stepper = match self.backend {
             Backend::Gpu => gpu_stepper(&self, needs)?,
@@ -1162,11 +1171,16 @@ fn gpu_stiff_stepper(
             (r.state, r.params, r.ends, guide)
         })
         .collect();
+    // Contacts as pins: the GPU has no contact rows (the build warns).
+    let stiff = StiffSettings {
+        contact_rows: false,
+        ..*stiff
+    };
     let stepper = cosserat_backend_gpu::GpuStiffStepper::new(
         rods,
         loads,
         &b.settings,
-        stiff,
+        &stiff,
         b.reaction_cutoff_hz
             .unwrap_or(cosserat_problem::report::DEFAULT_CUTOFF_HZ),
         &cosserat_backend_gpu::GpuOptions::default(),
