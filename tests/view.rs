@@ -47,14 +47,28 @@ fn view_under_xvfb(args: &[&std::ffi::OsStr]) -> Option<(String, String)> {
         env!("CARGO_BIN_EXE_cosserat").as_ref()
     };
     let args = if program == "bash" { &args[1..] } else { args };
-    let out = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 800x600x24"])
-        .arg(program)
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap();
+    let run = || {
+        Command::new("xvfb-run")
+            .args(["-a", "-s", "-screen 0 800x600x24"])
+            .arg(program)
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .unwrap()
+    };
+    // The X server `xvfb-run` starts is not always there when the program connects (the last
+    // test's server, still going away, can hold the display number `-a` picked): once seen in
+    // CI, as the viewer's error that it cannot connect. Such a start is tried again, twice at
+    // most; anything else the program says fails the test at once.
+    let mut out = run();
+    for _ in 0..2 {
+        if !String::from_utf8_lossy(&out.stderr).contains("Failed to open connection to X server") {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_secs(1));
+        out = run();
+    }
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     if stderr.contains("no GPU adapter") {
