@@ -109,21 +109,9 @@ impl MeshCollider {
             .enumerate()
             .map(|(slot, &t)| {
                 let [a, b, c] = self.mesh().triangle(t as usize);
-                let mut boundary = 0u32;
-                for k in 0..3u8 {
-                    if self.on_boundary(slot, Feature::Edge(k)) {
-                        boundary |= 1 << k;
-                    }
-                    if self.on_boundary(slot, Feature::Vertex(k)) {
-                        boundary |= 1 << (3 + k);
-                    }
-                }
-                if self.ridges[slot] {
-                    boundary |= 1 << 6;
-                }
                 GpuWallTriangle {
                     a: f3(a),
-                    boundary,
+                    boundary: self.boundary_bits(slot),
                     b: f3(b),
                     index: t,
                     c: f3(c),
@@ -144,10 +132,8 @@ impl MeshCollider {
     /// [`GpuWallTriangle::boundary`] and the triangle's index in the mesh.
     pub fn wall_triangles_f64(&self) -> Vec<f64> {
         let mut out = Vec::with_capacity(self.bvh().tri_indices().len() * WALL_F64);
-        for (slot, t) in self.wall_triangles().iter().enumerate() {
-            let [a, b, c] = self
-                .mesh()
-                .triangle(self.bvh().tri_indices()[slot] as usize);
+        for (slot, &t) in self.bvh().tri_indices().iter().enumerate() {
+            let [a, b, c] = self.mesh().triangle(t as usize);
             let normals = [Feature::Face]
                 .into_iter()
                 .chain((0..3).map(Feature::Edge))
@@ -156,9 +142,27 @@ impl MeshCollider {
             for v in [a, b, c].into_iter().chain(normals) {
                 out.extend([v.x, v.y, v.z]);
             }
-            out.extend([f64::from(t.boundary), f64::from(t.index)]);
+            out.extend([f64::from(self.boundary_bits(slot)), f64::from(t)]);
         }
         out
+    }
+
+    /// The boundary and ridge bits of the triangle in leaf-order `slot`
+    /// ([`GpuWallTriangle::boundary`]).
+    fn boundary_bits(&self, slot: usize) -> u32 {
+        let mut bits = 0u32;
+        for k in 0..3u8 {
+            if self.on_boundary(slot, Feature::Edge(k)) {
+                bits |= 1 << k;
+            }
+            if self.on_boundary(slot, Feature::Vertex(k)) {
+                bits |= 1 << (3 + k);
+            }
+        }
+        if self.ridges[slot] {
+            bits |= 1 << 6;
+        }
+        bits
     }
 }
 
