@@ -60,6 +60,13 @@ fn walls(sim: &Simulation) -> (f64, usize) {
         })
 }
 
+/// Tree walks per step of the first rod's contact queries (zero without contacts).
+fn walks_per_step(sim: &Simulation) -> f64 {
+    sim.stepper()
+        .collision_stats(0)
+        .map_or(0.0, |s| s.queries as f64 / s.steps.max(1) as f64)
+}
+
 fn build(text: &str, backend: Backend, copies: usize) -> Simulation {
     let overrides = [("batch.copies".to_string(), copies.to_string())];
     let (b, _, _) = parse_scene(Path::new("stiff-gpu-bench.toml"), text, &overrides)
@@ -155,6 +162,7 @@ fn main() {
             "gpu_penetration_m": walls(&gpu).0,
             "cpu_penetration_m": walls(&cpu).0,
             "gpu_escaped": walls(&gpu).1,
+            "gpu_walks_per_step": walks_per_step(&gpu),
             "cpu_escaped": walls(&cpu).1,
             "gpu_hand_force_n": gpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
             "cpu_hand_force_n": cpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
@@ -197,6 +205,7 @@ fn main() {
                 "tip_spread_m": spread,
                 "penetration_m": walls(&sim).0,
                 "escaped": walls(&sim).1,
+                "walks_per_step": walks_per_step(&sim),
             })
         );
     }

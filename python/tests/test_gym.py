@@ -74,3 +74,24 @@ def test_the_vector_environment_steps_its_copies_as_single_environments_would():
     # Different hands, different wires.
     assert not np.array_equal(obs[0], obs[1])
     assert not terminated.any() and not truncated.any()
+
+
+def test_the_vector_environment_on_the_gpu_steps_as_on_the_cpu(on_gpu):
+    """The GPU's stiff scheme (mesh contacts and the introducer in the kernel) as the vector
+    environment's batch: the same observations and rewards as the CPU's batch."""
+    kw = dict(num_envs=2, vectorization_mode="vector_entry_point", vessel_seed=5, target_branch=0,
+              elements=24, triangles=4000)
+    on_gpu_env = on_gpu(lambda: gym.make_vec(cosserat.gym.ENV_ID, backend="gpu", **kw))
+    on_cpu = gym.make_vec(cosserat.gym.ENV_ID, backend="cpu", **kw)
+    g, _ = on_gpu_env.reset(seed=0)
+    c, _ = on_cpu.reset(seed=0)
+    np.testing.assert_array_equal(g, c)
+    actions = np.array([[1.0, 0.0], [0.6, 1.0]], np.float32)
+    for _ in range(8):
+        g, rg, tg, ug, _ = on_gpu_env.step(actions)
+        c, rc, tc, uc, _ = on_cpu.step(actions)
+    # Both in f64; the CPU resolves wall contacts as rows, the GPU as pins (equal to rounding).
+    np.testing.assert_allclose(g, c, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(rg, rc, rtol=0, atol=1e-6)
+    assert not np.array_equal(g[0], g[1])
+    assert not (tg.any() or ug.any() or tc.any() or uc.any())

@@ -2,7 +2,6 @@
 clamped cantilever, the momentum balance of its clamp, bit-for-bit replay from a snapshot, and
 the library's own error messages surfacing as exceptions."""
 
-import os
 import pathlib
 import threading
 
@@ -347,21 +346,10 @@ def test_a_copy_that_diverges_stops_a_batch_of_one_simulation_and_says_which():
     assert all(e is not None and "with copy 2, which diverged" in e for e in errors[:2])
 
 
-def gpu_batch_or_skip(layout):
-    try:
-        return pushed_batch(layout, backend="gpu")
-    except cosserat.SceneError as e:
-        if "no GPU adapter" not in str(e):
-            raise
-        if os.environ.get("COSSERAT_REQUIRE_GPU") == "1":
-            pytest.fail(f"COSSERAT_REQUIRE_GPU=1 but there is no adapter: {e}")
-        pytest.skip(f"no GPU adapter: {e}")
-
-
-def test_a_gpu_batch_is_one_simulation_whose_copies_match_separate_ones():
-    copies = gpu_batch_or_skip(None)
+def test_a_gpu_batch_is_one_simulation_whose_copies_match_separate_ones(on_gpu):
+    copies = on_gpu(lambda: pushed_batch(None, backend="gpu"))
     assert copies.layout == "copies" and copies.backend == "gpu"
-    separate = gpu_batch_or_skip("simulations")
+    separate = on_gpu(lambda: pushed_batch("simulations", backend="gpu"))
     p, q = copies.positions(), separate.positions()
     assert np.abs(p[3] - p[0]).max() > 1e-4
     # f32 kernels: the same arithmetic per copy, dispatched together or apart.

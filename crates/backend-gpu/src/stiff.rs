@@ -134,7 +134,10 @@ struct StiffLayout {
 /// origin, 37 the unit axis, 40 the length, 41 the clearance).
 const ROD_SCALARS: usize = 44;
 /// Numbers per point of the contact state (`CSS` of `stiff_contact.wgsl`).
-const CONTACT_STATE: usize = 48;
+const CONTACT_STATE: usize = 56;
+/// Words of the near lists of a point and of the element starting at it (`near` of
+/// `stiff_wall.wgsl`: two lists of `NEAR_WORDS`).
+const NEAR_LISTS: usize = 64;
 /// Numbers of the per-rod report (`rep`): the counters (`ST_*` of the kernel), then per end the
 /// raw and the filtered reaction (`RE`, `RE_END`), then the largest filtered force (`RE_MAX`).
 const REPORT: usize = 48;
@@ -293,6 +296,8 @@ pub struct GpuStiffSimulation {
     rep_staging: wgpu::Buffer,
     /// The contact state of every point (`cs`), with a mesh or a guide.
     contact: Option<wgpu::Buffer>,
+    /// The near lists of every point and element (`near`), with a mesh.
+    near: Option<wgpu::Buffer>,
     wall: Option<GpuStiffWall>,
     /// Whether the kernel pins guided points (built with a rod that has a guide).
     guided: bool,
@@ -312,10 +317,12 @@ pub struct GpuStiffSimulation {
 
 /// A [`GpuStiffSimulation`]'s whole state, to return to ([`GpuStiffSimulation::restore`]): copies
 /// of its buffers on the device (the state, the working values with the multipliers the next step
-/// starts from, the factorisation's rows, the report) and what the host keeps.
+/// starts from, the factorisation's rows, the report, the contact state and near lists) and what
+/// the host keeps.
 pub struct GpuStiffSnapshot {
     buffers: [wgpu::Buffer; 4],
     contact: Option<wgpu::Buffer>,
+    near: Option<wgpu::Buffer>,
     rods: Vec<GpuStiffRod>,
     reports: Vec<[f64; REPORT]>,
     step: u64,
@@ -447,6 +454,14 @@ impl GpuStiffSimulation {
                 copy_out,
             )
         });
+        // Four bytes a word: half the `f64` count the helper sizes by.
+        let near = wall.is_some().then(|| {
+            buffer(
+                "stiff near lists",
+                (n_rods * (slots + 1) * NEAR_LISTS).div_ceil(2),
+                copy_out,
+            )
+        });
         let shape = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("stiff shape"),
             size: 32,
@@ -483,6 +498,9 @@ impl GpuStiffSimulation {
         if let Some(state) = &contact {
             bound.push((12, state));
         }
+        if let Some(lists) = &near {
+            bound.push((13, lists));
+        }
         let entries: Vec<_> = bound
             .into_iter()
             .map(|(binding, b)| wgpu::BindGroupEntry {
@@ -514,6 +532,7 @@ impl GpuStiffSimulation {
             staging,
             rep_staging,
             contact,
+            near,
             wall,
             guided,
             rods,
@@ -854,10 +873,12 @@ impl GpuStiffSimulation {
         };
         let buffers = [&self.st, &self.wk, &self.rows, &self.rep].map(&mut keep);
         let contact = self.contact.as_ref().map(&mut keep);
+        let near = self.near.as_ref().map(&mut keep);
         self.gpu.queue.submit([encoder.finish()]);
         GpuStiffSnapshot {
             buffers,
             contact,
+            near,
             rods: self.rods.clone(),
             reports: self.reports.clone(),
             step: self.step,
@@ -909,14 +930,18 @@ impl GpuStiffSimulation {
         if let (Some(copy), Some(b)) = (&snapshot.contact, &self.contact) {
             encoder.copy_buffer_to_buffer(copy, 0, b, 0, b.size());
         }
+        if let (Some(copy), Some(b)) = (&snapshot.near, &self.near) {
+            encoder.copy_buffer_to_buffer(copy, 0, b, 0, b.size());
+        }
         self.gpu.queue.submit([encoder.finish()]);
         self.gpu.wait_idle()
     }
 
     /// The contacts' statistics of rod `rod` as last read back (`None` without a wall): the
     /// penetration and the points behind the wall from a detection at each step's end, the
-    /// points pinned at the last step and the most so far, the swept tests' catches and the
-    /// element contacts per detection.
+    /// points pinned at the last step and the most so far, the swept tests' catches, the
+    /// element contacts per detection, and in `queries` the walks of the tree (points' and
+    /// elements' queries and sweeps their near lists could not answer).
     pub fn collision_stats(&self, rod: usize) -> Option<CollisionStats> {
         self.wall.as_ref()?;
         let s = self.reports.get(rod)?;
@@ -928,6 +953,7 @@ impl GpuStiffSimulation {
             steps: s[42] as u64,
             swept_catches: s[15] as u64,
             segment_contacts: s[41] as u64,
+            queries: s[43] as u64,
             ..CollisionStats::default()
         })
     }

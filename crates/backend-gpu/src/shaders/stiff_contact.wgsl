@@ -26,8 +26,9 @@
 // the swept test found it, whether its centre is behind the wall); and, at the point's index, the
 // element query of the element that starts there (C_RG found, normal, wall point, gap); the
 // wall's force on it over the last step (C_FORCE); its clearance from the mesh (C_CLEAR2 about
-// C_CLEAR_AT).
-const CSS: u32 = 48u;
+// C_CLEAR_AT); the ball of its near list (C_LAT, radius C_LR, not positive: no list) and, at
+// the point's index, the ball of the element's near list (C_EAT, C_ER).
+const CSS: u32 = 56u;
 const C_PIN: u32 = 0u;
 const C_N: u32 = 1u;
 const C_CR: u32 = 4u;
@@ -60,6 +61,10 @@ const C_ESC: u32 = 41u;
 // The wall's force on the point over the last accepted step [N] (normal and friction), while
 // C_LAST says it touched.
 const C_FORCE: u32 = 42u;
+const C_LAT: u32 = 48u;
+const C_LR: u32 = 51u;
+const C_EAT: u32 = 52u;
+const C_ER: u32 = 55u;
 
 // The CPU's constants (`contact.rs`, `pin.rs`, `mesh_contact.rs`).
 const DEPTH_TOLERANCE: f64 = 2e-2lf;
@@ -74,6 +79,9 @@ const STICK_SPEED: f64 = 1e-4lf;
 const SWEEP_FRACTION: f64 = 0.5lf;
 const SEGMENT_END: f64 = 1e-6lf;
 const SEGMENT_TOLERANCE: f64 = 0.02lf;
+// How far a near list reaches beyond the query it was made for, in the point's reach (radius and
+// margin): the list serves every query until its point has moved that far.
+const LIST_SKIN: f64 = 1.0lf;
 
 fn cbase(rod: u32, i: u32) -> u32 {
     return (rod * NPT + i) * CSS;
@@ -93,6 +101,74 @@ fn cp3(rod: u32, i: u32, k: u32, v: vec3<f64>) {
     cs[b] = v.x;
     cs[b + 1u] = v.y;
     cs[b + 2u] = v.z;
+}
+
+// Where the near lists of point i and of the element starting at it begin in `near`.
+fn near_base(rod: u32, i: u32) -> u32 {
+    return (rod * NPT + i) * 2u * NEAR_WORDS;
+}
+
+// After a walk made the list at `list` for the ball of radius `w` about `centre`: keeps the ball
+// at `at` (its centre, then its radius) of point or element i, or marks it unusable when the
+// list overflowed.
+fn keep_ball(rod: u32, i: u32, at: u32, list: u32, centre: vec3<f64>, w: f64) {
+    if near[list] == NEAR_FULL {
+        cp1(rod, i, at + 3u, -1.0lf);
+        return;
+    }
+    // Rounding of the distances must not widen the ball.
+    cp1(rod, i, at + 3u, w * (1.0lf - 1e-9lf));
+    cp3(rod, i, at, centre);
+}
+
+// The sphere query of point i at `x` (`sphere_walk`): from its near list while the sphere lies in
+// the list's ball, else by a walk of the tree that makes the list again.
+fn point_query(rod: u32, i: u32, x: vec3<f64>, reach: f64, away: vec3<f64>, cos_max: f64) -> SphereHit {
+    let list = near_base(rod, i);
+    let lr = cg1(rod, i, C_LR);
+    if lr > 0.0lf {
+        let dist = norm3(x - cg3(rod, i, C_LAT));
+        if dist + reach <= lr {
+            let bound = lr - dist;
+            return sphere_list(x, reach, away, cos_max, list, bound * bound);
+        }
+    }
+    atomicAdd(&wg_counts[4], 1u);
+    let w = reach * (1.0lf + LIST_SKIN);
+    let acc = sphere_walk(x, reach, away, cos_max, list, w);
+    keep_ball(rod, i, C_LAT, list, x, w);
+    return acc;
+}
+
+// The swept test of point i moving from `o` by `d` (`first_crossing64`): from its near list when
+// the motion lies in the list's ball.
+fn crossing_query(rod: u32, i: u32, o: vec3<f64>, d: vec3<f64>, reach: f64) -> Crossing64 {
+    let lr = cg1(rod, i, C_LR);
+    if lr > 0.0lf {
+        let c = cg3(rod, i, C_LAT);
+        if norm3(o - c) + reach <= lr && norm3(o + d - c) + reach <= lr {
+            return first_crossing_list(o, d, near_base(rod, i));
+        }
+    }
+    atomicAdd(&wg_counts[4], 1u);
+    return first_crossing64(o, d);
+}
+
+// The element query of element j from `a` by `d` (`ridge_nearest`): from its near list while
+// the query's ball lies in the list's, else by a walk that makes the list again.
+fn element_query(rod: u32, j: u32, a: vec3<f64>, d: vec3<f64>, limit: f64) -> RidgeHit {
+    let list = near_base(rod, j) + NEAR_WORDS;
+    let centre = a + d * 0.5lf;
+    let own = 0.5lf * norm3(d) + limit;
+    let lr = cg1(rod, j, C_ER);
+    if lr > 0.0lf && norm3(centre - cg3(rod, j, C_EAT)) + own <= lr {
+        return ridge_list(a, d, limit, list);
+    }
+    atomicAdd(&wg_counts[4], 1u);
+    let w = max(0.5lf * norm3(d) + (rod_radius(rod) + mesh_margin()) * (1.0lf + LIST_SKIN), own);
+    let hit = ridge_nearest(a, d, limit, list, w);
+    keep_ball(rod, j, C_EAT, list, centre, w);
+    return hit;
 }
 
 fn rod_radius(rod: u32) -> f64 {
@@ -462,11 +538,11 @@ fn two_walls(rod: u32, i: u32, tol: f64) -> TwoWalls {
     let radius = rod_radius(rod);
     let reach = radius + mesh_margin();
     let x = s3(rod, S_X, i);
-    let first = sphere_walk(x, reach, vec3<f64>(), 2.0lf);
+    let first = point_query(rod, i, x, reach, vec3<f64>(), 2.0lf);
     if first.wall_sd < 0.0lf || first.wall_sd - radius > tol {
         return out;
     }
-    let second = sphere_walk(x, reach, first.wall_n, CREASE_COS);
+    let second = point_query(rod, i, x, reach, first.wall_n, CREASE_COS);
     if second.wall_sd < 0.0lf || second.wall_sd - radius > tol {
         return out;
     }
@@ -517,7 +593,9 @@ fn pin_touching(rod: u32, i: u32, normal0: vec3<f64>, gap0: f64, walls: TwoWalls
 // swept, and an element whose points' clearances cover it is not queried: each skips only what
 // cannot touch, so the contacts are those of full queries.
 
-var<workgroup> wg_counts: array<atomic<u32>, 4>;
+// The step's swept catches, element contacts, pinned points, points behind the wall, and tree
+// walks (queries the near lists could not answer).
+var<workgroup> wg_counts: array<atomic<u32>, 5>;
 
 fn detect_points(rod: u32, t: u32, n: u32) {
     let radius = rod_radius(rod);
@@ -546,7 +624,7 @@ fn detect_points(rod: u32, t: u32, n: u32) {
             within = dot3(x - centre, x - centre) < free && dot3(x_old - centre, x_old - centre) < free;
         }
         if dot3(d, d) > far2 && !within {
-            let c = first_crossing64(x_old, d);
+            let c = crossing_query(rod, i, x_old, d, reach);
             if c.f >= 0.0lf {
                 let point = x_old + d * c.f;
                 normal = tri3(c.slot, 3u);
@@ -560,7 +638,7 @@ fn detect_points(rod: u32, t: u32, n: u32) {
             }
         }
         if !swept && due {
-            let acc = sphere_walk(x, reach, vec3<f64>(), 2.0lf);
+            let acc = point_query(rod, i, x, reach, vec3<f64>(), 2.0lf);
             let r = sphere_response(acc);
             escaped = r.escaped;
             var clear = -1.0lf;
@@ -623,7 +701,7 @@ fn detect_elements(rod: u32, t: u32, n: u32) {
         if !(limit > 0.0lf) {
             continue;
         }
-        let hit = ridge_nearest(a, s3(rod, S_X, j + 1u) - a, limit);
+        let hit = element_query(rod, j, a, s3(rod, S_X, j + 1u) - a, limit);
         if !hit.found || !(hit.fraction >= SEGMENT_END && hit.fraction <= 1.0lf - SEGMENT_END) {
             continue;
         }
@@ -994,7 +1072,8 @@ fn contact_record(rod: u32, t: u32, n: u32) {
     if t == 0u {
         put_r1(rod, ST_PEN, max(r1(rod, ST_PEN), deepest));
         put_r1(rod, ST_ESC, max(r1(rod, ST_ESC), f64(atomicLoad(&wg_counts[3]))));
-        for (var k = 0u; k < 4u; k++) {
+        put_r1(rod, ST_WALKS, r1(rod, ST_WALKS) + f64(atomicLoad(&wg_counts[4])));
+        for (var k = 0u; k < 5u; k++) {
             atomicStore(&wg_counts[k], 0u);
         }
     }

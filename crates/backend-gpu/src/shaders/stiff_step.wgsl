@@ -985,7 +985,7 @@ const ST_DKIND: u32 = 9u;
 const ST_DVAL: u32 = 10u;
 // With contacts: the points pinned at the end of the last step, the most so far, the deepest
 // penetration, the most points behind the wall at a step's end, the swept tests' catches, the
-// element contacts, and the steps counted.
+// element contacts, the steps counted, and the tree walks of the queries.
 const ST_CONT: u32 = 11u;
 const ST_MAXC: u32 = 12u;
 const ST_PEN: u32 = 13u;
@@ -993,6 +993,7 @@ const ST_ESC: u32 = 14u;
 const ST_SWEPT: u32 = 15u;
 const ST_SEG: u32 = 41u;
 const ST_CSTEPS: u32 = 42u;
+const ST_WALKS: u32 = 43u;
 // Then per end (RE_END numbers each from RE): the raw force and torque of the last step, the
 // filtered force and torque; then the largest filtered force so far.
 const RE: u32 = 16u;

@@ -4,8 +4,9 @@
 // rounding. The explicit kernels' `wall_contact.wgsl` answers the same questions in f32 with
 // near lists; the stiff scheme keeps its state in f64 and pins points on the wall to within a
 // fraction of a micrometre, so here the corners and pseudo-normals are the CPU's f64 values
-// (`MeshCollider::wall_triangles_f64`) and every query walks the tree (the tree's boxes are the
-// CPU's f32 boxes, widened to f64 as the CPU widens them).
+// (`MeshCollider::wall_triangles_f64`); the tree's boxes are the CPU's f32 boxes, widened to f64
+// as the CPU widens them. A query walks the tree only when the near list of its point or element
+// (below) cannot answer it.
 //
 // Composed after stiff_step.wgsl only for simulations with a mesh.
 
@@ -125,16 +126,100 @@ struct SphereHit {
     near2: f64,
 }
 
-// Walks the tree for the sphere of radius `r` at `p` (`MeshCollider::query_sphere`). The walls
-// in front are kept (`wall_n`, `wall_sd`) when `filter` is on: those whose normal makes a cosine
-// of at most `cos_max` in magnitude with `away` (pass a zero `away` and 2 to keep every wall).
-fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit {
+// Near lists: a point's (or an element's) triangles, kept between queries. A walk for a sphere
+// of radius `r` may also list every triangle within a larger `w` of its centre (those whose box
+// and plane are within `w`); while a later sphere of radius `r` about `p` lies inside that ball,
+// the list holds every triangle the sphere can touch, in the walk's order, so scanning it gives
+// the walk's answer to the last bit, at the cost of the list instead of the tree's levels of
+// dependent loads. A list takes NEAR_WORDS words of `near`: the count, then the slots; a count of
+// NEAR_FULL marks one that overflowed (the walk's answer stands, the list is not used).
+@group(0) @binding(13) var<storage, read_write> near: array<u32>;
+
+const NEAR_WORDS: u32 = 32u;
+const NEAR_FULL: u32 = 0xffffffffu;
+const NO_LIST: u32 = 0xffffffffu;
+
+// Appends `slot` to the list at `list` holding `listed` entries; returns the new count,
+// NEAR_FULL when it does not fit.
+fn list_push(list: u32, listed: u32, slot: u32) -> u32 {
+    if listed == NEAR_FULL || listed + 1u >= NEAR_WORDS {
+        return NEAR_FULL;
+    }
+    near[list + 1u + listed] = slot;
+    return listed + 1u;
+}
+
+// One triangle of a sphere query (`MeshCollider::query_sphere`'s test of a triangle), summed into
+// `acc`; `best_wall` is the least signed distance of the walls kept so far.
+fn sphere_triangle(
+    acc: ptr<function, SphereHit>,
+    best_wall: ptr<function, f64>,
+    slot: u32,
+    p: vec3<f64>,
+    r: f64,
+    away: vec3<f64>,
+    cos_max: f64,
+) {
+    let r2 = r * r;
+    let a = tri3(slot, 0u);
+    let plane = dot(tri3(slot, 3u), p - a);
+    // `TriData::beyond_plane` with `PLANE_REJECT`.
+    if plane * plane > r2 * (1.0lf + 1e-9lf) {
+        (*acc).near2 = min((*acc).near2, plane * plane);
+        return;
+    }
+    let cl = closest_on_triangle64(p, a, tri3(slot, 1u), tri3(slot, 2u));
+    let diff = p - cl.c;
+    let d2 = dot(diff, diff);
+    (*acc).near2 = min((*acc).near2, d2);
+    if !(d2 < r2) {
+        return;
+    }
+    let d = sqrt(d2);
+    let n = feature_normal64(slot, cl.feature);
+    let front = dot(diff, n) >= 0.0lf;
+    let sd = select(-d, d, front);
+    if d2 < (*acc).near_d2 {
+        (*acc).near_d2 = d2;
+        (*acc).near_signed = sd;
+        (*acc).near_boundary = feature_on_boundary64(slot, cl.feature);
+    }
+    let depth = r - sd;
+    (*acc).count += 1u;
+    (*acc).sum_all += n * depth;
+    (*acc).w_all += depth;
+    (*acc).max_all = max((*acc).max_all, depth);
+    if front {
+        (*acc).sum_front += n * depth;
+        (*acc).w_front += depth;
+        (*acc).max_front = max((*acc).max_front, depth);
+        if abs(dot(away, n)) <= cos_max && sd < *best_wall {
+            *best_wall = sd;
+            (*acc).wall_n = n;
+            (*acc).wall_sd = sd;
+        }
+    }
+}
+
+fn sphere_start() -> SphereHit {
     var acc: SphereHit;
     acc.near_d2 = 1.0e300lf;
     acc.wall_sd = -1.0lf;
     acc.near2 = 1.0e300lf;
+    return acc;
+}
+
+// Walks the tree for the sphere of radius `r` at `p` (`MeshCollider::query_sphere`). The walls
+// in front are kept (`wall_n`, `wall_sd`) when `filter` is on: those whose normal makes a cosine
+// of at most `cos_max` in magnitude with `away` (pass a zero `away` and 2 to keep every wall).
+// With `list` (not NO_LIST), it also lists at `list` the triangles within `w` >= `r` of `p`.
+fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64, list: u32, w: f64) -> SphereHit {
+    var acc = sphere_start();
     var best_wall = 1.0e300lf;
-    let r2 = r * r;
+    let listing = list != NO_LIST;
+    let reach = select(r, max(w, r), listing);
+    let w2 = reach * reach;
+    var listed = 0u;
     var stack: array<u32, MESH_STACK>;
     stack[0] = 0u;
     var sp = 1u;
@@ -142,7 +227,7 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
         sp -= 1u;
         let nd = mesh_nodes[stack[sp]];
         let bd2 = node_distance2(p, nd);
-        if bd2 > r2 {
+        if bd2 > w2 {
             acc.near2 = min(acc.near2, bd2);
             continue;
         }
@@ -153,49 +238,36 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64) -> SphereHit
                 sp += 2u;
             } else {
                 acc.near2 = 0.0lf;
+                listed = NEAR_FULL;
             }
             continue;
         }
         for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-            let a = tri3(slot, 0u);
-            let plane = dot(tri3(slot, 3u), p - a);
-            // `TriData::beyond_plane` with `PLANE_REJECT`.
-            if plane * plane > r2 * (1.0lf + 1e-9lf) {
-                acc.near2 = min(acc.near2, plane * plane);
-                continue;
-            }
-            let cl = closest_on_triangle64(p, a, tri3(slot, 1u), tri3(slot, 2u));
-            let diff = p - cl.c;
-            let d2 = dot(diff, diff);
-            acc.near2 = min(acc.near2, d2);
-            if !(d2 < r2) {
-                continue;
-            }
-            let d = sqrt(d2);
-            let n = feature_normal64(slot, cl.feature);
-            let front = dot(diff, n) >= 0.0lf;
-            let sd = select(-d, d, front);
-            if d2 < acc.near_d2 {
-                acc.near_d2 = d2;
-                acc.near_signed = sd;
-                acc.near_boundary = feature_on_boundary64(slot, cl.feature);
-            }
-            let depth = r - sd;
-            acc.count += 1u;
-            acc.sum_all += n * depth;
-            acc.w_all += depth;
-            acc.max_all = max(acc.max_all, depth);
-            if front {
-                acc.sum_front += n * depth;
-                acc.w_front += depth;
-                acc.max_front = max(acc.max_front, depth);
-                if abs(dot(away, n)) <= cos_max && sd < best_wall {
-                    best_wall = sd;
-                    acc.wall_n = n;
-                    acc.wall_sd = sd;
+            if listing && listed != NEAR_FULL {
+                let plane = dot(tri3(slot, 3u), p - tri3(slot, 0u));
+                if plane * plane <= w2 * (1.0lf + 1e-9lf) {
+                    listed = list_push(list, listed, slot);
                 }
             }
+            sphere_triangle(&acc, &best_wall, slot, p, r, away, cos_max);
         }
+    }
+    if listing {
+        near[list] = listed;
+    }
+    return acc;
+}
+
+// The sphere query of `sphere_walk` answered from the list at `list`, made about a centre within
+// its ball: `bound2` is the squared distance from `p` to the ball's surface, a lower bound of
+// the distance to every triangle left out.
+fn sphere_list(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64, list: u32, bound2: f64) -> SphereHit {
+    var acc = sphere_start();
+    acc.near2 = bound2;
+    var best_wall = 1.0e300lf;
+    let count = near[list];
+    for (var k = 1u; k <= count; k++) {
+        sphere_triangle(&acc, &best_wall, near[list + k], p, r, away, cos_max);
     }
     return acc;
 }
@@ -282,9 +354,24 @@ struct Crossing64 {
     slot: u32,
 }
 
+// One triangle of `first_crossing`: a crossing from the lumen side before `best` replaces it.
+fn crossing_triangle(best: ptr<function, Crossing64>, slot: u32, o: vec3<f64>, d: vec3<f64>) {
+    if dot(tri3(slot, 3u), d) >= 0.0lf {
+        return;
+    }
+    let f = segment_triangle64(o, d, tri3(slot, 0u), tri3(slot, 1u), tri3(slot, 2u));
+    if f >= 0.0lf && f < (*best).f {
+        (*best).f = f;
+        (*best).slot = slot;
+    }
+}
+
+fn crossing_found(best: Crossing64) -> Crossing64 {
+    return Crossing64(select(-1.0lf, best.f, best.f <= 1.0lf), best.slot);
+}
+
 fn first_crossing64(o: vec3<f64>, d: vec3<f64>) -> Crossing64 {
-    var best = 2.0lf;
-    var best_slot = 0u;
+    var best = Crossing64(2.0lf, 0u);
     if all(d == vec3<f64>()) {
         return Crossing64(-1.0lf, 0u);
     }
@@ -299,14 +386,7 @@ fn first_crossing64(o: vec3<f64>, d: vec3<f64>) -> Crossing64 {
         }
         if nd.count > 0u {
             for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-                if dot(tri3(slot, 3u), d) >= 0.0lf {
-                    continue;
-                }
-                let f = segment_triangle64(o, d, tri3(slot, 0u), tri3(slot, 1u), tri3(slot, 2u));
-                if f >= 0.0lf && f < best {
-                    best = f;
-                    best_slot = slot;
-                }
+                crossing_triangle(&best, slot, o, d);
             }
         } else if sp + 2u <= MESH_STACK {
             stack[sp] = nd.first;
@@ -314,7 +394,20 @@ fn first_crossing64(o: vec3<f64>, d: vec3<f64>) -> Crossing64 {
             sp += 2u;
         }
     }
-    return Crossing64(select(-1.0lf, best, best <= 1.0lf), best_slot);
+    return crossing_found(best);
+}
+
+// `first_crossing64` from a point's list, for a motion inside the list's ball.
+fn first_crossing_list(o: vec3<f64>, d: vec3<f64>, list: u32) -> Crossing64 {
+    var best = Crossing64(2.0lf, 0u);
+    if all(d == vec3<f64>()) {
+        return Crossing64(-1.0lf, 0u);
+    }
+    let count = near[list];
+    for (var k = 1u; k <= count; k++) {
+        crossing_triangle(&best, near[list + k], o, d);
+    }
+    return crossing_found(best);
 }
 
 // Closest points of segments p1 + s d1 and p2 + t d2 (collide `closest_points_segments`): (s, t).
@@ -431,21 +524,55 @@ struct RidgeHit {
     normal: vec3<f64>,
 }
 
-fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64) -> RidgeHit {
-    var out: RidgeHit;
-    var best_d2 = 0.0lf;
-    var best_s = 0.0lf;
-    var best_slot = 0u;
-    var found = false;
+// The nearest ridge triangle so far: its squared distance and fraction along the element, its
+// slot, and whether there is one.
+struct RidgeBest {
+    d2: f64,
+    s: f64,
+    slot: u32,
+    found: bool,
+}
+
+// One triangle of `segment_nearest_among`: a ridge triangle within `limit` of the element nearer
+// than the best so far replaces it.
+fn ridge_triangle(best: ptr<function, RidgeBest>, slot: u32, p: vec3<f64>, d: vec3<f64>, limit: f64) {
+    if (tri_bits(slot) & 64u) == 0u {
+        return;
+    }
+    let a = tri3(slot, 0u);
+    let n = tri3(slot, 3u);
+    let h0 = dot(n, p - a);
+    let h1 = dot(n, p + d - a);
+    if (h0 > limit && h1 > limit) || (h0 < -limit && h1 < -limit) || beyond_sides64(p, d, slot, limit) {
+        return;
+    }
+    let ds = segment_triangle_distance2_64(p, d, a, tri3(slot, 1u), tri3(slot, 2u));
+    if ds.x < limit * limit && (!(*best).found || ds.x < (*best).d2) {
+        (*best).found = true;
+        (*best).d2 = ds.x;
+        (*best).s = ds.y;
+        (*best).slot = slot;
+    }
+}
+
+// The ridge triangle nearest to the element from p to p + d within `limit`, by a walk of the tree
+// that, with `list` (not NO_LIST), also lists at `list` the ridge triangles within `w` of the
+// element's centre.
+fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64, list: u32, w: f64) -> RidgeHit {
+    var best: RidgeBest;
     let centre = p + d * 0.5lf;
-    let reach = 0.5lf * sqrt(dot(d, d)) + limit;
+    let listing = list != NO_LIST;
+    let own = 0.5lf * sqrt(dot(d, d)) + limit;
+    let reach = select(own, max(w, own), listing);
+    let reach2 = reach * reach;
+    var listed = 0u;
     var stack: array<u32, MESH_STACK>;
     stack[0] = 0u;
     var sp = 1u;
     while sp > 0u {
         sp -= 1u;
         let nd = mesh_nodes[stack[sp]];
-        if node_distance2(centre, nd) > reach * reach {
+        if node_distance2(centre, nd) > reach2 {
             continue;
         }
         if nd.count == 0u {
@@ -453,38 +580,50 @@ fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64) -> RidgeHit {
                 stack[sp] = nd.first;
                 stack[sp + 1u] = nd.first + 1u;
                 sp += 2u;
+            } else {
+                listed = NEAR_FULL;
             }
             continue;
         }
         for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-            if (tri_bits(slot) & 64u) == 0u {
-                continue;
+            if listing && listed != NEAR_FULL && (tri_bits(slot) & 64u) != 0u {
+                let plane = dot(tri3(slot, 3u), centre - tri3(slot, 0u));
+                if plane * plane <= reach2 * (1.0lf + 1e-9lf) {
+                    listed = list_push(list, listed, slot);
+                }
             }
-            let a = tri3(slot, 0u);
-            let n = tri3(slot, 3u);
-            let h0 = dot(n, p - a);
-            let h1 = dot(n, p + d - a);
-            if (h0 > limit && h1 > limit) || (h0 < -limit && h1 < -limit) || beyond_sides64(p, d, slot, limit) {
-                continue;
-            }
-            let ds = segment_triangle_distance2_64(p, d, a, tri3(slot, 1u), tri3(slot, 2u));
-            if ds.x < limit * limit && (!found || ds.x < best_d2) {
-                found = true;
-                best_d2 = ds.x;
-                best_s = ds.y;
-                best_slot = slot;
-            }
+            ridge_triangle(&best, slot, p, d, limit);
         }
     }
-    if !found {
+    if listing {
+        near[list] = listed;
+    }
+    return ridge_hit(best, p, d);
+}
+
+// `ridge_nearest` from an element's list, for an element whose query lies inside the list's
+// ball.
+fn ridge_list(p: vec3<f64>, d: vec3<f64>, limit: f64, list: u32) -> RidgeHit {
+    var best: RidgeBest;
+    let count = near[list];
+    for (var k = 1u; k <= count; k++) {
+        ridge_triangle(&best, near[list + k], p, d, limit);
+    }
+    return ridge_hit(best, p, d);
+}
+
+fn ridge_hit(best: RidgeBest, p: vec3<f64>, d: vec3<f64>) -> RidgeHit {
+    var out: RidgeHit;
+    if !best.found {
         return out;
     }
     out.found = true;
-    let at = p + d * best_s;
+    let best_slot = best.slot;
+    let at = p + d * best.s;
     let cl = closest_on_triangle64(at, tri3(best_slot, 0u), tri3(best_slot, 1u), tri3(best_slot, 2u));
     let diff = at - cl.c;
-    let distance = sqrt(best_d2);
-    out.fraction = best_s;
+    let distance = sqrt(best.d2);
+    out.fraction = best.s;
     out.on_wall = cl.c;
     if distance > 0.0lf {
         let side = select(-1.0lf, 1.0lf, dot(diff, feature_normal64(best_slot, cl.feature)) >= 0.0lf);
