@@ -33,7 +33,10 @@
 //!    points back along `−n`, split by `t`, in the same Newton iteration (`rows.rs`, the
 //!    Schur complement with both sides' columns), and its friction acts on the slip relative
 //!    to the master's motion at the iterate, its reaction on the master's two points
-//!    (`Work::partner_impulses`). Such a pair has no master planes and passes no load on. In
+//!    (`Work::partner_impulses`). Such a pair has no master planes and passes no load on. The
+//!    rows hold the slave's end points off the master's closest point only, not both
+//!    segments' end points on the two sides of one plane, so a master segment that turns
+//!    through a large angle within a step is not stopped by them. In
 //!    the knot of `scenes/fishermans-knot-stiff.toml` every contact up to the breakdown was
 //!    a self-contact (the turns of one strand's coil pressed together), held as a slave on a
 //!    frozen plane against a master on its backstop (`docs/stiff-solver.md`).
