@@ -217,7 +217,7 @@ pub fn step_bound_stiff<T: Real>(
         bindings.stats.detection_seconds += t0.elapsed().as_secs_f64();
         bindings.stats.bound_points = bound;
         if let Some(c) = bindings.contacts.as_mut() {
-            c.detect(&*rods, scratches, t, h);
+            c.detect(&*rods, scratches, t, h, stiff.contact_rows);
         }
         // 2. Outer rods first.
         for oi in 0..bindings.order.len() {

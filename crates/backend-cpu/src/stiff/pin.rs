@@ -43,6 +43,11 @@ pub(crate) struct Pinned {
     pub(crate) row_offset: f64,
     pub(crate) row_normal: Vec3<f64>,
     pub(crate) row_x: Vec3<f64>,
+    /// A self-contact's other side in the same rod (`rod_contact.rs`, contact rows only): the
+    /// segment `(j, j + 1)` and the parameter `t` of its closest point. The row then holds the
+    /// point's distance from that moving closest point, `n · (x_i − x_m)` with
+    /// `x_m = (1 − t) x_j + t x_{j+1}`, and its impulse acts on both sides (`rows.rs`).
+    pub(crate) partner: Option<(usize, f64)>,
 }
 
 /// Coulomb friction of a pinned point, as a force of the step's own equations rather than a
@@ -252,6 +257,7 @@ impl Pinned {
             row_offset: 0.0,
             row_normal: Vec3::zeros(),
             row_x: Vec3::zeros(),
+            partner: None,
         }
     }
 
@@ -277,6 +283,7 @@ impl Pinned {
             row_offset: 0.0,
             row_normal: Vec3::zeros(),
             row_x: Vec3::zeros(),
+            partner: None,
         }
     }
 

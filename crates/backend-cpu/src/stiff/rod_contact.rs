@@ -24,6 +24,22 @@
 //!    than [`BACKSTOP`] of the summed radii. A segment whose two end points are on one side of
 //!    a plane lies wholly on that side, so the two segments cannot pass through each other in
 //!    the step, however far they move in it: no crossing between steps without a swept test.
+//!
+//!    **A self-contact with contact rows** (`StiffSettings::contact_rows`, the default) is not
+//!    split: both sides are points of the same solve. Each of the slave segment's two end
+//!    points gets one row holding its distance from the master's closest point at the
+//!    iterate, `n · (x − x_m) ≥ r_a + r_b` with `x_m = (1 − t) x_j + t x_{j+1}`
+//!    (`Pinned::partner`); its impulse pushes the slave point along `n` and the master's two
+//!    points back along `−n`, split by `t`, in the same Newton iteration (`rows.rs`, the
+//!    Schur complement with both sides' columns), and its friction acts on the slip relative
+//!    to the master's motion at the iterate, its reaction on the master's two points
+//!    (`Work::partner_impulses`). Such a pair has no master planes and passes no load on. The
+//!    rows hold the slave's end points off the master's closest point only, not both
+//!    segments' end points on the two sides of one plane, so a master segment that turns
+//!    through a large angle within a step is not stopped by them. In
+//!    the knot of `scenes/fishermans-knot-stiff.toml` every contact up to the breakdown was
+//!    a self-contact (the turns of one strand's coil pressed together), held as a slave on a
+//!    frozen plane against a master on its backstop (`docs/stiff-solver.md`).
 //! 3. **Inside the solve**, the half-spaces are contacts as the mesh's walls are
 //!    (`contact.rs`): a point on or behind one of its planes at the solve's starting guess is put
 //!    on it and pinned to it (inverse mass `w (I − n nᵀ)` in the updates and the banded matrix,
@@ -97,6 +113,22 @@ pub(crate) struct HalfSpace {
     /// side (whose force on the plane the other side is loaded with) rather than its master.
     pub(crate) pair: usize,
     pub(crate) slave: bool,
+    /// For a self-contact with contact rows: the other side's segment and closest-point
+    /// parameter (`Pinned::partner`); `offset` is then the distance required from that
+    /// point, `n · (x − x_m) ≥ offset`, and the row acts on both sides within the solve.
+    pub(crate) partner: Option<(usize, f64)>,
+}
+
+impl HalfSpace {
+    /// How far `x` is behind it, `offset − n · x` (for a self-contact's, `offset − n · (x −
+    /// x_m)` with its other side's closest point at the iterate of `w`).
+    fn violation(&self, w: &Work, x: &Vec3<f64>) -> f64 {
+        let rel = match self.partner {
+            Some(q) => x - w.partner_x(q),
+            None => *x,
+        };
+        self.offset - self.normal.dot(&rel)
+    }
 }
 
 /// One rod's rod-contact planes for a step, and what its pins did (a part of the rod's scratch,
@@ -211,13 +243,14 @@ impl RodPlanes {
         }
     }
 
-    /// The half-space of point `i` with the largest violation `offset − n · x` at `x`.
-    fn deepest(&self, i: usize, x: &Vec3<f64>) -> Option<(usize, f64)> {
+    /// The half-space of point `i` with the largest violation `offset − n · x` at `x` (for a
+    /// self-contact's, `offset − n · (x − x_m)` with the other side at the iterate of `w`).
+    fn deepest(&self, i: usize, w: &Work, x: &Vec3<f64>) -> Option<(usize, f64)> {
         let base = self.first.get(i).copied()?;
         self.of(i)
             .iter()
             .enumerate()
-            .map(|(k, h)| (base + k, h.offset - h.normal.dot(x)))
+            .map(|(k, h)| (base + k, h.violation(w, x)))
             .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
@@ -237,7 +270,7 @@ impl RodPlanes {
         let hs = self.planes[h];
         let start = w.x_old.get(i) + hs.carried;
         let x = if first && self.last_stick[i] {
-            start + hs.normal * (hs.offset - hs.normal.dot(&start)).max(0.0)
+            start + hs.normal * hs.violation(w, &start).max(0.0)
         } else {
             w.x.get(i) + hs.normal * depth
         };
@@ -255,13 +288,9 @@ impl RodPlanes {
             friction = Some(f.continuing(&(predicted - hs.normal * hs.normal.dot(&predicted))));
         }
         self.slot[i] = w.pinned.len();
-        w.pinned.push(Pinned::on_wall(
-            i,
-            hs.normal,
-            true,
-            self.last_pn[i],
-            friction,
-        ));
+        let mut p = Pinned::on_wall(i, hs.normal, true, self.last_pn[i], friction);
+        p.partner = hs.partner;
+        w.pinned.push(p);
     }
 
     /// Step 3 of the module docs, before the solve of a step of `h`: pins the points on or
@@ -275,7 +304,7 @@ impl RodPlanes {
             if k.inv_mass[i] == 0.0 || self.slot[i] != usize::MAX {
                 continue;
             }
-            let Some((plane, depth)) = self.deepest(i, &w.x.get(i)) else {
+            let Some((plane, depth)) = self.deepest(i, w, &w.x.get(i)) else {
                 continue;
             };
             if depth < -tol {
@@ -297,7 +326,7 @@ impl RodPlanes {
     fn second_plane(&mut self, w: &mut Work, i: usize) -> (bool, bool) {
         let s = self.slot[i];
         let x = w.x.get(i);
-        let Some((h, depth)) = self.deepest(i, &x) else {
+        let Some((h, depth)) = self.deepest(i, w, &x) else {
             return (false, false);
         };
         if depth <= self.tolerance() {
@@ -308,6 +337,7 @@ impl RodPlanes {
         let p = &mut w.pinned[s];
         p.normal = normal;
         p.crease = None;
+        p.partner = self.planes[h].partner;
         if let Some(f) = p.friction.as_mut() {
             f.start = start;
         }
@@ -327,7 +357,7 @@ impl RodPlanes {
             }
             let s = self.slot[i];
             if s == usize::MAX {
-                let Some((h, depth)) = self.deepest(i, &w.x.get(i)) else {
+                let Some((h, depth)) = self.deepest(i, w, &w.x.get(i)) else {
                     continue;
                 };
                 if depth > tol {
@@ -487,6 +517,7 @@ impl StiffRodContacts {
         scratches: &mut [StiffScratch],
         t: f64,
         h: f64,
+        coupled: bool,
     ) {
         let t0 = std::time::Instant::now();
         let f = |v: &Vec3<T>| [v.x.to_f64(), v.y.to_f64(), v.z.to_f64()];
@@ -558,6 +589,23 @@ impl StiffRodContacts {
             let ahead = n.dot(&(pb + ub)) + rb + ra;
             let pair = self.pairs.len();
             self.pairs.push(*c);
+            if coupled && a == b {
+                // Both sides in one solve: one row per slave point holds its distance from the
+                // master's closest point, and acts on both.
+                for p in [i, i + 1] {
+                    self.per_rod[a].push(HalfSpace {
+                        point: p,
+                        normal: n,
+                        offset: radii,
+                        mid: radii,
+                        carried: ub,
+                        pair,
+                        slave: false,
+                        partner: Some((j, c.t)),
+                    });
+                }
+                continue;
+            }
             for p in [i, i + 1] {
                 self.per_rod[a].push(HalfSpace {
                     point: p,
@@ -567,6 +615,7 @@ impl StiffRodContacts {
                     carried: ub,
                     pair,
                     slave: true,
+                    partner: None,
                 });
             }
             for p in [j, j + 1] {
@@ -578,6 +627,7 @@ impl StiffRodContacts {
                     carried: ua,
                     pair,
                     slave: false,
+                    partner: None,
                 });
             }
         }

@@ -22,6 +22,13 @@
 //! optimality conditions of `min ½ yᵀ S y + cᵀ y` over `y ≥ 0`, solved by a primal active set
 //! (Lawson & Hanson's NNLS iteration with `S` in place of `AᵀA`) with `nalgebra`'s Cholesky.
 //! Then `Δλ = A⁻¹ r − A⁻¹ B Δp`. Tangential motion (friction) is as for pins.
+//!
+//! A self-contact row (`Pinned::partner`, `rod_contact.rs`) holds a point's distance from the
+//! closest point `x_m = (1 − t) x_j + t x_{j+1}` of another part of the same rod: its column of
+//! `B` is `w n` through the elements of its point and `−(1 − t) w n`, `−t w n` through those of
+//! `j` and `j + 1`, its gap is `n · (x − x_m)`, and `D` is the points' mobility along the
+//! rows' normals, `D_rc = Σ_q w_q c_rq c_cq n_r · n_c` over the points rows `r` and `c` share
+//! (no longer diagonal: two rows on one master segment share its points).
 
 use super::Consts;
 use super::direct::BlockTridiagonal;
@@ -29,6 +36,9 @@ use super::lanes::V3s;
 use super::work::Work;
 use cosserat_model::Vec3;
 use nalgebra::{DMatrix, DVector};
+
+/// A contact row's points with their weights along its normal (unused slots `usize::MAX`).
+type RowPoints = [(usize, f64); 3];
 
 /// The contact rows of a factorisation: which pins they are, `A⁻¹ B` and `S`.
 #[derive(Clone, Debug, Default)]
@@ -38,9 +48,14 @@ pub(crate) struct ContactRows {
     slots: Vec<usize>,
     /// Per row: `A⁻¹ B_c` (stretch–shear and bend–twist parts).
     cols: Vec<[V3s; 2]>,
-    /// Per row: `B_c` at the two elements of its point, `w a` (element `i − 1`) and `−w b`
-    /// (element `i`).
-    b: Vec<(Vec3<f64>, Vec3<f64>)>,
+    /// Per row: `B_c` as (element, entry) pairs: `w a` at element `i − 1` and `−w b` at
+    /// element `i` for its point, and for a self-contact row (`Pinned::partner`) the same of
+    /// its other side's two points, weighted by `−(1 − t)` and `−t`.
+    b: Vec<Vec<(usize, Vec3<f64>)>>,
+    /// Per row: its points with their weights (`(i, 1)`, and `(j, −(1 − t))`, `(j + 1, −t)`
+    /// for a self-contact row) and its normal, for `D`: the points' mobility
+    /// `D_rc = Σ_q w_q c_rq c_cq n_r · n_c` over the points rows `r` and `c` share.
+    d: Vec<(RowPoints, Vec3<f64>)>,
     /// The Schur complement `D − Bᵀ A⁻¹ B`.
     s: DMatrix<f64>,
     /// Whether `cols` and `s` belong to the current factorisation.
@@ -69,25 +84,45 @@ impl ContactRows {
         let m = self.points.len();
         let n = w.n;
         self.b.clear();
+        self.d.clear();
         for (r, &s) in self.slots.iter().enumerate() {
             let p = &w.pinned[s];
             let i = p.point;
-            let wi = k.inv_mass[i];
-            let project = |j: usize| {
-                let il = k.cols.inv_l0[j];
-                Vec3::new(
-                    w.dirs[0].get(j).dot(&p.normal),
-                    w.dirs[1].get(j).dot(&p.normal),
-                    w.dirs[2].get(j).dot(&p.normal),
-                ) * (il * wi)
+            // `B_c` of a point `q` pushed along the normal with weight `c`: its two elements.
+            let mut entries: Vec<(usize, Vec3<f64>)> = Vec::with_capacity(6);
+            let mut add = |q: usize, c: f64| {
+                let wq = k.inv_mass[q] * c;
+                if wq == 0.0 {
+                    return;
+                }
+                let project = |j: usize| {
+                    let il = k.cols.inv_l0[j];
+                    Vec3::new(
+                        w.dirs[0].get(j).dot(&p.normal),
+                        w.dirs[1].get(j).dot(&p.normal),
+                        w.dirs[2].get(j).dot(&p.normal),
+                    ) * (il * wq)
+                };
+                for (j, e) in [(q.checked_sub(1), 1.0), ((q < n).then_some(q), -1.0)] {
+                    if let Some(j) = j {
+                        let v = project(j) * e;
+                        match entries.iter_mut().find(|(a, _)| *a == j) {
+                            Some((_, x)) => *x += v,
+                            None => entries.push((j, v)),
+                        }
+                    }
+                }
             };
-            let a = if i >= 1 {
-                project(i - 1)
-            } else {
-                Vec3::zeros()
+            add(i, 1.0);
+            if let Some((j, t)) = p.partner {
+                add(j, -(1.0 - t));
+                add(j + 1, -t);
+            }
+            let weights = match p.partner {
+                Some((j, t)) => [(i, 1.0), (j, -(1.0 - t)), (j + 1, -t)],
+                None => [(i, 1.0), (usize::MAX, 0.0), (usize::MAX, 0.0)],
             };
-            let b = if i < n { -project(i) } else { Vec3::zeros() };
-            self.b.push((a, b));
+            self.d.push((weights, p.normal));
             if self.cols.len() <= r {
                 self.cols.push([V3s::zeros(n), V3s::zeros(n)]);
             }
@@ -98,23 +133,17 @@ impl ContactRows {
                 col[0].fill_zero();
                 col[1].fill_zero();
             }
-            if i >= 1 {
-                col[0].set(i - 1, &a);
+            for &(j, v) in &entries {
+                col[0].set(j, &v);
             }
-            if i < n {
-                col[0].set(i, &b);
-            }
+            self.b.push(entries);
             factor.solve(col);
         }
         self.s = DMatrix::zeros(m, m);
         for r in 0..m {
             for c in 0..=r {
                 let v = self.b_dot(r, &self.cols[c][0]);
-                let d = if r == c {
-                    k.inv_mass[self.points[r]]
-                } else {
-                    0.0
-                };
+                let d = self.mobility(k, r, c);
                 self.s[(r, c)] = d - v;
             }
         }
@@ -125,18 +154,23 @@ impl ContactRows {
         }
     }
 
+    /// `D_rc`: the mobility of row `c`'s points along row `r`'s normal (see `d`).
+    fn mobility(&self, k: &Consts, r: usize, c: usize) -> f64 {
+        let ((a, na), (b, nb)) = (&self.d[r], &self.d[c]);
+        let mut d = 0.0;
+        for &(p, cp) in a.iter().filter(|q| q.0 != usize::MAX) {
+            for &(q, cq) in b {
+                if p == q {
+                    d += k.inv_mass[p] * cp * cq;
+                }
+            }
+        }
+        if r == c { d } else { d * na.dot(nb) }
+    }
+
     /// `B_rᵀ v` for a stretch–shear column `v`.
     fn b_dot(&self, r: usize, v: &V3s) -> f64 {
-        let i = self.points[r];
-        let (a, b) = self.b[r];
-        let mut d = 0.0;
-        if i >= 1 {
-            d += a.dot(&v.get(i - 1));
-        }
-        if b != Vec3::zeros() {
-            d += b.dot(&v.get(i));
-        }
-        d
+        self.b[r].iter().map(|(j, e)| e.dot(&v.get(*j))).sum()
     }
 
     /// Whether the rows were built for the pins `w` has now.
@@ -160,11 +194,13 @@ impl ContactRows {
         for r in 0..m {
             let pin = &mut w.pinned[self.slots[r]];
             let x = w.x.get(pin.point);
+            // A self-contact row holds the distance from its other side's closest point.
+            let rel = x - pin.partner.map_or(Vec3::zeros(), |q| lerp(&w.x, q));
             if pin.row_normal != pin.normal || pin.row_x != x {
-                pin.row_offset = pin.normal.dot(&x);
+                pin.row_offset = pin.normal.dot(&rel);
                 pin.row_normal = pin.normal;
             }
-            let gap = pin.normal.dot(&x) - pin.row_offset;
+            let gap = pin.normal.dot(&rel) - pin.row_offset;
             p[r] = pin.mult.max(0.0);
             c[r] = gap + u_normal[self.slots[r]] + self.b_dot(r, &w.rhs[0]);
         }
@@ -192,6 +228,11 @@ impl ContactRows {
             }
         }
     }
+}
+
+/// `(1 − t) v_j + t v_{j+1}` for `(j, t)`.
+fn lerp(v: &V3s, (j, t): (usize, f64)) -> Vec3<f64> {
+    v.get(j) * (1.0 - t) + v.get(j + 1) * t
 }
 
 /// `argmin ½ yᵀ S y + cᵀ y` over `y ≥ 0` for a symmetric positive definite `S`, from the
@@ -346,6 +387,66 @@ mod tests {
         }
         let (_, free) = step(&[2, 3, 4], true);
         assert_eq!(free, [3]);
+    }
+
+    /// A self-contact row (`Pinned::partner`: point 2 against the segment of points 8 and 9
+    /// of the same rod) pressed by both sides' targets: after one Newton iteration its impulse
+    /// is positive, the distance between the point and the other side's closest point is
+    /// what it was (the row closed), and the impulse acts on both sides, equal and opposite:
+    /// the wall impulse `M (x − x̃) − Jᵀ λ` is `n p` at point 2, `−(1 − t) n p` and `−t n p`
+    /// at points 8 and 9, and zero at every other point.
+    #[test]
+    fn a_self_contact_row_acts_on_both_sides() {
+        let n = 12;
+        let normal = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let (i, j, t) = (2, 8, 0.3);
+        let (k, mut w) = setup(n);
+        for q in 0..=n {
+            w.x_pred.set(q, &w.x.get(q));
+        }
+        w.x_pred.set(i, &(w.x.get(i) - normal * 5e-2));
+        for q in [j, j + 1] {
+            w.x_pred.set(q, &(w.x.get(q) + normal * 3e-2));
+        }
+        let mut pin = Pinned::on_wall(i, normal, true, 0.0, None);
+        pin.partner = Some((j, t));
+        w.pinned = vec![pin];
+        w.contact_rows = true;
+        let distance = |w: &Work| normal.dot(&(w.x.get(i) - w.partner_x((j, t))));
+        let before = distance(&w);
+        w.constraints(&k);
+        w.precondition(&k, 1.0, true);
+        w.rhs(&k);
+        let mut asm = Assembled::default();
+        w.assemble(&k, &mut asm);
+        w.pin_blocks(&k, &mut asm);
+        let mut factor = BlockTridiagonal::default();
+        factor.factor(&asm);
+        factor.solve(&mut w.rhs);
+        let mut rows = ContactRows::default();
+        rows.build(&w, &k, &factor);
+        rows.solve(&mut w);
+        w.apply(&k, f64::INFINITY);
+        let p = w.pinned[0].mult;
+        assert!(p > 0.0, "impulse {p}");
+        assert!(
+            (distance(&w) - before).abs() < 1e-12,
+            "distance {} vs {before}",
+            distance(&w)
+        );
+        for q in 1..=n {
+            let expected = match q {
+                q if q == i => normal * p,
+                q if q == j => -normal * ((1.0 - t) * p),
+                q if q == j + 1 => -normal * (t * p),
+                _ => Vec3::zeros(),
+            };
+            let got = pin_impulse(&w, &k, &w.lambda[0], q);
+            assert!(
+                (got - expected).norm() <= 1e-9 * p,
+                "point {q}: {got} vs {expected}"
+            );
+        }
     }
 
     /// The active-set QP meets the LCP's conditions on a small random SPD problem, against

@@ -97,6 +97,11 @@ pub(crate) struct Work {
 }
 
 /// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
+/// `(1 − t) v_j + t v_{j+1}` for `(j, t)`.
+fn lerp_points(v: &V3s, (j, t): (usize, f64)) -> Vec3<f64> {
+    v.get(j) * (1.0 - t) + v.get(j + 1) * t
+}
+
 fn chunks(end: usize) -> impl Iterator<Item = usize> {
     (0..end).step_by(4)
 }
@@ -145,8 +150,58 @@ impl Work {
     pub(crate) fn pin_normal_u(&self) -> Vec<f64> {
         self.pinned
             .iter()
-            .map(|p| p.normal.dot(&self.u_x.get(p.point)))
+            .map(|p| {
+                let u = self.u_x.get(p.point);
+                match p.partner {
+                    Some(partner) if self.is_row(p) => {
+                        p.normal.dot(&(u - lerp_points(&self.u_x, partner)))
+                    }
+                    _ => p.normal.dot(&u),
+                }
+            })
             .collect()
+    }
+
+    /// The closest point of a self-contact row's other side (`Pinned::partner`) at the
+    /// current iterate.
+    pub(crate) fn partner_x(&self, partner: (usize, f64)) -> Vec3<f64> {
+        lerp_points(&self.x, partner)
+    }
+
+    /// Adds `−w_m c_m n p` to the corrections `u_x` of the other side's two points of every
+    /// self-contact row (`Pinned::partner`), `p` its multiplier (`increment` false) or its
+    /// last increment (`true`): the row's impulse on that side, split by the closest point's
+    /// parameter (`c` = `1 − t`, `t`). With the multiplier (at each residual) also the
+    /// reaction of the row's friction, and its slip is measured against the other side's
+    /// motion at the iterate (the friction's start carried with it).
+    fn partner_impulses(&mut self, k: &Consts, increment: bool) {
+        if !self.contact_rows {
+            return;
+        }
+        for s in 0..self.pinned.len() {
+            let p = self.pinned[s];
+            let Some((j, t)) = p.partner else { continue };
+            if !self.is_row(&p) || k.inv_mass[p.point] == 0.0 {
+                continue;
+            }
+            let mut push = p.normal * if increment { p.dmult } else { p.mult };
+            if !increment && let Some(f) = p.friction {
+                let moved = lerp_points(&self.x, (j, t)) - lerp_points(&self.x_old, (j, t));
+                let start = self.x_old.get(p.point) + moved;
+                if let Some(f) = self.pinned[s].friction.as_mut() {
+                    f.start = start;
+                }
+                let slip = p.sliding_part(&(self.x.get(p.point) - start));
+                push += f.impulse(&slip, p.pn);
+            }
+            if push == Vec3::zeros() {
+                continue;
+            }
+            for (m, c) in [(j, 1.0 - t), (j + 1, t)] {
+                let u = self.u_x.get(m) - push * (k.inv_mass[m] * c);
+                self.u_x.set(m, &u);
+            }
+        }
     }
 
     /// Sizes the columns for `n` elements (a new state; nothing is kept) unless they already
@@ -681,6 +736,7 @@ impl Work {
     /// motion shared by neighbouring points leaves out (a rope sliding down a slope as a whole
     /// would pass the tolerance with its friction unbalanced).
     fn pinned_balance(&mut self, k: &Consts) -> f64 {
+        self.partner_impulses(k, false);
         let mut worst = 0.0_f64;
         let mut imbalance = 0.0_f64;
         for p in &self.pinned {
@@ -720,6 +776,7 @@ impl Work {
     /// The pinned points' rows of the update `Δx = u + K⁻¹ Jᵀ Δλ`, where `u_x` holds
     /// `u + M⁻¹ Jᵀ Δλ` and `before` the pinned points' `u` (in `pinned`'s order).
     fn pinned_update(&mut self, k: &Consts, before: &[Vec3<f64>]) {
+        self.partner_impulses(k, true);
         for (p, u) in self.pinned.iter().zip(before) {
             let i = p.point;
             let w = k.inv_mass[i];
