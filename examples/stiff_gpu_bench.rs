@@ -3,7 +3,9 @@
 //! at 0.1 ms, run as a user runs it through the facade (wall clock, everything included). Two
 //! scenes (`--scene`): `free`, its clamped hand end moving sideways and twisting under gravity in
 //! free space; `insertion`, `scenes/nitinol-guidewire-insertion.toml` (pushed through the
-//! introducer into the 26 000-triangle vessel) at `--elements` and `--dt`.
+//! introducer into the 26 000-triangle vessel) at `--elements` and `--dt`; `guide`, the same
+//! without the vessel, and `bare`, without the vessel and the introducer (what the contacts and
+//! the guide each cost).
 //!
 //! - one copy as a 1 kHz haptic loop would call it: ten 0.1 ms steps and the tip read back per
 //!   tick, on the GPU and on the CPU (one core) of the same machine, with the tips compared;
@@ -11,7 +13,7 @@
 //!   distance between any copy's tip and the first copy's (they start alike, so it is zero when
 //!   every copy is stepped alike).
 //!
-//! `cargo run --release --example stiff_gpu_bench -- [--scene free|insertion] [--ticks N]
+//! `cargo run --release --example stiff_gpu_bench -- [--scene free|insertion|guide|bare] [--ticks N]
 //! [--copies 1,64,1024,4096] [--steps N] [--elements N] [--dt S] [--warm S]`; `--warm` runs
 //! that much simulated time before anything is timed (the insertion's wire reaches the vessel's
 //! walls after a few centimetres). Prints one JSON object per
@@ -48,6 +50,19 @@ fn insertion(elements: usize, dt: f64) -> String {
     include_str!("../scenes/nitinol-guidewire-insertion.toml")
         .replace("elements = 512", &format!("elements = {elements}"))
         .replace("dt = 1e-4", &format!("dt = {dt:e}"))
+}
+
+/// The insertion `text` without its vessel, and without its introducer unless `guide`: what
+/// the step costs without mesh contacts (`guide`) and without any pinned point (`bare`).
+fn without_vessel(text: &str, guide: bool) -> String {
+    let start = text.find("[environment]").expect("an environment");
+    let end = text.find("[[rod]]").expect("a rod");
+    let text = format!("{}{}", &text[..start], &text[end..]);
+    if guide {
+        text
+    } else {
+        text.replace(", guide = 0.49", "")
+    }
 }
 
 /// The deepest penetration and the most points behind the wall of any rod (zero without
@@ -124,7 +139,9 @@ fn main() {
     let text = match value("--scene").as_deref() {
         None | Some("free") => scene(elements, dt),
         Some("insertion") => insertion(elements, dt),
-        Some(other) => panic!("--scene free|insertion, got {other}"),
+        Some("guide") => without_vessel(&insertion(elements, dt), true),
+        Some("bare") => without_vessel(&insertion(elements, dt), false),
+        Some(other) => panic!("--scene free|insertion|guide|bare, got {other}"),
     };
     let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let warm: f64 = value("--warm").map_or(0.0, |v| v.parse().expect("--warm S"));
