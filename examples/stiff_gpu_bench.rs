@@ -57,7 +57,11 @@ fn insertion(elements: usize, dt: f64) -> String {
 fn without_vessel(text: &str, guide: bool) -> String {
     let start = text.find("[environment]").expect("an environment");
     let end = text.find("[[rod]]").expect("a rod");
-    let text = format!("{}{}", &text[..start], &text[end..]);
+    // The insertion's shape lies along the vessel's entry; a straight wire stands in for it.
+    let text = format!("{}{}", &text[..start], &text[end..]).replace(
+        r#"shape = { kind = "insertion", length = 0.5, inserted = 0.01 }"#,
+        r#"shape = { kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = 0.5 }"#,
+    );
     if guide {
         text
     } else {
