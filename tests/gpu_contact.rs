@@ -1,7 +1,8 @@
 //! Mesh contact and the introducer guide on the GPU, against the CPU explicit scheme in the same
-//! precision and sweep order (its oracle): a rope dragged over a floor with friction, and a wire
-//! pushed through an introducer into a vessel. Runs on lavapipe in CI
-//! (`COSSERAT_REQUIRE_GPU=1`); without an adapter it is skipped unless required.
+//! precision and sweep order (its oracle): a rope dragged over a floor with friction, a rope held
+//! or sliding on an incline (also against Coulomb's law), and a wire pushed through an introducer
+//! into a vessel. Runs on lavapipe in CI (`COSSERAT_REQUIRE_GPU=1`); without an adapter it is
+//! skipped unless required.
 
 #[path = "support/pair.rs"]
 mod pair;
@@ -397,4 +398,101 @@ end = { kind = "pinned", velocity = [0.0, 0.0, -0.1] }
         worst < 1e-2 * largest,
         "held-end forces differ by {worst} N (largest {largest} N)"
     );
+}
+
+/// A free rope laid across an incline of slope `tan_theta` (friction 0.4 static, 0.3 kinetic),
+/// let go from rest; returns the CPU and GPU runs after `steps` steps of 2e-5 s, and the unit
+/// vector down the slope.
+fn on_an_incline(tan_theta: f64, steps: u64) -> Option<(Simulation, Simulation, [f64; 3])> {
+    let theta = tan_theta.atan();
+    let (s, c) = theta.sin_cos();
+    let r = 2e-3;
+    let scene = format!(
+        r#"
+[solver]
+dt = 5e-5
+iterations = 10
+mode = "inextensible"
+ordering = "red-black"
+precision = "f32"
+
+[environment]
+mesh = {{ kind = "plane", point = [0.0, 0.0, 0.0], normal = [0.0, {ny}, {nz}], size = 1.0 }}
+friction = {{ static = 0.4, kinetic = 0.3 }}
+margin = 2e-4
+
+[[rod]]
+elements = 10
+shape = {{ kind = "straight", start = [-0.05, {y0}, {z0}], direction = [1.0, 0.0, 0.0], length = 0.1 }}
+material = {{ young_modulus = 1e6, poisson_ratio = 0.5, density = 1100.0, radius = {r} }}
+"#,
+        ny = -s,
+        nz = c,
+        y0 = -s * r,
+        z0 = c * r,
+    );
+    let (mut cpu, mut gpu) = pair(&scene, &[])?;
+    for sim in [&mut cpu, &mut gpu] {
+        sim.run(steps).unwrap_or_else(|e| panic!("{e}"));
+    }
+    Some((cpu, gpu, [0.0, -c, -s]))
+}
+
+/// How far the rope's centre moved down the slope `down` from where it was laid.
+fn slid(sim: &Simulation, down: [f64; 3]) -> f64 {
+    let p = sim.positions(RodHandle(0));
+    let n = p.len() as f64;
+    // Laid with its centre on the slope's line through the origin (at the radius above it).
+    let centre: Vec<f64> = (0..3)
+        .map(|k| p.iter().map(|q| q[k]).sum::<f64>() / n)
+        .collect();
+    (0..3).map(|k| centre[k] * down[k]).sum::<f64>()
+}
+
+#[test]
+fn a_rope_on_an_incline_sticks_below_the_friction_angle_and_slides_above_it_as_coulomb_says() {
+    const STEPS: u64 = 2000;
+    let t = STEPS as f64 * 5e-5;
+    // Below the friction angle (tan θ = 0.3 < μs = 0.4): static friction holds the rope. It
+    // settles into the contact over the first steps (micrometres, f32), then does not move.
+    let Some((mut cpu, mut gpu, down)) = on_an_incline(0.3, STEPS) else {
+        return;
+    };
+    let (c, g) = (slid(&cpu, down), slid(&gpu, down));
+    for sim in [&mut cpu, &mut gpu] {
+        sim.run(STEPS).unwrap_or_else(|e| panic!("{e}"));
+    }
+    let (c2, g2) = (slid(&cpu, down), slid(&gpu, down));
+    eprintln!("held: gpu {g:e} then {g2:e} m, cpu {c:e} then {c2:e} m");
+    assert!(
+        g.abs() < 5e-6,
+        "gpu slid {g:e} m down a slope it should hold on"
+    );
+    assert!(
+        (g2 - g).abs() < 1e-8,
+        "gpu crept {:e} m in the second 0.1 s",
+        g2 - g
+    );
+    assert!(
+        (c2 - c).abs() < 1e-8,
+        "cpu crept {:e} m in the second 0.1 s",
+        c2 - c
+    );
+    // Above it (tan θ = 0.6): the rope slides with a = g (sin θ − μk cos θ), its centre by
+    // ½ a t² (1 + h/t) as a constant acceleration integrates in steps of h (`tests/validation.rs`).
+    let Some((cpu, gpu, down)) = on_an_incline(0.6, STEPS) else {
+        return;
+    };
+    let theta = 0.6f64.atan();
+    let a = 9.81 * (theta.sin() - 0.3 * theta.cos());
+    let expected = 0.5 * a * t * t * (1.0 + 5e-5 / t);
+    let (c, g) = (slid(&cpu, down), slid(&gpu, down));
+    eprintln!("slid: gpu {g:e} m, cpu {c:e} m, Coulomb {expected:e} m");
+    assert!(
+        (g - expected).abs() < 1e-3 * expected,
+        "gpu slid {g:e} m, Coulomb {expected:e} m"
+    );
+    assert!((g - c).abs() < 1e-4 * expected, "gpu {g:e} m, cpu {c:e} m");
+    let gap = largest_gap(&cpu.positions(RodHandle(0)), &gpu.positions(RodHandle(0)));
+    assert!(gap < 1e-4 * expected, "GPU and CPU differ by {gap:e} m");
 }
