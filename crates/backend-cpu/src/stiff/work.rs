@@ -96,12 +96,12 @@ pub(crate) struct Work {
     pub(crate) rows: super::rows::ContactRows,
 }
 
-/// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
 /// `(1 − t) v_j + t v_{j+1}` for `(j, t)`.
 fn lerp_points(v: &V3s, (j, t): (usize, f64)) -> Vec3<f64> {
     v.get(j) * (1.0 - t) + v.get(j + 1) * t
 }
 
+/// The starts `0, 4, 8, …` of the four-lane chunks below `end`.
 fn chunks(end: usize) -> impl Iterator<Item = usize> {
     (0..end).step_by(4)
 }
