@@ -21,9 +21,11 @@
 //! the CPU does, and uploads them with the batch), the divergence test, and contact with one
 //! static triangle mesh shared by all rods ([`GpuStiffSimulation::with_wall`]; the CPU's stiff
 //! contacts, `shaders/stiff_contact.wgsl`: points pinned on the wall inside the solve, creases,
-//! element contacts at ridges, swept tests, Coulomb friction, rounds of the solve), compiled
-//! only into the kernels of simulations that have a mesh. **What it leaves out** (refused by
-//! [`GpuStiffSimulation::new`] or by the stepper's capabilities): guides, several obstacles,
+//! element contacts at ridges, swept tests, Coulomb friction, rounds of the solve; queries
+//! answered from near lists of triangles kept per point and element, `shaders/stiff_wall.wgsl`),
+//! compiled only into the kernels of simulations that have a mesh, and the introducer guide
+//! ([`GpuStiffRod::guide`]). **What it leaves out** (refused by
+//! [`GpuStiffSimulation::new`] or by the stepper's capabilities): several obstacles,
 //! analytic shapes and moving ones, friction per triangle, contact rows, bindings, rod contact,
 //! sliding and hinged ends, varying loads and moments, BDF2, the
 //! Gauss–Seidel variant; and, of the CPU's safety nets, the retake of an unconverged inextensible
