@@ -5,9 +5,8 @@ use cosserat::Simulation;
 use cosserat::scene::load_scene;
 use std::path::Path;
 
-/// Runs a shipped scene (with `set` overrides) to its end and checks that no point passed the
-/// wall and no step was retaken (with the axial compliance or in halves).
-fn run_without_retakes(scene: &str, set: &[(&str, &str)]) -> Simulation {
+/// Runs a shipped scene (with `set` overrides) to its end.
+fn run_scene(scene: &str, set: &[(&str, &str)]) -> Simulation {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join(scene);
     let set: Vec<_> = set
         .iter()
@@ -16,6 +15,13 @@ fn run_without_retakes(scene: &str, set: &[(&str, &str)]) -> Simulation {
     let (builder, length, _) = load_scene(&scene, &set).unwrap();
     let mut sim = builder.build().unwrap();
     sim.run(length.steps).unwrap();
+    sim
+}
+
+/// Runs a shipped scene (with `set` overrides) to its end and checks that no point passed the
+/// wall and no step was retaken (with the axial compliance or in halves).
+fn run_without_retakes(scene: &str, set: &[(&str, &str)]) -> Simulation {
+    let sim = run_scene(scene, set);
     let stiff = sim.stiff_summary().unwrap();
     let contact = sim.contact_report().unwrap();
     assert_eq!(contact.escaped_points, 0, "{contact:?}");
@@ -142,18 +148,14 @@ fn a_guidewire_in_a_catheter_goes_in_with_every_step_converged() {
     ignore = "50 stiff steps of a 512-element knot; `.ci/run` runs it with --release"
 )]
 fn the_knots_coiled_turns_press_on_each_other_without_a_retake() {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/fishermans-knot-stiff.toml");
-    let set: Vec<_> = [
-        ("solver.duration", "0.05"),
-        ("rod_contact.friction.static", "0"),
-        ("rod_contact.friction.kinetic", "0"),
-    ]
-    .iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect();
-    let (builder, length, _) = load_scene(&scene, &set).unwrap();
-    let mut sim = builder.build().unwrap();
-    sim.run(length.steps).unwrap();
+    let sim = run_scene(
+        "scenes/fishermans-knot-stiff.toml",
+        &[
+            ("solver.duration", "0.05"),
+            ("rod_contact.friction.static", "0"),
+            ("rod_contact.friction.kinetic", "0"),
+        ],
+    );
     let stiff = sim.stiff_summary().unwrap();
     let stats = sim.coupling_stats().unwrap();
     assert!(stats.max_contacts > 0, "{stats:?}");

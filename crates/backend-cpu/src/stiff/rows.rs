@@ -318,6 +318,22 @@ mod tests {
     /// never both), and where every impulse stays positive the iterate is the pinned one (the
     /// Schur complement of the rows is the projected matrix), to rounding. Of three
     /// neighbouring points pressed on one plane the middle one lifts off, which a pin cannot.
+    /// The first iteration's linear step of `w` with its pins: constraints, preconditioner,
+    /// right-hand side, assembly with the pins' blocks, and the factorisation, `w.rhs` solved
+    /// in place.
+    fn linear_step(w: &mut Work, k: &Consts) -> BlockTridiagonal {
+        w.constraints(k);
+        w.precondition(k, 1.0, true);
+        w.rhs(k);
+        let mut asm = Assembled::default();
+        w.assemble(k, &mut asm);
+        w.pin_blocks(k, &mut asm);
+        let mut factor = BlockTridiagonal::default();
+        factor.factor(&asm);
+        factor.solve(&mut w.rhs);
+        factor
+    }
+
     #[test]
     fn pressed_contact_rows_step_as_pins() {
         let n = 9;
@@ -337,15 +353,7 @@ mod tests {
                 })
                 .collect();
             w.contact_rows = rows;
-            w.constraints(&k);
-            w.precondition(&k, 1.0, true);
-            w.rhs(&k);
-            let mut asm = Assembled::default();
-            w.assemble(&k, &mut asm);
-            w.pin_blocks(&k, &mut asm);
-            let mut factor = BlockTridiagonal::default();
-            factor.factor(&asm);
-            factor.solve(&mut w.rhs);
+            let factor = linear_step(&mut w, &k);
             if rows {
                 let mut r = ContactRows::default();
                 r.build(&w, &k, &factor);
@@ -414,15 +422,7 @@ mod tests {
         w.contact_rows = true;
         let distance = |w: &Work| normal.dot(&(w.x.get(i) - w.partner_x((j, t))));
         let before = distance(&w);
-        w.constraints(&k);
-        w.precondition(&k, 1.0, true);
-        w.rhs(&k);
-        let mut asm = Assembled::default();
-        w.assemble(&k, &mut asm);
-        w.pin_blocks(&k, &mut asm);
-        let mut factor = BlockTridiagonal::default();
-        factor.factor(&asm);
-        factor.solve(&mut w.rhs);
+        let factor = linear_step(&mut w, &k);
         let mut rows = ContactRows::default();
         rows.build(&w, &k, &factor);
         rows.solve(&mut w);
