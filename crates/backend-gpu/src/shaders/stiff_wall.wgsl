@@ -137,7 +137,6 @@ struct SphereHit {
 
 const NEAR_WORDS: u32 = 32u;
 const NEAR_FULL: u32 = 0xffffffffu;
-const NO_LIST: u32 = 0xffffffffu;
 
 // Appends `slot` to the list at `list` holding `listed` entries; returns the new count,
 // NEAR_FULL when it does not fit.
@@ -212,12 +211,11 @@ fn sphere_start() -> SphereHit {
 // Walks the tree for the sphere of radius `r` at `p` (`MeshCollider::query_sphere`). The walls
 // in front are kept (`wall_n`, `wall_sd`) when `filter` is on: those whose normal makes a cosine
 // of at most `cos_max` in magnitude with `away` (pass a zero `away` and 2 to keep every wall).
-// With `list` (not NO_LIST), it also lists at `list` the triangles within `w` >= `r` of `p`.
+// It also lists at `list` the triangles within `w` >= `r` of `p` (the point's near list).
 fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64, list: u32, w: f64) -> SphereHit {
     var acc = sphere_start();
     var best_wall = 1.0e300lf;
-    let listing = list != NO_LIST;
-    let reach = select(r, max(w, r), listing);
+    let reach = max(w, r);
     let w2 = reach * reach;
     var listed = 0u;
     var stack: array<u32, MESH_STACK>;
@@ -243,7 +241,7 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64, list: u32, w
             continue;
         }
         for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-            if listing && listed != NEAR_FULL {
+            if listed != NEAR_FULL {
                 let plane = dot(tri3(slot, 3u), p - tri3(slot, 0u));
                 if plane * plane <= w2 * (1.0lf + 1e-9lf) {
                     listed = list_push(list, listed, slot);
@@ -252,9 +250,7 @@ fn sphere_walk(p: vec3<f64>, r: f64, away: vec3<f64>, cos_max: f64, list: u32, w
             sphere_triangle(&acc, &best_wall, slot, p, r, away, cos_max);
         }
     }
-    if listing {
-        near[list] = listed;
-    }
+    near[list] = listed;
     return acc;
 }
 
@@ -556,14 +552,12 @@ fn ridge_triangle(best: ptr<function, RidgeBest>, slot: u32, p: vec3<f64>, d: ve
 }
 
 // The ridge triangle nearest to the element from p to p + d within `limit`, by a walk of the tree
-// that, with `list` (not NO_LIST), also lists at `list` the ridge triangles within `w` of the
-// element's centre.
+// that also lists at `list` the ridge triangles within `w` of the element's centre (the
+// element's near list).
 fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64, list: u32, w: f64) -> RidgeHit {
     var best: RidgeBest;
     let centre = p + d * 0.5lf;
-    let listing = list != NO_LIST;
-    let own = 0.5lf * sqrt(dot(d, d)) + limit;
-    let reach = select(own, max(w, own), listing);
+    let reach = max(w, 0.5lf * sqrt(dot(d, d)) + limit);
     let reach2 = reach * reach;
     var listed = 0u;
     var stack: array<u32, MESH_STACK>;
@@ -586,7 +580,7 @@ fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64, list: u32, w: f64) -> R
             continue;
         }
         for (var slot = nd.first; slot < nd.first + nd.count; slot++) {
-            if listing && listed != NEAR_FULL && (tri_bits(slot) & 64u) != 0u {
+            if listed != NEAR_FULL && (tri_bits(slot) & 64u) != 0u {
                 let plane = dot(tri3(slot, 3u), centre - tri3(slot, 0u));
                 if plane * plane <= reach2 * (1.0lf + 1e-9lf) {
                     listed = list_push(list, listed, slot);
@@ -595,9 +589,7 @@ fn ridge_nearest(p: vec3<f64>, d: vec3<f64>, limit: f64, list: u32, w: f64) -> R
             ridge_triangle(&best, slot, p, d, limit);
         }
     }
-    if listing {
-        near[list] = listed;
-    }
+    near[list] = listed;
     return ridge_hit(best, p, d);
 }
 
