@@ -5,7 +5,11 @@
 //! free space; `insertion`, `scenes/nitinol-guidewire-insertion.toml` (pushed through the
 //! introducer into the 26 000-triangle vessel) at `--elements` and `--dt`; `guide`, the same
 //! without the vessel, and `bare`, without the vessel and the introducer (what the contacts and
-//! the guide each cost).
+//! the guide each cost); `navigation`, the scene of `cosserat.gym`'s navigation environment
+//! (`--elements 96 --dt 1e-3` are its defaults), pushed at its largest speed, and
+//! `navigation-guide`, `navigation-bare` as `guide` and `bare` are to `insertion`, and
+//! `navigation-far`, the wire of `navigation-guide` a metre from the vessel (the contacts'
+//! code runs, no point comes near a wall).
 //!
 //! - one copy as a 1 kHz haptic loop would call it: ten 0.1 ms steps and the tip read back per
 //!   tick, on the GPU and on the CPU (one core) of the same machine, with the tips compared;
@@ -13,7 +17,7 @@
 //!   distance between any copy's tip and the first copy's (they start alike, so it is zero when
 //!   every copy is stepped alike).
 //!
-//! `cargo run --release --example stiff_gpu_bench -- [--scene free|insertion|guide|bare] [--ticks N]
+//! `cargo run --release --example stiff_gpu_bench -- [--scene SCENE] [--ticks N]
 //! [--copies 1,64,1024,4096] [--steps N] [--elements N] [--dt S] [--warm S]`; `--warm` runs
 //! that much simulated time before anything is timed (the insertion's wire reaches the vessel's
 //! walls after a few centimetres). Prints one JSON object per
@@ -25,7 +29,8 @@ use cosserat::sim::{Backend, RodHandle, Simulation};
 use std::path::Path;
 use std::time::Instant;
 
-fn scene(elements: usize, dt: f64) -> String {
+/// The `[solver]` table of the stiff scheme in `f64` at `dt`, under `gravity`.
+fn stiff_solver(dt: f64, gravity: f64) -> String {
     format!(
         r#"
 [solver]
@@ -33,8 +38,15 @@ scheme = "stiff"
 dt = {dt:e}
 precision = "f64"
 mode = "inextensible"
-gravity = [0.0, 0.0, -9.81]
+gravity = [0.0, 0.0, {gravity:?}]
+"#
+    )
+}
 
+fn scene(elements: usize, dt: f64) -> String {
+    let solver = stiff_solver(dt, -9.81);
+    format!(
+        r#"{solver}
 [[rod]]
 elements = {elements}
 shape = {{ kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = 0.5 }}
@@ -52,21 +64,74 @@ fn insertion(elements: usize, dt: f64) -> String {
         .replace("dt = 1e-4", &format!("dt = {dt:e}"))
 }
 
+/// The scene of `cosserat.gym`'s `GuidewireNavigation-v0` at its defaults (a soft wire of 96
+/// elements over 0.6 m through the introducer into the 8 000-triangle vessel of seed 0, the
+/// stiff scheme at `dt`), the hand pushing at the environment's largest push speed (0.1 m/s).
+fn navigation(elements: usize, dt: f64) -> String {
+    let solver = stiff_solver(dt, 0.0);
+    format!(
+        r#"{solver}
+[environment]
+mesh = {{ kind = "vessel", triangles = 8000, seed = 0 }}
+friction = {{ static = 0.08, kinetic = 0.05 }}
+margin = 1e-4
+stop_outside = false
+
+[[rod]]
+elements = {elements}
+shape = {{ kind = "insertion", length = 0.6, inserted = 0.01 }}
+material = {{ young_modulus = 5e6, poisson_ratio = 0.5, density = 1100.0, radius = 4e-4 }}
+damping = {{ drag = 5.0 }}
+start = {{ kind = "clamped", guide = 0.59, axial_speed = 0.1, end_time = 100.0 }}
+"#
+    )
+}
+
 /// The insertion `text` without its vessel, and without its introducer unless `guide`: what
 /// the step costs without mesh contacts (`guide`) and without any pinned point (`bare`).
 fn without_vessel(text: &str, guide: bool) -> String {
     let start = text.find("[environment]").expect("an environment");
     let end = text.find("[[rod]]").expect("a rod");
-    // The insertion's shape lies along the vessel's entry; a straight wire stands in for it.
-    let text = format!("{}{}", &text[..start], &text[end..]).replace(
-        r#"shape = { kind = "insertion", length = 0.5, inserted = 0.01 }"#,
-        r#"shape = { kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = 0.5 }"#,
-    );
+    let text = format!("{}{}", &text[..start], &text[end..]);
+    // The insertion's shape lies along the vessel's entry; a straight wire of its length stands
+    // in for it.
+    let text: String = text
+        .lines()
+        .map(|line| match line.strip_prefix(r#"shape = { kind = "insertion", length = "#) {
+            Some(rest) => {
+                let length = rest.split(',').next().expect("a length");
+                format!(
+                    r#"shape = {{ kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = {length} }}"#
+                )
+            }
+            None => line.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
     if guide {
         text
     } else {
-        text.replace(", guide = 0.49", "")
+        let at = text.find(", guide = ").expect("a guide");
+        let number = at + ", guide = ".len();
+        let end = number
+            + text[number..]
+                .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+                .expect("the guide's length");
+        format!("{}{}", &text[..at], &text[end..])
     }
+}
+
+/// The insertion `text` with its wire straight and a metre from its vessel: the contacts' code
+/// compiled and run, no wall within reach.
+fn out_of_reach(text: &str) -> String {
+    let guided = without_vessel(text, true);
+    let rod = text.find("[[rod]]").expect("a rod");
+    let environment = &text[text.find("[environment]").expect("an environment")..rod];
+    let at = guided.find("[[rod]]").expect("a rod");
+    format!("{}{}{}", &guided[..at], environment, &guided[at..]).replace(
+        "start = [0.0, 0.0, 0.0], direction",
+        "start = [0.0, 1.0, 0.0], direction",
+    )
 }
 
 /// The deepest penetration and the most points behind the wall of any rod (zero without
@@ -145,7 +210,13 @@ fn main() {
         Some("insertion") => insertion(elements, dt),
         Some("guide") => without_vessel(&insertion(elements, dt), true),
         Some("bare") => without_vessel(&insertion(elements, dt), false),
-        Some(other) => panic!("--scene free|insertion|guide|bare, got {other}"),
+        Some("navigation") => navigation(elements, dt),
+        Some("navigation-guide") => without_vessel(&navigation(elements, dt), true),
+        Some("navigation-bare") => without_vessel(&navigation(elements, dt), false),
+        Some("navigation-far") => out_of_reach(&navigation(elements, dt)),
+        Some(other) => panic!(
+            "--scene free|insertion|guide|bare|navigation|navigation-guide|navigation-bare|navigation-far, got {other}"
+        ),
     };
     let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let warm: f64 = value("--warm").map_or(0.0, |v| v.parse().expect("--warm S"));

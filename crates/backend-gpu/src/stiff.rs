@@ -75,7 +75,8 @@ pub struct GpuStiffWall {
     pub margin: f64,
 }
 
-/// Invocations per rod: the partitioned solve's default (64), fewer for short rods.
+/// Invocations per rod: the partitioned solve's default (64), fewer for short rods and, in large
+/// batches, where fewer pad a rod less (`slice_threads`).
 const THREADS: u32 = crate::banded::PARTITIONED_THREADS;
 
 /// Steps per dispatch on a hardware adapter (the held ends' motions of a batch are uploaded per
@@ -377,7 +378,7 @@ impl GpuStiffSimulation {
             .limits
             .max_compute_invocations_per_workgroup
             .min(gpu.limits.max_compute_workgroup_size_x);
-        let mut threads = THREADS.min((longest as u32).next_power_of_two());
+        let mut threads = slice_threads(longest, rods.len(), options.max_threads);
         // The exchange of the banded solve and this kernel's reduction (8 bytes per invocation).
         let need = |t: u32| {
             crate::banded::partitioned_workgroup_bytes(crate::banded::Precision::F64, t)
@@ -1067,6 +1068,30 @@ impl GpuStiffSimulation {
     }
 }
 
+/// Batches of at least this many rods are sliced for the least work rather than the shortest
+/// step (`slice_threads`). Measured on an H100 (`docs/benchmarks/stiff-gpu.md`, "Slices for
+/// batches"): 32 slices of 96-element rods were 1.09× and 1.25× faster than 64 for 1 024 and
+/// 4 096 rods, and 1.3× slower for 64 and 256.
+const BATCH_RODS: usize = 512;
+
+/// Invocations per rod for `rods` rods of up to `longest` elements: the partitioned solve's 64
+/// (the shortest step of a rod), or, for batches of [`BATCH_RODS`] rods or more, 32 where that
+/// pads the rod less (96 elements: 32 slices of 3 instead of 64 slices of 2, a third of them
+/// padding); never more than the rod has elements or `max_threads` allows (a power of two; the
+/// adapter's limits may lower it further).
+fn slice_threads(longest: usize, rods: usize, max_threads: u32) -> u32 {
+    let cap = THREADS
+        .min((longest as u32).next_power_of_two())
+        .min(max_threads.max(1));
+    let cap = 1 << (31 - cap.leading_zeros());
+    let padded = |t: u32| longest.div_ceil(t as usize) * t as usize;
+    if rods >= BATCH_RODS && cap > 32 && padded(cap / 2) < padded(cap) {
+        cap / 2
+    } else {
+        cap
+    }
+}
+
 /// The kernel's source for `threads` invocations per rod and `per_thread` elements each (shader
 /// validation).
 #[cfg(test)]
@@ -1295,4 +1320,29 @@ fn state_block(s: &RodState<f64>, l: &StiffLayout) -> Vec<f64> {
         out[a..a + 4].copy_from_slice(&[q.i, q.j, q.k, q.w]);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{BATCH_RODS, slice_threads};
+
+    #[test]
+    fn batches_are_sliced_with_the_least_padding_and_single_rods_for_the_shortest_step() {
+        let batch = BATCH_RODS;
+        // 64 slices where they pad nothing or no less than 32 would.
+        assert_eq!(slice_threads(256, batch, 256), 64);
+        assert_eq!(slice_threads(100, batch, 256), 64);
+        assert_eq!(slice_threads(64, batch, 256), 64);
+        // In a batch, 32 where 64 would pad more: 96 = 32 × 3 (64 × 2 = 128), 160 = 32 × 5.
+        assert_eq!(slice_threads(96, batch, 256), 32);
+        assert_eq!(slice_threads(160, batch, 256), 32);
+        // Fewer rods keep the most slices.
+        assert_eq!(slice_threads(96, batch - 1, 256), 64);
+        assert_eq!(slice_threads(96, 1, 256), 64);
+        // Never more slices than elements, nor than the options allow.
+        assert_eq!(slice_threads(20, batch, 256), 32);
+        assert_eq!(slice_threads(5, 1, 256), 8);
+        assert_eq!(slice_threads(256, 1, 16), 16);
+        assert_eq!(slice_threads(256, 1, 48), 32);
+    }
 }
