@@ -18,7 +18,8 @@
 //!   every copy is stepped alike).
 //!
 //! `cargo run --release --example stiff_gpu_bench -- [--scene SCENE] [--ticks N]
-//! [--copies 1,64,1024,4096] [--steps N] [--elements N] [--dt S] [--warm S]`; `--warm` runs
+//! [--copies 1,64,1024,4096] [--steps N] [--elements N] [--dt S] [--warm S] [--batches-only]`;
+//! `--batches-only` leaves out the single copy's ticks; `--warm` runs
 //! that much simulated time before anything is timed (the insertion's wire reaches the vessel's
 //! walls after a few centimetres). Prints one JSON object per
 //! line; with contacts, each row also gives the deepest penetration and the most points behind
@@ -188,6 +189,52 @@ fn ticks(sim: &mut Simulation, ticks: usize, per_tick: u64) -> ([f64; 3], [f64; 
     )
 }
 
+/// Iterations per step and unconverged steps of the stiff scheme.
+fn summary(s: &Simulation) -> (f64, u64) {
+    let st = s.stiff_summary().expect("stiff");
+    (st.iterations_per_step(), st.unconverged_steps)
+}
+
+/// One copy as a haptic loop calls it, on the GPU and on the CPU: one JSON row.
+fn tick_row(text: &str, warm: f64, elements: usize, dt: f64, per_tick: u64, n_ticks: usize) {
+    let warm_steps = (warm / dt).round() as u64;
+    let mut gpu = build(text, Backend::Gpu, 1);
+    let mut cpu = build(text, Backend::Cpu, 1);
+    gpu.run(warm_steps).unwrap_or_else(|e| panic!("{e}"));
+    cpu.run(warm_steps).unwrap_or_else(|e| panic!("{e}"));
+    let (g, gtip) = ticks(&mut gpu, n_ticks, per_tick);
+    let (c, ctip) = ticks(&mut cpu, n_ticks, per_tick);
+    let gap = (0..3)
+        .map(|k| (gtip[k] - ctip[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    println!(
+        "{}",
+        serde_json::json!({
+            "case": "tick",
+            "warm_s": warm,
+            "elements": elements,
+            "dt": dt,
+            "steps_per_tick": per_tick,
+            "ticks": n_ticks,
+            "gpu_us": {"median": g[0], "p99": g[1], "max": g[2]},
+            "cpu_us": {"median": c[0], "p99": c[1], "max": c[2]},
+            "tip_gap_m": gap,
+            "gpu_iterations_per_step": summary(&gpu).0,
+            "cpu_iterations_per_step": summary(&cpu).0,
+            "gpu_unconverged": summary(&gpu).1,
+            "cpu_unconverged": summary(&cpu).1,
+            "gpu_penetration_m": walls(&gpu).0,
+            "cpu_penetration_m": walls(&cpu).0,
+            "gpu_escaped": walls(&gpu).1,
+            "gpu_walks_per_step": walks_per_step(&gpu),
+            "cpu_escaped": walls(&cpu).1,
+            "gpu_hand_force_n": gpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
+            "cpu_hand_force_n": cpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
+        })
+    );
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let value = |flag: &str| {
@@ -221,46 +268,9 @@ fn main() {
     let per_tick = (1e-3 / dt).round().max(1.0) as u64;
     let warm: f64 = value("--warm").map_or(0.0, |v| v.parse().expect("--warm S"));
     let warm_steps = (warm / dt).round() as u64;
-    let mut gpu = build(&text, Backend::Gpu, 1);
-    let mut cpu = build(&text, Backend::Cpu, 1);
-    gpu.run(warm_steps).unwrap_or_else(|e| panic!("{e}"));
-    cpu.run(warm_steps).unwrap_or_else(|e| panic!("{e}"));
-    let (g, gtip) = ticks(&mut gpu, n_ticks, per_tick);
-    let (c, ctip) = ticks(&mut cpu, n_ticks, per_tick);
-    let gap = (0..3)
-        .map(|k| (gtip[k] - ctip[k]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let summary = |s: &Simulation| {
-        let st = s.stiff_summary().expect("stiff");
-        (st.iterations_per_step(), st.unconverged_steps)
-    };
-    println!(
-        "{}",
-        serde_json::json!({
-            "case": "tick",
-            "warm_s": warm,
-            "elements": elements,
-            "dt": dt,
-            "steps_per_tick": per_tick,
-            "ticks": n_ticks,
-            "gpu_us": {"median": g[0], "p99": g[1], "max": g[2]},
-            "cpu_us": {"median": c[0], "p99": c[1], "max": c[2]},
-            "tip_gap_m": gap,
-            "gpu_iterations_per_step": summary(&gpu).0,
-            "cpu_iterations_per_step": summary(&cpu).0,
-            "gpu_unconverged": summary(&gpu).1,
-            "cpu_unconverged": summary(&cpu).1,
-            "gpu_penetration_m": walls(&gpu).0,
-            "cpu_penetration_m": walls(&cpu).0,
-            "gpu_escaped": walls(&gpu).1,
-            "gpu_walks_per_step": walks_per_step(&gpu),
-            "cpu_escaped": walls(&cpu).1,
-            "gpu_hand_force_n": gpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
-            "cpu_hand_force_n": cpu.end_reaction(RodHandle(0), 0).map(|r| r.force),
-        })
-    );
-    drop(gpu);
+    if !args.iter().any(|a| a == "--batches-only") {
+        tick_row(&text, warm, elements, dt, per_tick, n_ticks);
+    }
     for &n in &copies {
         let mut sim = build(&text, Backend::Gpu, n);
         // Warm-up (pipeline, first dispatch), and the simulated time asked for.
