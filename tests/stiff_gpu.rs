@@ -250,6 +250,22 @@ fn a_wire_dragged_over_a_floor_moves_as_on_the_cpu() {
     assert!(s.contacts > 20, "the wire lies on the floor: {s:?}");
 }
 
+/// The same wire at 150 elements: each invocation's slice holds three elements (64 slices,
+/// the last 14 of them padding only), where the scenes above give every slice one. Every pass
+/// of the step and of the contacts loops over a slice, so this is the kernel's layout at real
+/// resolutions (256 elements: four a slice; 96 in a large batch: three).
+#[test]
+fn a_wire_of_three_elements_a_slice_dragged_over_a_floor_moves_as_on_the_cpu() {
+    let scene = format!("{CONTACT_SOLVER}{FLOOR}").replace("elements = 40", "elements = 150");
+    let Some((mut cpu, mut gpu)) = gpu_stiff(&scene) else {
+        return;
+    };
+    agree(&mut cpu, &mut gpu, 2, 20, 1e-9);
+    contacts_agree(&cpu, &gpu, 1e-9);
+    let s = gpu.stepper().collision_stats(0).expect("stats");
+    assert!(s.contacts > 75, "the wire lies on the floor: {s:?}");
+}
+
 /// The procedural vessel, coarse (4 000 triangles), with the friction of the insertion scenes.
 const VESSEL_WALL: &str = r#"
 [environment]
