@@ -325,3 +325,29 @@ fn a_wire_fed_through_the_introducer_moves_as_on_the_cpu() {
     let moved = largest_gap(&[hand], &[gpu.positions(RodHandle(0))[0]]);
     assert!((moved - 0.1).abs() < 1e-9, "the hand moved {moved} m");
 }
+
+/// A rod longer than the kernel's slices hold is refused with its length and the limit, not
+/// left to fail in the driver's compiler (the partitioned solve's private arrays hold 16
+/// elements an invocation in `f64`; 64 invocations: 1 024 elements).
+#[test]
+fn a_rod_too_long_for_the_kernels_slices_is_refused_by_name() {
+    let scene = PENDULUM.replace("elements = 24", "elements = 1100");
+    let (b, _, _) = cosserat::scene::parse_scene(std::path::Path::new("long.toml"), &scene, &[])
+        .unwrap_or_else(|e| panic!("{e}"));
+    match b.backend(cosserat::sim::Backend::Gpu).build() {
+        Ok(_) => panic!("a rod of 1100 elements was accepted"),
+        Err(e) if e.to_string().contains("adapter") || !cfg!(feature = "gpu") => {
+            assert!(
+                std::env::var("COSSERAT_REQUIRE_GPU").as_deref() != Ok("1"),
+                "COSSERAT_REQUIRE_GPU=1 but {e}"
+            );
+        }
+        Err(e) => {
+            let e = e.to_string();
+            assert!(
+                e.contains("1100 elements") && e.contains("up to 1024 elements"),
+                "{e}"
+            );
+        }
+    }
+}

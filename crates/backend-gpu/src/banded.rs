@@ -96,6 +96,12 @@ const PARTITIONED_INTERIOR: usize = 78;
 /// (19 968 bytes) failed to compile there, 16 in `f64` and 32 in `f32` (9 984 bytes each) ran.
 const PARTITIONED_PRIVATE_BYTES: usize = 16 * PARTITIONED_INTERIOR * 8;
 
+/// The most elements of a rod one invocation of the partitioned solve may own in `precision`
+/// (its private arrays within [`PARTITIONED_PRIVATE_BYTES`]).
+pub(crate) fn partitioned_max_slice(precision: Precision) -> usize {
+    PARTITIONED_PRIVATE_BYTES / (PARTITIONED_INTERIOR * precision.bytes())
+}
+
 /// Numbers the cyclic reduction keeps per element (`CR_STRIDE` of the kernel).
 const CR_STRIDE: usize = 228;
 

@@ -389,6 +389,16 @@ impl GpuStiffSimulation {
             threads /= 2;
         }
         let per_thread = longest.div_ceil(threads as usize);
+        let most = crate::banded::partitioned_max_slice(crate::banded::Precision::F64);
+        if per_thread > most {
+            return Err(GpuError::InvalidInput(format!(
+                "a rod of {longest} elements needs {per_thread} elements in each of the {threads} \
+                 invocations of the GPU's stiff scheme, and at most {most} fit an invocation's \
+                 private arrays in f64: rods of up to {} elements run there (use fewer elements \
+                 or --backend cpu)",
+                most * threads as usize
+            )));
+        }
         let layout = StiffLayout::new(threads as usize, per_thread);
         let device = &gpu.device;
         let n_rods = rods.len();
@@ -1077,15 +1087,20 @@ const BATCH_RODS: usize = 512;
 /// Invocations per rod for `rods` rods of up to `longest` elements: the partitioned solve's 64
 /// (the shortest step of a rod), or, for batches of [`BATCH_RODS`] rods or more, 32 where that
 /// pads the rod less (96 elements: 32 slices of 3 instead of 64 slices of 2, a third of them
-/// padding); never more than the rod has elements or `max_threads` allows (a power of two; the
-/// adapter's limits may lower it further).
+/// padding), and only while a slice stays within what the solve's private arrays hold in `f64`
+/// (16 elements); never more than the rod has elements or `max_threads` allows (a power of two;
+/// the adapter's limits may lower it further).
 fn slice_threads(longest: usize, rods: usize, max_threads: u32) -> u32 {
     let cap = THREADS
         .min((longest as u32).next_power_of_two())
         .min(max_threads.max(1));
     let cap = 1 << (31 - cap.leading_zeros());
     let padded = |t: u32| longest.div_ceil(t as usize) * t as usize;
-    if rods >= BATCH_RODS && cap > 32 && padded(cap / 2) < padded(cap) {
+    let fits = |t: u32| {
+        longest.div_ceil(t as usize)
+            <= crate::banded::partitioned_max_slice(crate::banded::Precision::F64)
+    };
+    if rods >= BATCH_RODS && cap > 32 && padded(cap / 2) < padded(cap) && fits(cap / 2) {
         cap / 2
     } else {
         cap
@@ -1336,6 +1351,10 @@ mod tests {
         // In a batch, 32 where 64 would pad more: 96 = 32 × 3 (64 × 2 = 128), 160 = 32 × 5.
         assert_eq!(slice_threads(96, batch, 256), 32);
         assert_eq!(slice_threads(160, batch, 256), 32);
+        // Unless a slice of 32 would hold more than the solve's private arrays do in f64 (16):
+        // 520 elements would be 32 × 17 (64 × 9 = 576); 480 are 32 × 15 (64 × 8 = 512).
+        assert_eq!(slice_threads(520, batch, 256), 64);
+        assert_eq!(slice_threads(480, batch, 256), 32);
         // Fewer rods keep the most slices.
         assert_eq!(slice_threads(96, batch - 1, 256), 64);
         assert_eq!(slice_threads(96, 1, 256), 64);
