@@ -88,27 +88,29 @@ start = {{ kind = "clamped", guide = 0.59, axial_speed = 0.1, end_time = 100.0 }
     )
 }
 
-/// The insertion `text` without its vessel, and without its introducer unless `guide`: what
-/// the step costs without mesh contacts (`guide`) and without any pinned point (`bare`).
-fn without_vessel(text: &str, guide: bool) -> String {
-    let start = text.find("[environment]").expect("an environment");
-    let end = text.find("[[rod]]").expect("a rod");
-    let text = format!("{}{}", &text[..start], &text[end..]);
-    // The insertion's shape lies along the vessel's entry; a straight wire of its length stands
-    // in for it.
-    let text: String = text
-        .lines()
+/// `text` with its insertion's shape (which lies along the vessel's entry) replaced by a straight
+/// wire of the same length from `start` along x.
+fn straightened(text: &str, start: [f64; 3]) -> String {
+    text.lines()
         .map(|line| match line.strip_prefix(r#"shape = { kind = "insertion", length = "#) {
             Some(rest) => {
                 let length = rest.split(',').next().expect("a length");
                 format!(
-                    r#"shape = {{ kind = "straight", start = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], length = {length} }}"#
+                    r#"shape = {{ kind = "straight", start = {start:?}, direction = [1.0, 0.0, 0.0], length = {length} }}"#
                 )
             }
             None => line.to_string(),
         })
         .collect::<Vec<_>>()
-        .join("\n");
+        .join("\n")
+}
+
+/// The insertion `text` without its vessel, and without its introducer unless `guide`: what
+/// the step costs without mesh contacts (`guide`) and without any pinned point (`bare`).
+fn without_vessel(text: &str, guide: bool) -> String {
+    let start = text.find("[environment]").expect("an environment");
+    let end = text.find("[[rod]]").expect("a rod");
+    let text = straightened(&format!("{}{}", &text[..start], &text[end..]), [0.0; 3]);
     if guide {
         text
     } else {
@@ -125,14 +127,7 @@ fn without_vessel(text: &str, guide: bool) -> String {
 /// The insertion `text` with its wire straight and a metre from its vessel: the contacts' code
 /// compiled and run, no wall within reach.
 fn out_of_reach(text: &str) -> String {
-    let guided = without_vessel(text, true);
-    let rod = text.find("[[rod]]").expect("a rod");
-    let environment = &text[text.find("[environment]").expect("an environment")..rod];
-    let at = guided.find("[[rod]]").expect("a rod");
-    format!("{}{}{}", &guided[..at], environment, &guided[at..]).replace(
-        "start = [0.0, 0.0, 0.0], direction",
-        "start = [0.0, 1.0, 0.0], direction",
-    )
+    straightened(text, [0.0, 1.0, 0.0])
 }
 
 /// The deepest penetration and the most points behind the wall of any rod (zero without
