@@ -10,28 +10,38 @@ fn gpu_required() -> bool {
     std::env::var("COSSERAT_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
-/// The scene `text` (with `overrides`) built for the CPU and for the GPU; `None` when no GPU
-/// adapter is available and none is required.
-pub(crate) fn pair(text: &str, overrides: &[(&str, &str)]) -> Option<(Simulation, Simulation)> {
+fn build(text: &str, overrides: &[(&str, &str)], backend: Backend) -> Result<Simulation, String> {
     let overrides: Vec<(String, String)> = overrides
         .iter()
         .map(|(k, v)| ((*k).into(), (*v).into()))
         .collect();
-    let build = |backend| {
-        let (b, _, _) = parse_scene(Path::new("scene.toml"), text, &overrides)
-            .unwrap_or_else(|e| panic!("{e}"));
-        b.backend(backend).build()
-    };
-    let cpu = build(Backend::Cpu).unwrap_or_else(|e| panic!("cpu: {e}"));
-    match build(Backend::Gpu) {
-        Ok(gpu) => Some((cpu, gpu)),
-        Err(e) if !cfg!(feature = "gpu") || e.to_string().contains("adapter") => {
+    let (b, _, _) =
+        parse_scene(Path::new("scene.toml"), text, &overrides).unwrap_or_else(|e| panic!("{e}"));
+    b.backend(backend).build().map_err(|e| e.to_string())
+}
+
+/// The scene `text` (with `overrides`) built for the GPU, or the build's error; `None` when no
+/// GPU adapter is available and none is required.
+pub(crate) fn gpu_build(
+    text: &str,
+    overrides: &[(&str, &str)],
+) -> Option<Result<Simulation, String>> {
+    match build(text, overrides, Backend::Gpu) {
+        Err(e) if !cfg!(feature = "gpu") || e.contains("adapter") => {
             assert!(!gpu_required(), "COSSERAT_REQUIRE_GPU=1 but {e}");
             eprintln!("note: skipping a GPU test: {e}");
             None
         }
-        Err(e) => panic!("gpu: {e}"),
+        built => Some(built),
     }
+}
+
+/// The scene `text` (with `overrides`) built for the CPU and for the GPU; `None` when no GPU
+/// adapter is available and none is required.
+pub(crate) fn pair(text: &str, overrides: &[(&str, &str)]) -> Option<(Simulation, Simulation)> {
+    let cpu = build(text, overrides, Backend::Cpu).unwrap_or_else(|e| panic!("cpu: {e}"));
+    let gpu = gpu_build(text, overrides)?.unwrap_or_else(|e| panic!("gpu: {e}"));
+    Some((cpu, gpu))
 }
 
 /// The largest distance between corresponding points of `a` and `b`.
